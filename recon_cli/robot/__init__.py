@@ -1,0 +1,1 @@
+"""The robot cell: description (xacro), limits, kinematics, IK and collision model."""

@@ -1,0 +1,107 @@
+"""Expanding the cell's xacro description (robot/cell.urdf.xacro) into URDF text.
+
+The one description feeds every consumer: pinocchio (kinematics, dynamics), the FCL
+collision model and the MuJoCo scene. Expansion is cached per process, keyed by the
+arguments and the content of every file under robot/.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import hashlib
+import io
+import math
+from dataclasses import dataclass
+from enum import Enum
+
+from recon_cli.errors import InputError, UnknownNameError
+from recon_cli.paths import ROBOT_DIR
+
+CELL_XACRO = ROBOT_DIR / "cell.urdf.xacro"
+
+#: the thesis planned with a 3 cm safety distance (MoveIt planning context, CELL_FACTS 3.4)
+DEFAULT_SAFETY_DISTANCE = 0.03
+
+
+class CellKind(str, Enum):
+    """The two cells of the thesis."""
+
+    GANTRY = "gantry"  #: 9 DoF: two linear axes + iiwa (Figures 1.1, 2.7)
+    CEILING = "ceiling"  #: 7 DoF: iiwa fixed under the roof (section 5.1)
+
+    @classmethod
+    def parse(cls, name: str) -> CellKind:
+        aliases = {"9dof": cls.GANTRY, "7dof": cls.CEILING}
+        key = str(name).strip().lower()
+        if key in aliases:
+            return aliases[key]
+        try:
+            return cls(key)
+        except ValueError:
+            raise UnknownNameError(
+                "cell", name, [c.value for c in cls] + list(aliases)
+            ) from None
+
+
+@dataclass(frozen=True)
+class CellConfig:
+    """Arguments of the cell description.
+
+    kind: which cell
+    safety_distance: inflation of every collision shape [m] (thesis 2.2.4)
+    table_lift: extension of the telescoping table [m]
+    ceiling_xy: base position of the ceiling cell in the world [m]
+    """
+
+    kind: CellKind = CellKind.GANTRY
+    safety_distance: float = DEFAULT_SAFETY_DISTANCE
+    table_lift: float = 0.0
+    ceiling_xy: tuple[float, float] = (0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.kind, CellKind):
+            object.__setattr__(self, "kind", CellKind.parse(self.kind))
+        if not (math.isfinite(self.safety_distance) and 0.0 <= self.safety_distance <= 0.2):
+            raise InputError(
+                f"safety distance {self.safety_distance} m is outside 0 ... 0.2 m",
+                hint="give it in metres, e.g. 0.03",
+            )
+        if not (math.isfinite(self.table_lift) and 0.0 <= self.table_lift <= 0.65):
+            raise InputError(
+                f"table lift {self.table_lift} m is outside the table's 0 ... 0.65 m",
+                hint="give it in metres",
+            )
+
+    def xacro_args(self) -> dict[str, str]:
+        return {
+            "cell": self.kind.value,
+            "sd": repr(float(self.safety_distance)),
+            "table_lift": repr(float(self.table_lift)),
+            "ceiling_x": repr(float(self.ceiling_xy[0])),
+            "ceiling_y": repr(float(self.ceiling_xy[1])),
+        }
+
+
+def _robot_dir_digest() -> str:
+    h = hashlib.sha256()
+    for path in sorted(ROBOT_DIR.rglob("*")):
+        if path.is_file() and path.suffix in {".xacro", ".yaml", ".urdf"}:
+            h.update(str(path.relative_to(ROBOT_DIR)).encode())
+            h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def expand_urdf(config: CellConfig = CellConfig()) -> str:  # noqa: B008 (frozen)
+    """URDF text of the cell for the given arguments."""
+    return _expand(tuple(sorted(config.xacro_args().items())), _robot_dir_digest())
+
+
+@functools.lru_cache(maxsize=16)
+def _expand(args: tuple[tuple[str, str], ...], digest: str) -> str:
+    import xacro
+
+    # xacro reports harmless notes on stderr; keep library output quiet
+    with contextlib.redirect_stderr(io.StringIO()):
+        doc = xacro.process_file(str(CELL_XACRO), mappings=dict(args))
+    return doc.toprettyxml(indent="  ")

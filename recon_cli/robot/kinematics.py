@@ -1,0 +1,67 @@
+"""Kinematics of the cell with pinocchio, built from the expanded URDF.
+
+``Kinematics.world_T_camera(q)`` is eq. 2.10 of the thesis: the chain of link transforms
+from the world to the optical frame ``camera``. Joint vectors follow the URDF tree order,
+which is the thesis order: base_joint_1, base_joint_2, arm_joint_1 ... arm_joint_7
+(9-DoF gantry cell) or arm_joint_1 ... arm_joint_7 (7-DoF ceiling cell).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from recon_cli.robot.limits import JointLimits, limits_from_urdf
+
+CAMERA_FRAME = "camera"
+MARKER_FRAME = "marker"
+
+
+class Kinematics:
+    """Forward kinematics and Jacobians of one cell. Not thread-safe (one pinocchio Data)."""
+
+    def __init__(self, urdf: str) -> None:
+        self.model: pin.Model = pin.buildModelFromXML(urdf)
+        self.data: pin.Data = self.model.createData()
+        self.joint_names: tuple[str, ...] = tuple(self.model.names[1:])
+        self.limits: JointLimits = limits_from_urdf(urdf, self.joint_names)
+        self.camera_frame_id = self.model.getFrameId(CAMERA_FRAME)
+        self._marker_frame_id = self.model.getFrameId(MARKER_FRAME)
+
+    @property
+    def nq(self) -> int:
+        return self.model.nq
+
+    def frame_id(self, name: str) -> int:
+        fid = self.model.getFrameId(name)
+        if fid >= self.model.nframes:
+            raise KeyError(name)
+        return fid
+
+    def frame_pose(self, q: np.ndarray, frame: str | int) -> np.ndarray:
+        """``world_T_frame`` at configuration q, shape (4, 4)."""
+        fid = self.frame_id(frame) if isinstance(frame, str) else frame
+        pin.forwardKinematics(self.model, self.data, q)
+        return pin.updateFramePlacement(self.model, self.data, fid).homogeneous
+
+    def world_T_camera(self, q: np.ndarray) -> np.ndarray:
+        """Camera (optical frame) pose in the world at q, eq. 2.10, shape (4, 4)."""
+        return self.frame_pose(q, self.camera_frame_id)
+
+    def world_T_marker(self) -> np.ndarray:
+        """Pose of the marker board frame in the world (fixed), shape (4, 4)."""
+        return self.frame_pose(pin.neutral(self.model), self._marker_frame_id)
+
+    def camera_jacobian(self, q: np.ndarray, local: bool = False) -> np.ndarray:
+        """Geometric Jacobian of the camera frame, shape (6, n), rows (v, omega).
+
+        local=False: linear velocity of the camera origin and angular velocity, both in
+        world axes (LOCAL_WORLD_ALIGNED); local=True: both in camera axes.
+        """
+        ref = pin.LOCAL if local else pin.LOCAL_WORLD_ALIGNED
+        pin.computeJointJacobians(self.model, self.data, q)
+        pin.updateFramePlacement(self.model, self.data, self.camera_frame_id)
+        return pin.getFrameJacobian(self.model, self.data, self.camera_frame_id, ref)
+
+    def neutral(self) -> np.ndarray:
+        return pin.neutral(self.model)

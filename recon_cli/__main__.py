@@ -1,3 +1,3 @@
-from recon_cli.cli import main
+from recon_cli.cli import run
 
-main()
+run()

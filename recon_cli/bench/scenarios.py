@@ -1,0 +1,24 @@
+"""Problem data of the thesis benchmarks (chapter 4), in SI units and joint-vector order.
+
+Table 4.1 rounds the goal to whole degrees and centimetres; the exact values below are the
+ones of the thesis' benchmark logs (../shared/CELL_FACTS.md 11.1).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from recon_cli.robot.collision import ObjectBox
+
+#: start state of Table 4.1 (9-DoF gantry cell): base_joint_1 = -1 m, all others 0
+TABLE_4_1_START = np.array([-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+#: goal state of Table 4.1 (9-DoF gantry cell), [m, m, rad x 7]
+TABLE_4_1_GOAL = np.array([0.0102727, -0.330269, -1.50012, -1.62369, -0.638512, -1.40155,
+                           -1.43857, -0.862087, -2.023])
+
+#: the 0.3 m cube standing on the table top (world centre (0, 0, 0.83)) of sections 4.1/4.2
+BENCH_CUBE = ObjectBox(center=(0.0, 0.0, 0.83), size=(0.3, 0.3, 0.3))
+
+#: focus point of the 24-view scenario of eq. 4.1 [m, world]
+EQ_4_1_FOCUS = (0.0, 0.0, 0.78)

@@ -1,0 +1,205 @@
+"""The ``recon`` command line. Commands only parse options, call the library and print.
+
+Heavy libraries (pinocchio, FCL, Open3D, MuJoCo, OMPL) are imported inside the commands
+so that ``recon --help`` is instant. User errors (``ReconError`` and malformed options)
+end as one line on stderr and a non-zero exit code, without a traceback (:func:`main`).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from recon_cli.errors import InputError, ReconError
+
+app = typer.Typer(
+    name="recon",
+    help="Robot-assisted 3D reconstruction of objects with a robot-held depth camera.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+bench_app = typer.Typer(help="Benchmarks with results tables and figures.", no_args_is_help=True)
+app.add_typer(bench_app, name="bench")
+
+CellOpt = Annotated[str, typer.Option("--cell", help="gantry (9 DoF, linear axes) or ceiling (7 DoF).")]
+SafetyOpt = Annotated[float, typer.Option("--safety", help="Safety distance [m] that inflates every collision shape.")]
+SeedOpt = Annotated[int, typer.Option("--seed", help="Seed of the random number generator.")]
+
+
+def parse_vector(text: str, n: int, option: str, unit: str) -> tuple[float, ...]:
+    """Parse 'x,y,z' into n finite floats, or raise a one-line InputError."""
+    parts = [p for p in text.replace(";", ",").split(",") if p.strip()]
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != n or not all(math.isfinite(v) for v in values):
+        example = ",".join(["0"] * (n - 1) + ["0.3"])
+        raise InputError(f"{option} '{text}' is not {n} numbers",
+                         hint=f"write {n} comma-separated values in {unit}, e.g. {example}")
+    return values
+
+
+def _cell(cell: str, safety: float, object_box: str | None = None):
+    from recon_cli.robot.cell import Cell
+    from recon_cli.robot.collision import ObjectBox
+    from recon_cli.robot.description import CellConfig, CellKind
+
+    config = CellConfig(kind=CellKind.parse(cell), safety_distance=safety)
+    box = None
+    if object_box:
+        size = parse_vector(object_box, 3, "--object-box", "metres")
+        if min(size) <= 0:
+            raise InputError(f"--object-box '{object_box}' has a non-positive edge",
+                             hint="give the box edges in metres, e.g. 0.3,0.3,0.3")
+        box = ObjectBox.on_table(size, table_top_z=0.68 + config.table_lift)
+    return Cell(config, box)
+
+
+@app.command()
+def cell(
+    cell: CellOpt = "gantry",
+    safety: SafetyOpt = 0.03,
+    urdf: Annotated[Path | None, typer.Option(help="Also write the expanded URDF to this file.")] = None,
+) -> None:
+    """Print the loaded cell: joints, limits, collision shapes, camera and marker frames."""
+    from recon_cli.console import console
+    from recon_cli.render import cell_tables
+
+    c = _cell(cell, safety)
+    q_show = c.kin.neutral()
+    if "base_joint_1" in c.joint_names:
+        from recon_cli.bench.scenarios import TABLE_4_1_START
+
+        q_show = TABLE_4_1_START.copy()
+    for table in cell_tables(c, q_show):
+        console.print(table)
+    if urdf is not None:
+        try:
+            urdf.write_text(c.urdf)
+        except OSError as exc:
+            raise ReconError(f"cannot write {urdf}: {exc.strerror}",
+                             hint="choose a writable path for --urdf") from None
+        console.print(f"expanded URDF written to {urdf}")
+
+
+@app.command()
+def ik(
+    focus: Annotated[str, typer.Option(help="Focus point f as x,y,z [m].")] = "0,0,0.78",
+    radius: Annotated[float, typer.Option("--radius", "-r", help="Camera distance r from f [m].")] = 0.6,
+    theta: Annotated[float, typer.Option(help="Polar angle from the vertical [deg].")] = 70.0,
+    phi: Annotated[float, typer.Option(help="Azimuth [deg].")] = 0.0,
+    alpha: Annotated[float, typer.Option(help="Camera roll about its viewing axis [deg].")] = 0.0,
+    frame: Annotated[str, typer.Option(help="Frame of f and the angles: world or marker.")] = "world",
+    object_box: Annotated[str | None, typer.Option(help="Object bounding box on the table centre, sx,sy,sz [m].")] = "0.3,0.3,0.3",
+    solutions: Annotated[int, typer.Option(min=1, max=32, help="How many distinct solutions to look for.")] = 4,
+    cell: CellOpt = "gantry",
+    safety: SafetyOpt = 0.03,
+    seed: SeedOpt = 0,
+) -> None:
+    """Solve inverse kinematics for a camera view (f, r, theta, phi, alpha)."""
+    import numpy as np
+
+    from recon_cli.console import console
+    from recon_cli.errors import UnknownNameError
+    from recon_cli.geometry.view import Frame, View
+    from recon_cli.render import ik_table, pose_text
+    from recon_cli.robot.ik import IKOptions
+
+    try:
+        ref = Frame(frame.lower())
+    except ValueError:
+        raise UnknownNameError("frame", frame, [f.value for f in Frame]) from None
+    view = View.from_degrees(parse_vector(focus, 3, "--focus", "metres"), radius, theta, phi,
+                             alpha, ref)
+    c = _cell(cell, safety, object_box if object_box and object_box.lower() != "none" else None)
+    T = c.view_pose(view)
+    result = c.solve_pose(T, np.random.default_rng(seed),
+                          options=IKOptions(max_solutions=solutions))
+    console.print(f"camera goal: {pose_text(T)}")
+    console.print(ik_table(c, result))
+
+
+@bench_app.command("ik")
+def bench_ik(
+    n: Annotated[int, typer.Option("--n", min=1, help="Number of camera poses.")] = 500,
+    solutions: Annotated[int, typer.Option(min=1, max=32, help="Solutions asked per pose in the multi-solution run.")] = 4,
+    cell: CellOpt = "gantry",
+    safety: SafetyOpt = 0.03,
+    seed: SeedOpt = 0,
+    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/bench-ik-<time>).")] = None,
+) -> None:
+    """IK success rate and time on random reachable camera poses around the table."""
+    from rich.table import Table
+
+    from recon_cli.bench.ik import IKBenchConfig, run_ik_bench
+    from recon_cli.console import console, progress_bar, run_folder, write_json
+
+    folder = run_folder(out, "bench-ik")
+    c = _cell(cell, safety)
+    cfg = IKBenchConfig(n_poses=n, solutions=solutions, seed=seed)
+    with progress_bar() as update:
+        result = run_ik_bench(c, cfg, update)
+    write_json(folder / "bench_ik.json", {"config": cfg.__dict__, "safety_distance": safety,
+                                          "result": result.to_dict()})
+    table = Table(title=f"IK benchmark, {c.config.kind.value} cell, {result.n_poses} poses "
+                        f"(from {result.samples_drawn} random configurations)")
+    table.add_column("measure")
+    table.add_column("value", justify="right")
+    rows = [
+        ("success, first solution", f"{result.success_first * 100:.1f} %"),
+        ("median time to first solution", f"{result.median_ms_first:.2f} ms"),
+        ("p90 time to first solution", f"{result.p90_ms_first:.2f} ms"),
+        (f"success, asking for {solutions}", f"{result.success_multi * 100:.1f} %"),
+        ("mean distinct solutions found", f"{result.mean_solutions:.2f}"),
+        ("median time per solution", f"{result.median_ms_per_solution:.2f} ms"),
+        ("max position error", f"{result.max_position_error_m:.2e} m"),
+        ("max rotation error", f"{result.max_rotation_error_rad:.2e} rad"),
+        ("all within soft limits", str(result.all_within_soft_limits)),
+        ("all collision-free", str(result.all_collision_free)),
+        ("min separation of solutions", f"{result.min_pairwise_separation:.3f}"),
+    ]
+    for row in rows:
+        table.add_row(*row)
+    console.print(table)
+    console.print(f"results: {folder / 'bench_ik.json'}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the app and return the exit code; user errors become one line on stderr."""
+    from recon_cli.console import err_console
+
+    command = typer.main.get_command(app)
+    try:
+        result = command.main(args=argv, prog_name="recon", standalone_mode=False)
+    except ReconError as exc:
+        err_console.print(f"error: {exc.one_line()}", markup=False, soft_wrap=True)
+        return exc.exit_code
+    except typer.Exit as exc:
+        return exc.exit_code
+    except (typer.Abort, KeyboardInterrupt):
+        err_console.print("interrupted", markup=False)
+        return 130
+    except typer.TyperException as exc:  # usage errors: bad option values, unknown options
+        ctx = getattr(exc, "ctx", None)
+        if type(exc).__name__ == "NoArgsIsHelpError":  # typer has printed the help already
+            return 0
+        where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
+        message = exc.format_message() if hasattr(exc, "format_message") else str(exc)
+        err_console.print(f"error: {message}{where}", markup=False, soft_wrap=True)
+        return int(getattr(exc, "exit_code", 2))
+    return result if isinstance(result, int) else 0
+
+
+def run() -> None:
+    """Console-script entry point."""
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    run()

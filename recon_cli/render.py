@@ -1,0 +1,96 @@
+"""Terminal rendering of results (tables); the CLI calls these after the library ran."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from rich.table import Table
+
+from recon_cli.geometry.transforms import invert
+from recon_cli.robot.cell import Cell
+from recon_cli.robot.ik import IKResult
+
+
+def joint_value(value: float, prismatic: bool) -> str:
+    return f"{value:+.4f} m" if prismatic else f"{math.degrees(value):+8.3f}°"
+
+
+def pose_text(T: np.ndarray) -> str:
+    p = T[:3, 3]
+    z = T[:3, 2]
+    return (f"position ({p[0]:+.4f}, {p[1]:+.4f}, {p[2]:+.4f}) m, "
+            f"viewing direction ({z[0]:+.3f}, {z[1]:+.3f}, {z[2]:+.3f})")
+
+
+def cell_tables(cell: Cell, q_show: np.ndarray) -> list:
+    lim = cell.limits
+    out = []
+    joints = Table(title=f"joints of the {cell.config.kind.value} cell ({lim.n} DoF)")
+    for col in ("joint", "type", "hard limits", "soft limits", "velocity", "acceleration"):
+        joints.add_column(col)
+    for i, name in enumerate(lim.names):
+        p = bool(lim.prismatic[i])
+        unit = "m" if p else "°"
+        k = 1.0 if p else 180.0 / math.pi
+        joints.add_row(
+            name, "prismatic" if p else "revolute",
+            f"{lim.lower[i] * k:+.4g} … {lim.upper[i] * k:+.4g} {unit}",
+            f"{lim.soft_lower[i] * k:+.4g} … {lim.soft_upper[i] * k:+.4g} {unit}",
+            f"{lim.velocity[i] * k:.4g} {unit}/s", f"{lim.acceleration[i] * k:.4g} {unit}/s²",
+        )
+    out.append(joints)
+
+    shapes = Table(title=f"collision shapes (inflated by the safety distance "
+                         f"{cell.config.safety_distance:.3f} m)")
+    for col in ("side", "link", "shape", "kind", "size [m]"):
+        shapes.add_column(col)
+    for side, group in (("robot", cell.collision.robot_shapes), ("environment", cell.collision.env_shapes)):
+        for s in group:
+            if s.kind == "box":
+                size = " × ".join(f"{d:.4g}" for d in s.dims)
+            elif s.kind in ("capsule", "cylinder"):
+                size = f"r {s.dims[0]:.4g}, length {s.dims[1]:.4g}"
+            else:
+                size = f"r {s.dims[0]:.4g}"
+            shapes.add_row(side, s.link, s.name, s.kind, size)
+    out.append(shapes)
+
+    cam = Table(title="camera and marker frames")
+    cam.add_column("frame")
+    cam.add_column("pose")
+    flange = cell.kin.frame_pose(q_show, "arm_link_7")
+    T_cam = cell.kin.world_T_camera(q_show)
+    f_T_c = invert(flange) @ T_cam
+    cam.add_row("camera in flange (arm_link_7)", pose_text(f_T_c))
+    cam.add_row("camera in world at the shown q", pose_text(T_cam))
+    m = cell.world_T_marker
+    cam.add_row("marker in world", f"origin ({m[0, 3]:+.4f}, {m[1, 3]:+.4f}, {m[2, 3]:+.4f}) m, "
+                f"x ({m[0, 0]:+.0f}, {m[1, 0]:+.0f}, {m[2, 0]:+.0f}), z ({m[0, 2]:+.0f}, {m[1, 2]:+.0f}, {m[2, 2]:+.0f})")
+    out.append(cam)
+    return out
+
+
+def ik_table(cell: Cell, result: IKResult) -> Table:
+    lim = cell.limits
+    table = Table(title=f"{len(result.solutions)} IK solution(s) in {result.seconds * 1e3:.1f} ms "
+                        f"({result.attempts} seeds, {result.converged} converged, "
+                        f"{result.rejected_collision} colliding)")
+    table.add_column("joint")
+    for k in range(len(result.solutions)):
+        table.add_column(f"#{k + 1}", justify="right")
+    for i, name in enumerate(lim.names):
+        table.add_row(name, *[joint_value(s.q[i], bool(lim.prismatic[i])) for s in result.solutions])
+    margins, clear, selfd = [], [], []
+    for s in result.solutions:
+        m = lim.margin_to_soft(s.q)
+        j = int(np.argmin(m))
+        margins.append(f"{joint_value(m[j], bool(lim.prismatic[j])).strip()} ({lim.names[j]})")
+        d = cell.collision.distance(s.q)
+        clear.append(f"{d.environment * 1e3:.1f} mm")
+        selfd.append(f"{d.self_ * 1e3:.1f} mm")
+    table.add_section()
+    table.add_row("limit margin", *margins)
+    table.add_row("clearance", *clear)
+    table.add_row("self distance", *selfd)
+    return table

@@ -1,0 +1,187 @@
+"""Inverse kinematics of the camera pose for the redundant cells (thesis 2.2.1).
+
+Damped least squares (Levenberg-Marquardt) on the SE(3) error ``log(world_T_camera(q)^-1
+world_T_goal)`` with pinocchio's Jacobians, from several seeds, projected onto the soft
+joint limits. Converged solutions are kept when they are collision-free and differ from
+the ones already found, so the caller gets several distinct goal configurations (the
+redundancy of the 9-DoF chain gives infinitely many). Seeds: the caller's seed first,
+then random configurations whose gantry puts the iiwa base near the camera.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+import pinocchio as pin
+
+from recon_cli.robot.collision import CollisionModel
+from recon_cli.robot.kinematics import Kinematics
+
+
+class IKStatus(str, Enum):
+    SOLVED = "solved"
+    #: no attempt converged: the pose is out of reach (or too close to the limits)
+    UNREACHABLE = "unreachable"
+    #: attempts converged, but every solution collides
+    COLLIDING = "colliding"
+
+
+@dataclass(frozen=True)
+class IKOptions:
+    """Options of :func:`solve_ik`.
+
+    max_solutions: stop after this many distinct solutions
+    max_attempts: seeds to try at most
+    max_iterations: LM iterations per seed
+    tol_position [m], tol_rotation [rad]: convergence tolerances
+    min_separation: smallest joint-space distance (max norm, [rad] or [m]) between solutions
+    check_collision: reject colliding solutions
+    limit_avoidance: gain of the null-space motion toward mid-range (0 disables it)
+    """
+
+    max_solutions: int = 4
+    max_attempts: int = 60
+    max_iterations: int = 80
+    tol_position: float = 1e-6
+    tol_rotation: float = 1e-6
+    min_separation: float = 0.1
+    check_collision: bool = True
+    limit_avoidance: float = 1.0
+
+
+@dataclass(frozen=True)
+class IKSolution:
+    """One goal configuration. q: (n,) joint vector; limit_margin: smallest distance to a
+    soft limit [rad or m]; position_error [m], rotation_error [rad] of the camera."""
+
+    q: np.ndarray
+    limit_margin: float
+    position_error: float
+    rotation_error: float
+
+
+@dataclass(frozen=True)
+class IKResult:
+    status: IKStatus
+    solutions: tuple[IKSolution, ...]
+    attempts: int
+    converged: int
+    rejected_collision: int
+    seconds: float
+    colliding_pairs: tuple[tuple[str, str], ...] = field(default=())
+
+    @property
+    def ok(self) -> bool:
+        return self.status is IKStatus.SOLVED
+
+
+class IKSolver:
+    """Camera-pose IK for one cell; reuses one pinocchio Data across calls."""
+
+    def __init__(self, kin: Kinematics, collision: CollisionModel | None = None) -> None:
+        self.kin = kin
+        self.collision = collision
+        self._data = kin.model.createData()
+        self._lo = kin.limits.soft_lower
+        self._hi = kin.limits.soft_upper
+        self._mid = (self._lo + self._hi) / 2.0
+        self._inv_range2 = 1.0 / ((self._hi - self._lo) / 2.0) ** 2
+        names = kin.joint_names
+        self._gantry = [names.index(j) for j in ("base_joint_1", "base_joint_2") if j in names]
+        # where the iiwa base sits relative to the gantry joints: base_xy = offset + (q_b, q_a)
+        q0 = kin.neutral()
+        base0 = kin.frame_pose(q0, "arm_link_0")[:3, 3]
+        self._base_offset_xy = base0[:2].copy()
+
+    # ------------------------------------------------------------------ seeds
+    def random_seed(self, world_T_goal: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """A random configuration; with linear axes, the iiwa base is placed within 0.6 m
+        (horizontally) of the goal camera position."""
+        q = rng.uniform(self._lo, self._hi)
+        if self._gantry:
+            target = world_T_goal[:2, 3] + rng.uniform(-0.6, 0.6, size=2)
+            ia, ib = self._gantry  # a moves along world y, b along world x
+            q[ia] = target[1] - self._base_offset_xy[1]
+            q[ib] = target[0] - self._base_offset_xy[0]
+            q = np.clip(q, self._lo, self._hi)
+        return q
+
+    # ------------------------------------------------------------------ one descent
+    def descend(self, world_T_goal: np.ndarray, q: np.ndarray, options: IKOptions
+                ) -> tuple[np.ndarray, bool, float, float]:
+        """LM from q; returns (q, converged, position error [m], rotation error [rad])."""
+        model, data, fid = self.kin.model, self._data, self.kin.camera_frame_id
+        oMgoal = pin.SE3(world_T_goal[:3, :3], world_T_goal[:3, 3])
+        lam = 1e-3
+        q = q.copy()
+        err = None
+        prev_cost = np.inf
+        for _ in range(options.max_iterations):
+            pin.computeJointJacobians(model, data, q)
+            oMf = pin.updateFramePlacement(model, data, fid)
+            cMg = oMf.actInv(oMgoal)
+            err = pin.log6(cMg).vector  # in the camera frame: (v, w)
+            ep, er = np.linalg.norm(err[:3]), np.linalg.norm(err[3:])
+            if ep < options.tol_position and er < options.tol_rotation:
+                return q, True, float(ep), float(er)
+            cost = ep * ep + er * er
+            lam = lam * 0.3 if cost < prev_cost else min(lam * 4.0, 1.0)
+            prev_cost = cost
+            J = pin.getFrameJacobian(model, data, fid, pin.LOCAL)
+            J = pin.Jlog6(cMg.inverse()) @ J
+            JJt = J @ J.T
+            JJt[np.diag_indices(6)] += lam
+            Jpinv = J.T @ np.linalg.inv(JJt)
+            dq = Jpinv @ err
+            if options.limit_avoidance > 0.0 and ep + er > 1e-3:
+                # secondary task in the null space while far from the goal: pull joints toward
+                # the middle of their range (off near the goal, for quadratic convergence)
+                pull = options.limit_avoidance * (self._mid - q) * self._inv_range2
+                dq += pull - Jpinv @ (J @ pull)
+            step = np.max(np.abs(dq))
+            if step > 0.5:
+                dq *= 0.5 / step
+            q = np.clip(pin.integrate(model, q, dq), self._lo, self._hi)
+        ep = float(np.linalg.norm(err[:3])) if err is not None else np.inf
+        er = float(np.linalg.norm(err[3:])) if err is not None else np.inf
+        return q, False, ep, er
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, world_T_goal: np.ndarray, rng: np.random.Generator,
+              seed: np.ndarray | None = None, options: IKOptions = IKOptions()  # noqa: B008
+              ) -> IKResult:
+        """Up to ``options.max_solutions`` distinct collision-free solutions for a camera pose."""
+        t0 = time.perf_counter()
+        solutions: list[IKSolution] = []
+        converged = rejected = 0
+        pairs: tuple[tuple[str, str], ...] = ()
+        attempts = 0
+        while attempts < options.max_attempts and len(solutions) < options.max_solutions:
+            start = (np.clip(seed, self._lo, self._hi) if (seed is not None and attempts == 0)
+                     else self.random_seed(world_T_goal, rng))
+            attempts += 1
+            q, ok, ep, er = self.descend(world_T_goal, start, options)
+            if not ok:
+                continue
+            converged += 1
+            if any(np.max(np.abs(q - s.q)) < options.min_separation for s in solutions):
+                continue
+            if options.check_collision and self.collision is not None:
+                report = self.collision.check(q)
+                if report.colliding:
+                    rejected += 1
+                    pairs = pairs or report.pairs
+                    continue
+            margin = float(np.min(self.kin.limits.margin_to_soft(q)))
+            solutions.append(IKSolution(q, margin, ep, er))
+        if solutions:
+            status = IKStatus.SOLVED
+        elif converged:
+            status = IKStatus.COLLIDING
+        else:
+            status = IKStatus.UNREACHABLE
+        return IKResult(status, tuple(solutions), attempts, converged, rejected,
+                        time.perf_counter() - t0, pairs)

@@ -96,7 +96,9 @@ def ik(
     phi: Annotated[float, typer.Option(help="Azimuth [deg].")] = 0.0,
     alpha: Annotated[float, typer.Option(help="Camera roll about its viewing axis [deg].")] = 0.0,
     frame: Annotated[str, typer.Option(help="Frame of f and the angles: world or marker.")] = "world",
-    object_box: Annotated[str | None, typer.Option(help="Object bounding box on the table centre, sx,sy,sz [m].")] = "0.3,0.3,0.3",
+    object_box: Annotated[
+        str | None, typer.Option(help="Object bounding box on the table centre, sx,sy,sz [m]; 'none' for no box.")
+    ] = "0.3,0.3,0.3",
     solutions: Annotated[int, typer.Option(min=1, max=32, help="How many distinct solutions to look for.")] = 4,
     cell: CellOpt = "gantry",
     safety: SafetyOpt = 0.03,
@@ -128,7 +130,7 @@ def ik(
 @bench_app.command("ik")
 def bench_ik(
     n: Annotated[int, typer.Option("--n", min=1, help="Number of camera poses.")] = 500,
-    solutions: Annotated[int, typer.Option(min=1, max=32, help="Solutions asked per pose in the multi-solution run.")] = 4,
+    solutions: Annotated[int, typer.Option(min=1, max=32, help="Solutions asked per pose in the second run.")] = 4,
     cell: CellOpt = "gantry",
     safety: SafetyOpt = 0.03,
     seed: SeedOpt = 0,

@@ -65,8 +65,8 @@ def cell_tables(cell: Cell, q_show: np.ndarray) -> list:
     cam.add_row("camera in flange (arm_link_7)", pose_text(f_T_c))
     cam.add_row("camera in world at the shown q", pose_text(T_cam))
     m = cell.world_T_marker
-    cam.add_row("marker in world", f"origin ({m[0, 3]:+.4f}, {m[1, 3]:+.4f}, {m[2, 3]:+.4f}) m, "
-                f"x ({m[0, 0]:+.0f}, {m[1, 0]:+.0f}, {m[2, 0]:+.0f}), z ({m[0, 2]:+.0f}, {m[1, 2]:+.0f}, {m[2, 2]:+.0f})")
+    cam.add_row("marker in world", f"origin ({m[0, 3]:+.4f}, {m[1, 3]:+.4f}, {m[2, 3]:+.4f}) m, x "
+                f"({m[0, 0]:+.0f}, {m[1, 0]:+.0f}, {m[2, 0]:+.0f}), z ({m[0, 2]:+.0f}, {m[1, 2]:+.0f}, {m[2, 2]:+.0f})")
     out.append(cam)
     return out
 

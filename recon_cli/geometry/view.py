@@ -11,14 +11,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 
 import numpy as np
 
 from recon_cli.errors import InvalidViewError
 
 
-class Frame(str, Enum):
+class Frame(StrEnum):
     """Reference frame a view (or a box) is given in."""
 
     WORLD = "world"

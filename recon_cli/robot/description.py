@@ -13,7 +13,7 @@ import hashlib
 import io
 import math
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.paths import ROBOT_DIR
@@ -24,7 +24,7 @@ CELL_XACRO = ROBOT_DIR / "cell.urdf.xacro"
 DEFAULT_SAFETY_DISTANCE = 0.03
 
 
-class CellKind(str, Enum):
+class CellKind(StrEnum):
     """The two cells of the thesis."""
 
     GANTRY = "gantry"  #: 9 DoF: two linear axes + iiwa (Figures 1.1, 2.7)

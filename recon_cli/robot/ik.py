@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 
 import numpy as np
 import pinocchio as pin
@@ -21,7 +21,7 @@ from recon_cli.robot.collision import CollisionModel
 from recon_cli.robot.kinematics import Kinematics
 
 
-class IKStatus(str, Enum):
+class IKStatus(StrEnum):
     SOLVED = "solved"
     #: no attempt converged: the pose is out of reach (or too close to the limits)
     UNREACHABLE = "unreachable"

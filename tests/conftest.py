@@ -1,0 +1,32 @@
+"""Shared fixtures: the two cells (built once per session) and seeded generators."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from recon_cli.bench.scenarios import BENCH_CUBE
+from recon_cli.robot.cell import Cell
+from recon_cli.robot.description import CellConfig, CellKind
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED_DATA = ROOT.parent / "shared" / "data"
+
+
+@pytest.fixture(scope="session")
+def gantry() -> Cell:
+    """The 9-DoF cell with the 0.3 m benchmark cube on the table (thesis 4.1)."""
+    return Cell(CellConfig(kind=CellKind.GANTRY), object_box=BENCH_CUBE)
+
+
+@pytest.fixture(scope="session")
+def ceiling() -> Cell:
+    """The 7-DoF ceiling cell of thesis section 5.1."""
+    return Cell(CellConfig(kind=CellKind.CEILING))
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(12345)

@@ -1,0 +1,110 @@
+"""The command line: commands run, user errors are one line with a non-zero exit."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from recon_cli.cli import main
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_help_lists_commands(capsys):
+    code, out, _ = run(capsys, "--help")
+    assert code == 0
+    for command in ("cell", "ik", "bench"):
+        assert command in out
+
+
+def test_help_is_fast_and_light():
+    """`recon --help` must not import the heavy libraries."""
+    code = ("import sys; from recon_cli.cli import main; main(['--help']); "
+            "heavy = [m for m in ('pinocchio', 'fcl', 'open3d', 'mujoco', 'ompl') if m in sys.modules]; "
+            "print('HEAVY', heavy)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert "HEAVY []" in out.stdout
+
+
+def test_cell_prints_joints_shapes_camera(capsys, tmp_path):
+    code, out, _ = run(capsys, "cell", "--urdf", str(tmp_path / "cell.urdf"))
+    assert code == 0
+    for text in ("base_joint_1", "arm_joint_7", "capsule", "table_top", "camera in flange", "marker"):
+        assert text in out
+    assert (tmp_path / "cell.urdf").read_text().startswith("<?xml")
+
+
+def test_cell_ceiling(capsys):
+    code, out, _ = run(capsys, "cell", "--cell", "ceiling")
+    assert code == 0 and "7 DoF" in out and "base_joint_1" not in out
+
+
+def test_ik_prints_solutions(capsys):
+    code, out, _ = run(capsys, "ik", "--focus", "0,0,0.78", "-r", "0.6", "--theta", "70",
+                       "--phi", "30", "--solutions", "3")
+    assert code == 0
+    assert "3 IK solution(s)" in out and "clearance" in out and "limit margin" in out
+
+
+def test_ik_marker_frame(capsys):
+    code, out, _ = run(capsys, "ik", "--frame", "marker", "--focus", "0.1925,0.1225,0.1",
+                       "--theta", "50", "--solutions", "1")
+    assert code == 0 and "1 IK solution(s)" in out
+
+
+@pytest.mark.parametrize("argv, code, needle", [
+    (["ik", "--focus", "0.7,1.2,-0.2", "-r", "0.3", "--theta", "90"], 1, "out of reach"),
+    (["ik", "--theta", "170", "-r", "0.2"], 1, "under the table top"),
+    (["ik", "--focus", "0,0,0.9", "--theta", "0", "-r", "0.05"], 1, "inside object"),
+    (["ik", "--cell", "scara"], 1, "unknown cell 'scara'; choose one of: gantry, ceiling"),
+    (["cell", "--cell", "12dof"], 1, "unknown cell"),
+    (["ik", "--radius", "abc"], 2, "Invalid value for '--radius'"),
+    (["ik", "--focus", "1,2,x"], 1, "--focus '1,2,x' is not 3 numbers"),
+    (["ik", "--focus", "1,2"], 1, "is not 3 numbers"),
+    (["ik", "--radius", "-0.5"], 1, "not positive"),
+    (["ik", "--theta", "nan"], 1, "non-finite"),
+    (["ik", "--frame", "tool"], 1, "unknown frame 'tool'"),
+    (["ik", "--object-box", "0.3,-1,0.3"], 1, "non-positive edge"),
+    (["cell", "--safety", "-1"], 1, "safety distance"),
+    (["ik", "--nonsense"], 2, "No such option"),
+])
+def test_bad_input_is_one_line(capsys, argv, code, needle):
+    got, out, err = run(capsys, *argv)
+    assert got == code
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith("error: ")
+    assert needle in lines[0]
+    assert "Traceback" not in err + out
+
+
+def test_console_script_exit_code():
+    """The installed entry point exits non-zero without a traceback."""
+    proc = subprocess.run([sys.executable, "-m", "recon_cli", "ik", "--cell", "nope"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 1
+    assert proc.stderr.strip().startswith("error: unknown cell")
+    assert "Traceback" not in proc.stderr
+
+
+def test_bench_ik_quick(capsys, tmp_path):
+    code, out, _ = run(capsys, "bench", "ik", "--n", "10", "--out", str(tmp_path))
+    assert code == 0
+    data = json.loads((tmp_path / "bench_ik.json").read_text())
+    res = data["result"]
+    assert res["n_poses"] == 10 and res["success_first"] == 1.0
+    assert res["all_within_soft_limits"] and res["all_collision_free"]
+
+
+def test_bench_output_folder_not_writable(capsys, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    code, _, err = run(capsys, "bench", "ik", "--n", "1", "--out", str(blocker / "sub"))
+    assert code == 1 and "not writable" in err

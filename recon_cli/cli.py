@@ -72,12 +72,12 @@ def cell(
     from recon_cli.render import cell_tables
 
     c = _cell(cell, safety)
-    q_show = c.kin.neutral()
+    q_show, label = c.kin.neutral(), "q = 0"
     if "base_joint_1" in c.joint_names:
         from recon_cli.bench.scenarios import TABLE_4_1_START
 
-        q_show = TABLE_4_1_START.copy()
-    for table in cell_tables(c, q_show):
+        q_show, label = TABLE_4_1_START.copy(), "the Table 4.1 start"
+    for table in cell_tables(c, q_show, label):
         console.print(table)
     if urdf is not None:
         try:

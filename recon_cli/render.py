@@ -23,7 +23,7 @@ def pose_text(T: np.ndarray) -> str:
             f"viewing direction ({z[0]:+.3f}, {z[1]:+.3f}, {z[2]:+.3f})")
 
 
-def cell_tables(cell: Cell, q_show: np.ndarray) -> list:
+def cell_tables(cell: Cell, q_show: np.ndarray, q_label: str) -> list:
     lim = cell.limits
     out = []
     joints = Table(title=f"joints of the {cell.config.kind.value} cell ({lim.n} DoF)")
@@ -63,12 +63,16 @@ def cell_tables(cell: Cell, q_show: np.ndarray) -> list:
     T_cam = cell.kin.world_T_camera(q_show)
     f_T_c = invert(flange) @ T_cam
     cam.add_row("camera in flange (arm_link_7)", pose_text(f_T_c))
-    cam.add_row("camera in world at the shown q", pose_text(T_cam))
+    cam.add_row(f"camera in world at {q_label}", pose_text(T_cam))
     m = cell.world_T_marker
     cam.add_row("marker in world", f"origin ({m[0, 3]:+.4f}, {m[1, 3]:+.4f}, {m[2, 3]:+.4f}) m, x "
                 f"({m[0, 0]:+.0f}, {m[1, 0]:+.0f}, {m[2, 0]:+.0f}), z ({m[0, 2]:+.0f}, {m[1, 2]:+.0f}, {m[2, 2]:+.0f})")
     out.append(cam)
     return out
+
+
+def _short(pair: tuple[str, str]) -> str:
+    return " ↔ ".join(label.split("/")[-1] for label in pair)
 
 
 def ik_table(cell: Cell, result: IKResult) -> Table:
@@ -84,11 +88,11 @@ def ik_table(cell: Cell, result: IKResult) -> Table:
     margins, clear, selfd = [], [], []
     for s in result.solutions:
         m = lim.margin_to_soft(s.q)
-        j = int(np.argmin(m))
+        j = int(np.argmin(m / (lim.soft_upper - lim.soft_lower)))  # tightest relative to range
         margins.append(f"{joint_value(m[j], bool(lim.prismatic[j])).strip()} ({lim.names[j]})")
         d = cell.collision.distance(s.q)
-        clear.append(f"{d.environment * 1e3:.1f} mm")
-        selfd.append(f"{d.self_ * 1e3:.1f} mm")
+        clear.append(f"{d.environment * 1e3:.1f} mm ({_short(d.environment_pair)})")
+        selfd.append(f"{d.self_ * 1e3:.1f} mm ({_short(d.self_pair)})")
     table.add_section()
     table.add_row("limit margin", *margins)
     table.add_row("clearance", *clear)

@@ -1,0 +1,61 @@
+"""The backend interfaces: the only things that differ between simulation and hardware.
+
+A ``RobotBackend`` executes a time-parameterized, already checked trajectory and reports
+the measured joints; a ``CameraBackend`` captures colour + depth with its intrinsics.
+Everything above (planning, scripts, view planning, registration) uses only these.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from recon_cli.perception.camera_model import Intrinsics
+from recon_cli.planning.trajectory import Trajectory
+
+
+@dataclass(frozen=True)
+class ExecutionReport:
+    """How a trajectory was executed.
+
+    duration: planned duration [s]; settle_time: time after the end until settled [s]
+    max_tracking_error: largest |q - q_d| over the motion, per joint (n,) [rad or m]
+    final_error: |q - q_goal| per joint when settled (n,)
+    settled: the settling criterion was met before the time-out
+    """
+
+    duration: float
+    settle_time: float
+    max_tracking_error: np.ndarray
+    final_error: np.ndarray
+    settled: bool
+
+
+@dataclass(frozen=True)
+class RGBDFrame:
+    """One capture. color: (H, W, 3) uint8 RGB; depth: (H, W) float64 [m], 0 = no return."""
+
+    color: np.ndarray
+    depth: np.ndarray
+    intrinsics: Intrinsics
+    timestamp: float  # [s] backend clock
+
+
+@runtime_checkable
+class RobotBackend(Protocol):
+    joint_names: tuple[str, ...]
+
+    def measured_joints(self) -> np.ndarray:
+        """Measured joint positions (n,) in recon's joint order."""
+
+    def execute(self, trajectory: Trajectory) -> ExecutionReport:
+        """Follow a checked trajectory that starts at the current configuration, then wait
+        until the robot has settled at its end."""
+
+
+@runtime_checkable
+class CameraBackend(Protocol):
+    def capture(self) -> RGBDFrame:
+        """Colour and depth images of the current view."""

@@ -1,0 +1,124 @@
+"""The simulated robot: MuJoCo plant under computed-torque control with integral action.
+
+Control law (thesis eqs. 2.12-2.14), at the plant's 1 kHz step:
+    tau = M(q) v + C(q, qd) qd + g(q),   v = qdd_d - K0 e - K1 ed - KI int(e),   e = q - q_d
+with M, C, g from pinocchio's model of the same URDF plus the reflected rotor inertia of
+robot/drives.yaml. The plant additionally has viscous joint friction the controller does
+not know; the integral term removes the resulting error. After the trajectory the final
+configuration is held until the robot has settled: every joint within ``settle_position``
+of the goal and slower than ``settle_velocity`` for ``settle_hold`` seconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from recon_cli.backends.base import ExecutionReport
+from recon_cli.backends.sim.scene import SimScene, drives, mujoco
+from recon_cli.planning.trajectory import Trajectory
+from recon_cli.robot.kinematics import Kinematics
+
+
+@dataclass(frozen=True)
+class ControllerGains:
+    K0: float = 1200.0
+    K1: float = 80.0
+    KI: float = 200.0
+
+    @classmethod
+    def thesis(cls) -> ControllerGains:
+        c = drives()["controller"]
+        return cls(float(c["K0"]), float(c["K1"]), float(c["KI"]))
+
+
+@dataclass(frozen=True)
+class SettleCriterion:
+    position: float = 2e-6  # [rad or m] per joint
+    velocity: float = 1e-4  # [rad/s or m/s] per joint
+    hold: float = 0.05  # [s]
+    timeout: float = 3.0  # [s]
+
+
+class SimRobot:
+    """RobotBackend of the simulation."""
+
+    def __init__(self, scene: SimScene, data: mujoco.MjData, kin: Kinematics,
+                 gains: ControllerGains | None = None, settle: SettleCriterion | None = None) -> None:
+        if tuple(kin.joint_names) != scene.joint_names:
+            raise ValueError("the controller model and the plant have different joints")
+        self.scene = scene
+        self.data = data
+        self.kin = kin
+        self.joint_names = scene.joint_names
+        self.gains = gains or ControllerGains.thesis()
+        self.settle = settle or SettleCriterion()
+        self._pin_data = kin.model.createData()
+        arm = drives()["armature"]
+        self._armature = np.array([float(arm.get(n, 0.0)) for n in self.joint_names])
+        self._effort = kin.limits.effort
+
+    # ------------------------------------------------------------------ state
+    def measured_joints(self) -> np.ndarray:
+        return self.data.qpos[self.scene.qpos_index].copy()
+
+    def measured_velocities(self) -> np.ndarray:
+        return self.data.qvel[self.scene.dof_index].copy()
+
+    def reset(self, q: np.ndarray) -> None:
+        """Place the robot at rest at q (start of a session)."""
+        self.data.qpos[self.scene.qpos_index] = q
+        self.data.qvel[:] = 0.0
+        self.data.ctrl[:] = 0.0
+        mujoco.mj_forward(self.scene.model, self.data)
+
+    # ------------------------------------------------------------------ control
+    def _torque(self, q, qd, q_d, qd_d, qdd_d, integral) -> np.ndarray:
+        g = self.gains
+        e, ed = q - q_d, qd - qd_d
+        v = qdd_d - g.K0 * e - g.K1 * ed - g.KI * integral
+        tau = pin.rnea(self.kin.model, self._pin_data, q, qd, v) + self._armature * v
+        return np.clip(tau, -self._effort, self._effort)
+
+    def execute(self, trajectory: Trajectory) -> ExecutionReport:
+        model, data = self.scene.model, self.data
+        qi, di = self.scene.qpos_index, self.scene.dof_index
+        dt = model.opt.timestep
+        steps = int(np.ceil(trajectory.duration / dt))
+        q_des, qd_des, qdd_des = trajectory.sample(np.arange(steps + 1) * dt)
+        integral = np.zeros(len(qi))
+        max_err = np.zeros(len(qi))
+        for k in range(steps):
+            q, qd = data.qpos[qi], data.qvel[di]
+            e = q - q_des[k]
+            np.maximum(max_err, np.abs(e), out=max_err)
+            integral += e * dt
+            data.ctrl[:] = self._torque(q, qd, q_des[k], qd_des[k], qdd_des[k], integral)
+            mujoco.mj_step(model, data)
+        # hold the goal until settled
+        goal = trajectory.goal
+        zero = np.zeros(len(qi))
+        s = self.settle
+        held = 0.0
+        t = 0.0
+        settled = False
+        while t < s.timeout:
+            q, qd = data.qpos[qi], data.qvel[di]
+            e = q - goal
+            np.maximum(max_err, np.abs(e), out=max_err)
+            if np.all(np.abs(e) < s.position) and np.all(np.abs(qd) < s.velocity):
+                held += dt
+                if held >= s.hold:
+                    settled = True
+                    break
+            else:
+                held = 0.0
+            integral += e * dt
+            data.ctrl[:] = self._torque(q, qd, goal, zero, zero, integral)
+            mujoco.mj_step(model, data)
+            t += dt
+        mujoco.mj_forward(model, data)
+        final = np.abs(data.qpos[qi] - goal)
+        return ExecutionReport(trajectory.duration, t, max_err, final, settled)

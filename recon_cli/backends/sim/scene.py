@@ -1,0 +1,173 @@
+"""The MuJoCo scene, compiled from the same expanded URDF as everything else.
+
+The URDF's visual geometry (real sizes, safety distance 0) becomes the scene; its collision
+geometry is dropped (planning checks collisions with FCL; the robot only moves along
+checked trajectories). Added through the MjSpec API: the flange camera (MuJoCo cameras
+look along -z, so the OpenCV optical frame is turned by pi about x), the ChArUco board as
+a texture on the board plate, the object to scan as a mesh, lights, joint motors, and the
+drive data of robot/drives.yaml (reflected rotor inertia, plant-only viscous friction).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import yaml
+from lxml import etree
+
+from recon_cli.objects import SceneObject
+from recon_cli.paths import ROBOT_DIR
+from recon_cli.perception.charuco import BoardSpec, thesis_board
+from recon_cli.perception.sensor import SensorModel, motioncam_3d_m
+from recon_cli.robot.description import CellConfig, expand_urdf
+from recon_cli.robot.limits import limits_from_urdf
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import mujoco  # noqa: E402  (MUJOCO_GL must be set before the import)
+
+CAMERA_NAME = "depth_camera"
+OBJECT_NAME = "scan_object"
+BOARD_PIXELS_PER_METRE = 8000.0  # texture resolution of the printed board (0.125 mm per texel)
+
+
+@functools.lru_cache(maxsize=1)
+def drives() -> dict:
+    with open(ROBOT_DIR / "drives.yaml") as f:
+        return yaml.safe_load(f)
+
+
+@dataclass
+class SimScene:
+    """A compiled scene and the indices the backends need."""
+
+    model: mujoco.MjModel
+    joint_names: tuple[str, ...]
+    qpos_index: np.ndarray  # (n,) qpos address of each joint, in recon's joint order
+    dof_index: np.ndarray  # (n,) dof address of each joint
+    camera_id: int
+    sensor: SensorModel
+    scene_object: SceneObject | None
+
+
+def _mujoco_urdf(config: CellConfig) -> str:
+    """URDF text of the cell (real sizes) with MuJoCo's compiler options inside <robot>."""
+    urdf = expand_urdf(CellConfig(kind=config.kind, safety_distance=0.0,
+                                  table_lift=config.table_lift, ceiling_xy=config.ceiling_xy))
+    root = etree.fromstring(urdf.encode())
+    mj = etree.SubElement(root, "mujoco")
+    etree.SubElement(mj, "compiler", fusestatic="false", discardvisual="false",
+                     balanceinertia="true", strippath="false")
+    return etree.tostring(root).decode()
+
+
+def _board_rgb(board: BoardSpec) -> np.ndarray:
+    """The printed board as an RGB texture. MuJoCo puts the first texture row at the
+    plane's +y edge, which is where the board image's top row belongs (marker y max);
+    tests/backends check the orientation by detecting the board in a render."""
+    grey = board.image(BOARD_PIXELS_PER_METRE)
+    return np.ascontiguousarray(np.repeat(grey[:, :, None], 3, axis=2))
+
+
+def build_scene(config: CellConfig, scene_object: SceneObject | None = None,
+                sensor: SensorModel | None = None, board: BoardSpec | None = None,
+                timestep: float = 0.001) -> SimScene:
+    sensor = sensor or motioncam_3d_m()
+    board = board or thesis_board()
+    urdf = _mujoco_urdf(config)
+    spec = mujoco.MjSpec.from_string(urdf)
+    spec.option.timestep = timestep
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.visual.global_.offwidth = max(sensor.width, 640)
+    spec.visual.global_.offheight = max(sensor.height, 480)
+    spec.visual.quality.shadowsize = 0
+    spec.visual.headlight.ambient = [0.45, 0.45, 0.45]
+    spec.visual.headlight.diffuse = [0.35, 0.35, 0.35]
+    spec.visual.headlight.specular = [0.0, 0.0, 0.0]
+
+    # keep the visual geometry only: no contacts in the plant
+    for geom in list(spec.geoms):
+        if geom.contype != 0 or geom.conaffinity != 0:
+            spec.delete(geom)
+
+    # depth camera on the optical frame "camera": OpenGL axes = OpenCV axes turned by pi about x
+    cam_body = spec.body("camera")
+    cam = cam_body.add_camera()
+    cam.name = CAMERA_NAME
+    cam.quat = [0.0, 1.0, 0.0, 0.0]
+    cam.fovy = float(np.degrees(sensor.fovy))
+
+    # the printed board on the carrier plate (top face of the plate is z = 0 of "marker")
+    tex = spec.add_texture()
+    tex.name = "charuco"
+    tex.type = mujoco.mjtTexture.mjTEXTURE_2D
+    rgb = _board_rgb(board)
+    tex.width, tex.height, tex.nchannel = rgb.shape[1], rgb.shape[0], 3
+    tex.data = rgb.tobytes()
+    mat = spec.add_material()
+    mat.name = "charuco"
+    mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "charuco"
+    mat.texrepeat = [1, 1]
+    mat.texuniform = False
+    mat.specular = 0.0
+    mat.shininess = 0.0
+    sx, sy = board.size
+    g = spec.body("marker").add_geom()
+    g.name = "charuco_print"
+    g.type = mujoco.mjtGeom.mjGEOM_PLANE
+    g.size = [sx / 2.0, sy / 2.0, 0.01]
+    g.pos = [sx / 2.0, sy / 2.0, 1e-5]
+    g.material = "charuco"
+    g.contype = g.conaffinity = 0
+
+    if scene_object is not None:
+        mesh = spec.add_mesh()
+        mesh.name = OBJECT_NAME
+        mesh.uservert = scene_object.vertices.astype(np.float32).ravel().tolist()
+        mesh.userface = scene_object.triangles.astype(np.int32).ravel().tolist()
+        og = spec.worldbody.add_geom()
+        og.name = OBJECT_NAME
+        og.type = mujoco.mjtGeom.mjGEOM_MESH
+        og.meshname = OBJECT_NAME
+        og.rgba = list(scene_object.rgba)
+        og.contype = og.conaffinity = 0
+        T = scene_object.world_T_object
+        og.pos = T[:3, 3].tolist()
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, T[:3, :3].ravel())
+        og.quat = quat.tolist()
+
+    light = spec.worldbody.add_light()
+    light.pos = [0.4, -0.6, 2.5]
+    light.dir = [-0.15, 0.25, -1.0]
+    light.diffuse = [0.5, 0.5, 0.5]
+    light.castshadow = False
+
+    d = drives()
+    joint_names = []
+    movable = [j.name for j in spec.joints]
+    effort = dict(zip(movable, limits_from_urdf(urdf, movable).effort, strict=True))
+    for joint in spec.joints:
+        joint_names.append(joint.name)
+        joint.armature = float(d["armature"].get(joint.name, 0.0))
+        joint.damping = [float(d["plant_viscous_friction"].get(joint.name, 0.0)), 0.0, 0.0]
+        act = spec.add_actuator()
+        act.name = f"motor_{joint.name}"
+        act.target = joint.name
+        act.trntype = mujoco.mjtTrn.mjTRN_JOINT
+        act.gainprm[0] = 1.0
+        act.ctrllimited = True
+        act.ctrlrange = [-float(effort[joint.name]), float(effort[joint.name])]  # URDF effort
+
+    model = spec.compile()
+    extent = model.stat.extent
+    model.vis.map.znear = 0.05 / extent  # 5 cm: far inside the sensor's 0.497 m minimum range
+    model.vis.map.zfar = 10.0 / extent
+    names = tuple(joint_names)
+    qpos_index = np.array([model.jnt_qposadr[model.joint(n).id] for n in names])
+    dof_index = np.array([model.jnt_dofadr[model.joint(n).id] for n in names])
+    return SimScene(model, names, qpos_index, dof_index, model.camera(CAMERA_NAME).id, sensor,
+                    scene_object)

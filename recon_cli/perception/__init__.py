@@ -1,0 +1,1 @@
+"""Perception: camera models, RGB-D to points, ChArUco board, cropping."""

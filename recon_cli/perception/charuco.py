@@ -1,0 +1,115 @@
+"""The ChArUco board: definition, printable image, detection and pose (thesis 2.4.2, 4.2).
+
+OpenCV's board frame has its origin at the top-left corner of the board image, x to the
+right, y down the image and z into the board. recon's marker frame M (design notes) has
+its origin at the lower-left corner, x along the 11-square side, y up the image and z out
+of the board: ``opencv_board_T_marker`` converts between the two.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import yaml
+
+from recon_cli.paths import ROBOT_DIR
+from recon_cli.perception.camera_model import Intrinsics
+
+
+@dataclass(frozen=True)
+class BoardSpec:
+    squares_x: int
+    squares_y: int
+    square_length: float  # [m]
+    marker_length: float  # [m]
+    dictionary: str
+
+    @property
+    def size(self) -> tuple[float, float]:
+        """Printed area [m] along marker x and y."""
+        return self.squares_x * self.square_length, self.squares_y * self.square_length
+
+    def board(self) -> cv2.aruco.CharucoBoard:
+        dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
+        return cv2.aruco.CharucoBoard((self.squares_x, self.squares_y), self.square_length,
+                                      self.marker_length, dictionary)
+
+    def image(self, pixels_per_metre: float = 4000.0) -> np.ndarray:
+        """Grey image of the printed area, row 0 at the board's top edge (marker y max)."""
+        w = round(self.size[0] * pixels_per_metre)
+        h = round(self.size[1] * pixels_per_metre)
+        return self.board().generateImage((w, h), marginSize=0, borderBits=1)
+
+    def opencv_board_T_marker(self) -> np.ndarray:
+        """Pose of the marker frame M in OpenCV's board frame (rotation by pi about x)."""
+        T = np.diag([1.0, -1.0, -1.0, 1.0])
+        T[1, 3] = self.size[1]
+        return T
+
+
+@functools.lru_cache(maxsize=1)
+def thesis_board() -> BoardSpec:
+    with open(ROBOT_DIR / "board.yaml") as f:
+        d = yaml.safe_load(f)
+    return BoardSpec(int(d["squares_x"]), int(d["squares_y"]), float(d["square_length"]),
+                     float(d["marker_length"]), str(d["dictionary"]))
+
+
+@dataclass(frozen=True)
+class CharucoDetection:
+    """Detected ChArUco corners. corners: (N, 2) pixels; ids: (N,) chessboard corner ids."""
+
+    corners: np.ndarray
+    ids: np.ndarray
+    marker_count: int
+
+    @property
+    def n_corners(self) -> int:
+        return len(self.ids)
+
+
+def detect(image: np.ndarray, spec: BoardSpec) -> CharucoDetection:
+    """Find the board's markers and interpolate its chessboard corners (colour or grey)."""
+    grey = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) if image.ndim == 3 else image
+    detector = cv2.aruco.CharucoDetector(spec.board())
+    corners, ids, marker_corners, marker_ids = detector.detectBoard(grey)
+    if ids is None or len(ids) == 0:
+        return CharucoDetection(np.zeros((0, 2)), np.zeros(0, dtype=int),
+                                0 if marker_ids is None else len(marker_ids))
+    return CharucoDetection(corners.reshape(-1, 2).astype(np.float64), ids.reshape(-1).astype(int),
+                            0 if marker_ids is None else len(marker_ids))
+
+
+@dataclass(frozen=True)
+class BoardPose:
+    """camera_T_marker [4x4] and the RMS reprojection error [px] of the corners used."""
+
+    camera_T_marker: np.ndarray
+    reprojection_rms: float
+    n_corners: int
+
+
+def estimate_pose(detection: CharucoDetection, spec: BoardSpec, K: Intrinsics,
+                  dist: np.ndarray | None = None, min_corners: int = 6) -> BoardPose | None:
+    """Board pose from the interpolated corners with solvePnP; None when too few corners."""
+    if detection.n_corners < min_corners:
+        return None
+    board = spec.board()
+    obj, img = board.matchImagePoints(detection.corners.reshape(-1, 1, 2).astype(np.float32),
+                                      detection.ids.reshape(-1, 1).astype(np.int32))
+    if obj is None or len(obj) < min_corners:
+        return None
+    dist = np.zeros(5) if dist is None else dist
+    ok, rvec, tvec = cv2.solvePnP(obj, img, K.matrix(), dist, flags=cv2.SOLVEPNP_IPPE)
+    if not ok:
+        return None
+    rvec, tvec = cv2.solvePnPRefineLM(obj, img, K.matrix(), dist, rvec, tvec)
+    proj, _ = cv2.projectPoints(obj, rvec, tvec, K.matrix(), dist)
+    rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - img.reshape(-1, 2)) ** 2, axis=1))))
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(rvec)[0]
+    T[:3, 3] = tvec.reshape(3)
+    return BoardPose(T @ spec.opencv_board_T_marker(), rms, len(obj))

@@ -1,0 +1,1 @@
+"""Motion planning: trajectories, time parameterization, (OMPL planning in issue #4)."""

@@ -54,9 +54,14 @@ class TrajectoryError(ReconError):
     """A trajectory that may not be executed (limits or collisions)."""
 
 
+#: toppra enforces the limits at its grid points only; between them a curved path can
+#: exceed them slightly, so it plans against limits shrunk by this factor
+LIMIT_MARGIN = 0.98
+
+
 def parameterize(path: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
                  velocity_scale: float = 1.0, acceleration_scale: float = 1.0,
-                 grid_points: int = 200) -> Trajectory:
+                 grid_points: int = 400) -> Trajectory:
     """Time-optimal rest-to-rest trajectory along a piecewise-linear joint path (K, n).
 
     toppra on a path that interpolates the waypoints linearly in a normalized path
@@ -80,8 +85,10 @@ def parameterize(path: np.ndarray, velocity: np.ndarray, acceleration: np.ndarra
     else:
         s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
         geom = ta.SplineInterpolator(s / s[-1], path, bc_type="clamped")
-    vlim = np.stack([-velocity * velocity_scale, velocity * velocity_scale], axis=1)
-    alim = np.stack([-acceleration * acceleration_scale, acceleration * acceleration_scale], axis=1)
+    v = velocity * velocity_scale * LIMIT_MARGIN
+    a = acceleration * acceleration_scale * LIMIT_MARGIN
+    vlim = np.stack([-v, v], axis=1)
+    alim = np.stack([-a, a], axis=1)
     pc_vel = constraint.JointVelocityConstraint(vlim)
     pc_acc = constraint.JointAccelerationConstraint(
         alim, discretization_scheme=constraint.DiscretizationType.Interpolation)
@@ -100,6 +107,37 @@ def parameterize(path: np.ndarray, velocity: np.ndarray, acceleration: np.ndarra
     q, qd, qdd = evaluate(times)
     q[0], q[-1] = path[0], path[-1]
     return Trajectory(times, q, qd, qdd, evaluate)
+
+
+def concatenate(parts: list[Trajectory]) -> Trajectory:
+    """Trajectories one after the other (each must start where the previous one ends)."""
+    parts = [p for p in parts if p.duration > 0] or parts[:1]
+    offsets = np.cumsum([0.0] + [p.duration for p in parts[:-1]])
+    times = np.concatenate([p.times[(1 if k else 0):] + off
+                            for k, (p, off) in enumerate(zip(parts, offsets, strict=True))])
+    q = np.concatenate([p.q[(1 if k else 0):] for k, p in enumerate(parts)])
+    qd = np.concatenate([p.qd[(1 if k else 0):] for k, p in enumerate(parts)])
+    qdd = np.concatenate([p.qdd[(1 if k else 0):] for k, p in enumerate(parts)])
+    ends = offsets + np.array([p.duration for p in parts])
+
+    def evaluate(t: np.ndarray):
+        idx = np.clip(np.searchsorted(ends, t, side="left"), 0, len(parts) - 1)
+        out = [np.empty((len(t), q.shape[1])) for _ in range(3)]
+        for k in np.unique(idx):
+            m = idx == k
+            for o, v in zip(out, parts[k].sample(t[m] - offsets[k]), strict=True):
+                o[m] = v
+        return tuple(out)
+
+    return Trajectory(times, q, qd, qdd, evaluate)
+
+
+def stop_and_go(path: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
+                velocity_scale: float = 1.0, acceleration_scale: float = 1.0) -> Trajectory:
+    """Rest-to-rest motion along each straight segment of a path: the executed course is
+    exactly the piecewise-linear path the planner checked (slower than a smooth one)."""
+    return concatenate([straight_line(a, b, velocity, acceleration, velocity_scale, acceleration_scale)
+                        for a, b in zip(path[:-1], path[1:], strict=True)])
 
 
 def straight_line(q0: np.ndarray, q1: np.ndarray, velocity: np.ndarray,

@@ -26,6 +26,13 @@ from lxml import etree
 
 from recon_cli.geometry.transforms import pose_from_xyz_rpy
 from recon_cli.paths import ROBOT_DIR
+from recon_cli.robot.broadphase import (
+    bounding_box,
+    bounding_capsule,
+    segment_distance,
+    segments_hit_boxes,
+    world_aabbs,
+)
 from recon_cli.robot.kinematics import Kinematics
 
 OBJECT_LINK = "object"
@@ -166,7 +173,12 @@ def allowed_link_pairs(urdf: str, kin: Kinematics) -> set[frozenset[str]]:
 
 
 class CollisionModel:
-    """Yes/no collision checks and distance queries for configurations of one cell."""
+    """Yes/no collision checks and distance queries for configurations of one cell.
+
+    Broad phase in numpy (bounding capsules of the robot shapes against bounding boxes of
+    the environment shapes and against each other, for many configurations at once,
+    ``recon_cli.robot.broadphase``); narrow phase with FCL on the candidate pairs only.
+    """
 
     def __init__(self, urdf: str, kin: Kinematics, object_box: ObjectBox | None = None,
                  safety_distance: float = 0.0) -> None:
@@ -179,20 +191,19 @@ class CollisionModel:
         self._static_env_shapes = [s for s in shapes if s.joint == 0]
         self._robot_geoms = [_geometry(s.kind, s.dims) for s in self.robot_shapes]
         self._robot_objs = [fcl.CollisionObject(g, fcl.Transform()) for g in self._robot_geoms]
-        self._robot_index = {id(g): i for i, g in enumerate(self._robot_geoms)}
         self._robot_joints = np.array([s.joint for s in self.robot_shapes])
         self._robot_local = np.stack([s.joint_T_shape for s in self.robot_shapes])  # (R, 4, 4)
-        self._robot_manager = fcl.DynamicAABBTreeCollisionManager()
-        self._robot_manager.registerObjects(self._robot_objs)
-        self._robot_manager.setup()
+        caps = [bounding_capsule(s.kind, s.dims) for s in self.robot_shapes]
+        self._cap_a = np.stack([c[0] for c in caps])  # (R, 3) in the shape frame
+        self._cap_b = np.stack([c[1] for c in caps])
+        self._cap_r = np.array([c[2] for c in caps])  # (R,)
         # robot shape pairs to check against each other
-        self._self_pairs = [
+        self._self_pairs = np.array([
             (i, j) for i, j in itertools.combinations(range(len(self.robot_shapes)), 2)
             if frozenset((self.robot_shapes[i].link, self.robot_shapes[j].link)) not in self._allowed
-        ]
-        self._self_allowed = np.ones((len(self.robot_shapes),) * 2, dtype=bool)
-        for i, j in self._self_pairs:
-            self._self_allowed[i, j] = self._self_allowed[j, i] = False
+        ], dtype=int).reshape(-1, 2)
+        self._self_r = self._cap_r[self._self_pairs[:, 0]] + self._cap_r[self._self_pairs[:, 1]]
+        self._request = fcl.CollisionRequest()
         self.set_object_box(object_box)
 
     # ------------------------------------------------------------------ environment
@@ -206,15 +217,16 @@ class CollisionModel:
             T[:3, 3] = box.center
             env.append(CollisionShape("object_box", OBJECT_LINK, 0, "box", size, T))
         self.env_shapes = env
-        self._env_geoms = [_geometry(s.kind, s.dims) for s in env]
         self._env_objs = [
-            fcl.CollisionObject(g, fcl.Transform(s.joint_T_shape[:3, :3], s.joint_T_shape[:3, 3]))
-            for g, s in zip(self._env_geoms, env, strict=True)
+            fcl.CollisionObject(_geometry(s.kind, s.dims),
+                                fcl.Transform(s.joint_T_shape[:3, :3], s.joint_T_shape[:3, 3]))
+            for s in env
         ]
-        self._env_index = {id(g): i for i, g in enumerate(self._env_geoms)}
-        self._env_manager = fcl.DynamicAABBTreeCollisionManager()
-        self._env_manager.registerObjects(self._env_objs)
-        self._env_manager.setup()
+        # broad phase: world-aligned boxes around the (static) environment shapes
+        self._env_c, self._env_h = world_aabbs(
+            np.stack([s.joint_T_shape[:3, :3] for s in env]),
+            np.stack([s.joint_T_shape[:3, 3] for s in env]),
+            np.stack([bounding_box(s.kind, s.dims) for s in env]))  # (E, 3) each
         self._env_allowed = np.array([
             [frozenset((r.link, e.link)) in self._allowed for e in env] for r in self.robot_shapes
         ], dtype=bool)  # (R, E)
@@ -226,41 +238,77 @@ class CollisionModel:
         oMi = np.stack([self._data.oMi[j].homogeneous for j in range(self.kin.model.njoints)])
         return oMi[self._robot_joints] @ self._robot_local
 
-    def _place(self, q: np.ndarray) -> None:
-        poses = self.shape_poses(q)
-        for obj, T in zip(self._robot_objs, poses, strict=True):
-            obj.setTransform(fcl.Transform(T[:3, :3], T[:3, 3]))
-        self._robot_manager.update()
+    def _candidates(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Broad phase for poses (..., R, 4, 4): env candidates (..., R, E) and self
+        candidates (..., P) (indices into the checked self pairs)."""
+        R, t = poses[..., :3, :3], poses[..., :3, 3]
+        a = (R @ self._cap_a[:, :, None])[..., 0] + t
+        b = (R @ self._cap_b[:, :, None])[..., 0] + t
+        env = segments_hit_boxes(a, b, self._cap_r, self._env_c, self._env_h)
+        env &= ~self._env_allowed
+        i, j = self._self_pairs[:, 0], self._self_pairs[:, 1]
+        dist = segment_distance(a[..., i, :], b[..., i, :], a[..., j, :], b[..., j, :])
+        return env, dist <= self._self_r
+
+    def _exact(self, poses: np.ndarray, env_c: np.ndarray, self_c: np.ndarray,
+               first_only: bool) -> list[tuple[str, str]]:
+        """Narrow phase with FCL on the candidate pairs of one configuration."""
+        pairs: list[tuple[str, str]] = []
+        placed: set[int] = set()
+
+        def place(k: int) -> fcl.CollisionObject:
+            obj = self._robot_objs[k]
+            if k not in placed:
+                T = poses[k]
+                obj.setTransform(fcl.Transform(T[:3, :3], T[:3, 3]))
+                placed.add(k)
+            return obj
+
+        for r, e in zip(*np.nonzero(env_c), strict=True):
+            if fcl.collide(place(r), self._env_objs[e], self._request, fcl.CollisionResult()):
+                pairs.append((self.robot_shapes[r].label, self.env_shapes[e].label))
+                if first_only:
+                    return pairs
+        for p in np.nonzero(self_c)[0]:
+            i, j = self._self_pairs[p]
+            if fcl.collide(place(i), place(j), self._request, fcl.CollisionResult()):
+                pairs.append((self.robot_shapes[i].label, self.robot_shapes[j].label))
+                if first_only:
+                    return pairs
+        return pairs
 
     # ------------------------------------------------------------------ queries
     def check(self, q: np.ndarray) -> CollisionReport:
         """All colliding shape pairs at q (robot-environment and self)."""
-        self._place(np.asarray(q, dtype=float))
-        pairs: list[tuple[str, str]] = []
-        req = fcl.CollisionRequest(num_max_contacts=10_000, enable_contact=False)
-        data = fcl.CollisionData(request=req)
-        self._robot_manager.collide(self._env_manager, data, fcl.defaultCollisionCallback)
-        for c in data.result.contacts:
-            i, j = self._robot_index.get(id(c.o1)), self._env_index.get(id(c.o2))
-            if i is None:  # the manager may report the pair the other way round
-                i, j = self._robot_index[id(c.o2)], self._env_index[id(c.o1)]
-            if not self._env_allowed[i, j]:
-                pairs.append((self.robot_shapes[i].label, self.env_shapes[j].label))
-        data = fcl.CollisionData(request=req)
-        self._robot_manager.collide(data, fcl.defaultCollisionCallback)
-        for c in data.result.contacts:
-            i, j = self._robot_index[id(c.o1)], self._robot_index[id(c.o2)]
-            if not self._self_allowed[i, j]:
-                a, b = sorted((i, j))
-                pairs.append((self.robot_shapes[a].label, self.robot_shapes[b].label))
-        return CollisionReport(tuple(dict.fromkeys(pairs)))
+        poses = self.shape_poses(np.asarray(q, dtype=float))
+        env_c, self_c = self._candidates(poses)
+        return CollisionReport(tuple(self._exact(poses, env_c, self_c, first_only=False)))
 
     def in_collision(self, q: np.ndarray) -> bool:
-        return self.check(q).colliding
+        poses = self.shape_poses(np.asarray(q, dtype=float))
+        env_c, self_c = self._candidates(poses)
+        if not env_c.any() and not self_c.any():
+            return False
+        return bool(self._exact(poses, env_c, self_c, first_only=True))
+
+    def first_collision(self, qs: np.ndarray) -> int:
+        """Index of the first colliding configuration of qs (K, n), or -1 if all are free.
+
+        The broad phase runs for all K configurations in one vectorized call."""
+        qs = np.asarray(qs, dtype=float)
+        poses = np.stack([self.shape_poses(q) for q in qs])  # (K, R, 4, 4)
+        env_c, self_c = self._candidates(poses)
+        suspect = np.nonzero(env_c.any(axis=(1, 2)) | self_c.any(axis=1))[0]
+        for k in suspect:
+            if self._exact(poses[k], env_c[k], self_c[k], first_only=True):
+                return int(k)
+        return -1
 
     def distance(self, q: np.ndarray) -> DistanceReport:
-        """Smallest robot-environment and robot-self distances at q [m]."""
-        self._place(np.asarray(q, dtype=float))
+        """Smallest robot-environment and robot-self distances at q [m] (exact, all pairs)."""
+        poses = self.shape_poses(np.asarray(q, dtype=float))
+        for obj, T in zip(self._robot_objs, poses, strict=True):
+            obj.setTransform(fcl.Transform(T[:3, :3], T[:3, 3]))
         req = fcl.DistanceRequest()
         best_env, env_pair = np.inf, ("", "")
         for i, ro in enumerate(self._robot_objs):

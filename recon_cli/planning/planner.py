@@ -1,0 +1,241 @@
+"""Collision-free motion planning with OMPL (thesis 2.2, 3.1).
+
+A request goes from a start configuration to a joint goal or to a camera pose (any of
+several IK solutions, OMPL goal states). The state space is the cell's joint space within
+the soft limits; a state is valid when the collision model says it is free; a motion is
+valid when every configuration on the straight segment, sampled so that no robot point
+moves more than ``max_step`` between samples, is free (checked in vectorized batches,
+coarse to fine). After the search the path is simplified (shortcutting, smoothing), time-
+parameterized with toppra and checked once more along its dense course. Failures are
+results (``PlanStatus``), never exceptions.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+
+from recon_cli.errors import UnknownNameError
+from recon_cli.planning.checks import TrajectoryCheck, check_trajectory, lever_arms
+from recon_cli.planning.trajectory import Trajectory, parameterize, stop_and_go
+from recon_cli.robot.cell import Cell
+from recon_cli.robot.ik import IKOptions
+
+#: geometric planners of the OMPL 2.x wheel, by the names OMPL (and MoveIt) give them
+PLANNERS = ("RRTConnect", "RRT", "RRTstar", "PRM", "PRMstar", "KPIECE1", "BKPIECE1", "LBKPIECE1",
+            "FMT", "BFMT", "BITstar", "AORRTC", "InformedRRTstar", "SORRTstar")
+
+
+class PlanStatus(StrEnum):
+    SOLVED = "solved"
+    TIMEOUT = "timeout"  # no exact solution within the time limit
+    INVALID_START = "invalid_start"  # start in collision or outside the soft limits
+    INVALID_GOAL = "invalid_goal"  # goal in collision / outside limits / no IK solution
+    TRAJECTORY_REJECTED = "trajectory_rejected"  # the timed trajectory failed its final check
+
+
+@dataclass(frozen=True)
+class PlanOptions:
+    planner: str = "RRTConnect"
+    time_limit: float = 5.0  # [s] for the search
+    simplify_time: float = 1.0  # [s] at most for simplification
+    velocity_scale: float = 0.15  # of the joint velocity limits (thesis script manager)
+    acceleration_scale: float = 0.3  # of the joint acceleration limits
+    max_step: float = 0.005  # [m] largest robot-point motion between checked samples
+    ik_solutions: int = 4  # goal configurations tried for a pose goal
+
+    def __post_init__(self) -> None:
+        if self.planner not in PLANNERS:
+            raise UnknownNameError("planner", self.planner, PLANNERS)
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    status: PlanStatus
+    planner: str
+    plan_time: float  # [s] search
+    simplify_time: float  # [s]
+    total_time: float  # [s] IK + search + simplification + timing + final check
+    path: np.ndarray | None = None  # (K, n) simplified waypoints
+    trajectory: Trajectory | None = None
+    check: TrajectoryCheck | None = None
+    message: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.status is PlanStatus.SOLVED
+
+    @property
+    def path_length(self) -> float:
+        """Sum of absolute joint differences along the path (rad and m mixed, as MoveIt)."""
+        if self.path is None:
+            return float("nan")
+        return float(np.sum(np.abs(np.diff(self.path, axis=0))))
+
+
+_OMPL_SEEDED: list[int] = []
+
+
+def seed_ompl(seed: int) -> None:
+    """Seed OMPL's process-wide random generator. OMPL accepts a seed only before its first
+    random number, so every command seeds it once, up front, from its --seed."""
+    from ompl import util as ou
+
+    if not _OMPL_SEEDED:
+        ou.RNG.setSeed(int(seed) % (2**31 - 2) + 1)
+        _OMPL_SEEDED.append(int(seed))
+
+
+@contextlib.contextmanager
+def _quiet_ompl():
+    from ompl import util as ou
+
+    level = ou.getLogLevel()
+    ou.setLogLevel(ou.LOG_ERROR if os.environ.get("RECON_OMPL_DEBUG") is None else ou.LOG_DEBUG)
+    try:
+        yield
+    finally:
+        ou.setLogLevel(level)
+
+
+class MotionPlanner:
+    """OMPL planning in the joint space of one cell."""
+
+    def __init__(self, cell: Cell, options: PlanOptions = PlanOptions()) -> None:  # noqa: B008
+        from ompl import base as ob
+        from ompl import geometric as og
+
+        self.cell = cell
+        self.options = options
+        self._ob, self._og = ob, og
+        n = cell.kin.nq
+        self.n = n
+        self.space = ob.RealVectorStateSpace(n)
+        bounds = ob.RealVectorBounds(n)
+        for i in range(n):
+            bounds.setLow(i, float(cell.limits.soft_lower[i]))
+            bounds.setHigh(i, float(cell.limits.soft_upper[i]))
+        self.space.setBounds(bounds)
+        self.setup = og.SimpleSetup(self.space)
+        self.si = self.setup.getSpaceInformation()
+        self.setup.setStateValidityChecker(self._state_valid)
+        self._lever = lever_arms(cell)
+        planner = self
+
+        class _SegmentValidator(ob.MotionValidator):
+            def checkMotion(self, s1, s2):  # noqa: N802 (OMPL's name)
+                return planner._motion_valid(planner._vec(s1), planner._vec(s2))
+
+        self._validator = _SegmentValidator(self.si)
+        self.si.setMotionValidator(self._validator)
+        self.stats = {"states": 0, "motions": 0, "motion_samples": 0}
+
+    # ------------------------------------------------------------------ validity
+    def _vec(self, state) -> np.ndarray:
+        return np.array([state[i] for i in range(self.n)])
+
+    def _state_valid(self, state) -> bool:
+        self.stats["states"] += 1
+        return not self.cell.collision.in_collision(self._vec(state))
+
+    def _motion_valid(self, a: np.ndarray, b: np.ndarray) -> bool:
+        self.stats["motions"] += 1
+        k = max(1, int(np.ceil(float(np.abs(b - a) @ self._lever) / self.options.max_step)))
+        # coarse to fine: bit-reversed order of the k samples after a (b is included)
+        order = np.argsort([int(format(i, "b")[::-1], 2) / (1 << len(format(i, "b")))
+                            for i in range(1, k + 1)], kind="stable")
+        t = (np.arange(1, k + 1) / k)[order]
+        qs = a + t[:, None] * (b - a)
+        for start in range(0, k, 64):
+            chunk = qs[start:start + 64]
+            self.stats["motion_samples"] += len(chunk)
+            if self.cell.collision.first_collision(chunk) >= 0:
+                return False
+        return True
+
+    # ------------------------------------------------------------------ requests
+    def _state(self, q: np.ndarray):
+        s = self.si.allocState()
+        for i in range(self.n):
+            s[i] = float(q[i])
+        return s
+
+    def _config_problem(self, q: np.ndarray) -> str | None:
+        lim = self.cell.limits
+        if not lim.within_soft(q, tol=1e-9):
+            return "outside the soft joint limits"
+        report = self.cell.collision.check(q)
+        if report.colliding:
+            a, b = report.pairs[0]
+            return f"in collision ({a} with {b})"
+        return None
+
+    def plan_to_joints(self, q_start: np.ndarray, q_goal: np.ndarray | list[np.ndarray],
+                       seed: int = 0) -> PlanResult:
+        """Plan from q_start to a joint goal (or to whichever of several goals is reached)."""
+        t0 = time.perf_counter()
+        opt = self.options
+        goals = [np.asarray(q_goal, float)] if np.ndim(q_goal) == 1 else [np.asarray(g, float) for g in q_goal]
+        problem = self._config_problem(np.asarray(q_start, float))
+        if problem:
+            return PlanResult(PlanStatus.INVALID_START, opt.planner, 0.0, 0.0,
+                              time.perf_counter() - t0, message=f"start configuration {problem}")
+        valid_goals = [g for g in goals if self._config_problem(g) is None]
+        if not valid_goals:
+            return PlanResult(PlanStatus.INVALID_GOAL, opt.planner, 0.0, 0.0, time.perf_counter() - t0,
+                              message=f"goal configuration {self._config_problem(goals[0])}")
+        seed_ompl(seed)
+        with _quiet_ompl():
+            self.setup.clear()
+            self.setup.clearStartStates()
+            self.setup.setStartState(self._state(q_start))
+            if len(valid_goals) == 1:
+                self.setup.setGoalState(self._state(valid_goals[0]))
+            else:
+                goal = self._ob.GoalStates(self.si)
+                for g in valid_goals:
+                    goal.addState(self._state(g))
+                self.setup.setGoal(goal)
+            self.setup.setPlanner(getattr(self._og, opt.planner)(self.si))
+            self.setup.setup()
+            t1 = time.perf_counter()
+            status = self.setup.solve(opt.time_limit)
+            plan_time = time.perf_counter() - t1
+            exact = bool(status) and self.setup.haveExactSolutionPath()
+            if not exact:
+                return PlanResult(PlanStatus.TIMEOUT, opt.planner, plan_time, 0.0,
+                                  time.perf_counter() - t0,
+                                  message=f"{opt.planner} found no path within {opt.time_limit:g} s")
+            t2 = time.perf_counter()
+            self.setup.simplifySolution(opt.simplify_time)
+            simplify_time = time.perf_counter() - t2
+            path_geo = self.setup.getSolutionPath()
+            path = np.array([[path_geo.getState(k)[i] for i in range(self.n)]
+                             for k in range(path_geo.getStateCount())])
+        lim = self.cell.limits
+        traj = parameterize(path, lim.velocity, lim.acceleration, opt.velocity_scale, opt.acceleration_scale)
+        check = check_trajectory(traj, self.cell, opt.velocity_scale, opt.acceleration_scale, opt.max_step)
+        if not check.ok and len(path) > 2:
+            # the smooth spline left the checked segments: follow them exactly instead
+            traj = stop_and_go(path, lim.velocity, lim.acceleration, opt.velocity_scale, opt.acceleration_scale)
+            check = check_trajectory(traj, self.cell, opt.velocity_scale, opt.acceleration_scale, opt.max_step)
+        status_out = PlanStatus.SOLVED if check.ok else PlanStatus.TRAJECTORY_REJECTED
+        message = "" if check.ok else (
+            f"the timed trajectory collides ({check.collision[0][0]} with {check.collision[0][1]} "
+            f"at t = {check.collision_time:.2f} s)" if check.collision else "the timed trajectory exceeds a limit")
+        return PlanResult(status_out, opt.planner, plan_time, simplify_time, time.perf_counter() - t0,
+                          path, traj if check.ok else None, check, message)
+
+    def plan_to_pose(self, q_start: np.ndarray, world_T_camera: np.ndarray,
+                     rng: np.random.Generator, what: str = "view") -> PlanResult:
+        """Plan to a camera pose: IK (several solutions, raises when none), then plan to any."""
+        ik = self.cell.solve_pose(world_T_camera, rng, seed=q_start,
+                                  options=IKOptions(max_solutions=self.options.ik_solutions), what=what)
+        goals = sorted((s.q for s in ik.solutions), key=lambda g: float(np.abs(g - q_start) @ self._lever))
+        result = self.plan_to_joints(q_start, goals, seed=int(rng.integers(1 << 30)))
+        return result

@@ -1,0 +1,1 @@
+"""Reconstruction: the scan store, registration, surface and evaluation."""

@@ -1,0 +1,244 @@
+"""The scan store: one folder per session, one subfolder per scan (the contract between
+acquisition and registration; design notes, "The scan store").
+
+    <session>/session.json            cell, sensor, backend, object (what produced the scans)
+    <session>/scan_0003/color.png     RGB, 8 bit
+    <session>/scan_0003/depth.png     uint16, depth [m] * depth_scale (0 = no return)
+    <session>/scan_0003/scan.json     intrinsics, depth_scale, measured joints, world_T_camera
+                                      from forward kinematics, marker pose (when found),
+                                      planned view, execution report, timestamps
+    <session>/scan_0003/ground_truth.json   simulation only: true camera pose (never read
+                                      by any algorithm; evaluation only)
+
+A scan is written completely into a hidden temporary folder and then renamed into place,
+so a crash or Ctrl-C loses at most the scan in progress; readers ignore temporary folders.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from recon_cli.errors import FileError
+from recon_cli.geometry.transforms import transform_points
+from recon_cli.perception.camera_model import Intrinsics, backproject
+
+SCAN_DIR = re.compile(r"^scan_(\d{4,})$")
+FORMAT_VERSION = 1
+
+
+@dataclass
+class Scan:
+    """One scan read back from (or about to be written to) the store."""
+
+    index: int
+    color: np.ndarray | None  # (H, W, 3) uint8 RGB, None when the scan has no colour
+    depth: np.ndarray  # (H, W) float64 [m], 0 = no return
+    intrinsics: Intrinsics
+    joints: dict[str, float]  # measured joint positions [m or rad]
+    world_T_camera_fk: np.ndarray  # camera pose from forward kinematics of the measured joints
+    meta: dict[str, Any] = field(default_factory=dict)  # planned view, execution, timestamps...
+    marker_T_camera: np.ndarray | None = None  # from the ChArUco board, when found
+    ground_truth: dict[str, Any] | None = None  # simulation only; evaluation only
+    path: Path | None = None
+
+    def points_camera(self) -> np.ndarray:
+        """Points (N, 3) in the camera frame [m]."""
+        return backproject(self.depth, self.intrinsics)
+
+    def points_world_fk(self) -> np.ndarray:
+        """Points (N, 3) in the world, placed with the forward-kinematics camera pose."""
+        return transform_points(self.world_T_camera_fk, self.points_camera())
+
+    def to_open3d_rgbd(self, depth_trunc: float = 3.0):
+        """An Open3D RGBDImage (colour kept as colour, depth in metres)."""
+        import open3d as o3d
+
+        color = self.color if self.color is not None else np.zeros((*self.depth.shape, 3), np.uint8)
+        return o3d.geometry.RGBDImage.create_from_color_and_depth(
+            o3d.geometry.Image(np.ascontiguousarray(color)),
+            o3d.geometry.Image(self.depth.astype(np.float32)),
+            depth_scale=1.0, depth_trunc=depth_trunc, convert_rgb_to_intensity=False)
+
+    def to_open3d_cloud(self, world_T_camera: np.ndarray | None = None):
+        """Open3D point cloud with colours, in the camera frame or placed by a pose."""
+        import open3d as o3d
+
+        cloud = o3d.geometry.PointCloud.create_from_rgbd_image(
+            self.to_open3d_rgbd(), self.intrinsics.to_open3d())
+        if world_T_camera is not None:
+            cloud.transform(world_T_camera)
+        return cloud
+
+
+def _jsonable(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.floating | np.integer):
+        return value.item()
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, Path):
+        return str(value)
+    if hasattr(value, "to_dict"):
+        return value.to_dict()
+    raise TypeError(f"not JSON serializable: {type(value)}")
+
+
+def _write_json(path: Path, data) -> None:
+    with open(path, "w") as f:
+        json.dump(data, f, indent=2, default=_jsonable)
+        f.write("\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def _write_png(path: Path, image: np.ndarray) -> None:
+    ok, buf = cv2.imencode(".png", image)
+    if not ok:
+        raise FileError(f"cannot encode {path.name}")
+    with open(path, "wb") as f:
+        f.write(buf.tobytes())
+        f.flush()
+        os.fsync(f.fileno())
+
+
+class ScanStore:
+    """A session folder of scans."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = Path(root)
+
+    # ------------------------------------------------------------------ writing
+    @classmethod
+    def create(cls, root: Path, session: dict[str, Any]) -> ScanStore:
+        root = Path(root)
+        try:
+            root.mkdir(parents=True, exist_ok=True)
+            store = cls(root)
+            info = {"format": FORMAT_VERSION, "created": time.time(), **session}
+            tmp = root / ".session.json.tmp"
+            _write_json(tmp, info)
+            os.replace(tmp, root / "session.json")
+        except OSError as exc:
+            raise FileError(f"cannot write the scan store {root} ({exc.strerror})",
+                            hint="choose a writable output folder") from None
+        return store
+
+    def next_index(self) -> int:
+        return max(self.indices(), default=-1) + 1
+
+    def write(self, scan: Scan, depth_scale: float) -> Path:
+        """Write a scan atomically (temporary folder, then rename). Returns its folder."""
+        final = self.root / f"scan_{scan.index:04d}"
+        tmp = self.root / f".scan_{scan.index:04d}.tmp-{os.getpid()}"
+        if final.exists():
+            raise FileError(f"scan {final} already exists", hint="use a new session folder")
+        try:
+            if tmp.exists():
+                shutil.rmtree(tmp)
+            tmp.mkdir()
+            if scan.color is not None:
+                _write_png(tmp / "color.png", cv2.cvtColor(scan.color, cv2.COLOR_RGB2BGR))
+            units = np.round(scan.depth * depth_scale)
+            if np.any(units > np.iinfo(np.uint16).max):
+                raise FileError(f"depth beyond {np.iinfo(np.uint16).max / depth_scale:.2f} m "
+                                f"cannot be stored at scale {depth_scale}")
+            _write_png(tmp / "depth.png", units.astype(np.uint16))
+            record = {
+                "format": FORMAT_VERSION,
+                "index": scan.index,
+                "intrinsics": scan.intrinsics.to_dict(),
+                "depth_scale": depth_scale,
+                "depth_unit": f"{1e3 / depth_scale:g} mm",
+                "joints": scan.joints,
+                "world_T_camera_fk": scan.world_T_camera_fk,
+                "marker_T_camera": scan.marker_T_camera,
+                **scan.meta,
+            }
+            _write_json(tmp / "scan.json", record)
+            if scan.ground_truth is not None:
+                _write_json(tmp / "ground_truth.json", scan.ground_truth)
+            fd = os.open(tmp, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+            os.rename(tmp, final)
+        except OSError as exc:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise FileError(f"cannot write scan {final} ({exc.strerror})",
+                            hint="check free space and permissions of the output folder") from None
+        scan.path = final
+        return final
+
+    # ------------------------------------------------------------------ reading
+    def session(self) -> dict[str, Any]:
+        path = self.root / "session.json"
+        if not path.exists():
+            return {}
+        return json.loads(path.read_text())
+
+    def indices(self) -> list[int]:
+        if not self.root.is_dir():
+            return []
+        out = []
+        for child in self.root.iterdir():
+            m = SCAN_DIR.match(child.name)
+            if m and child.is_dir() and (child / "scan.json").exists():
+                out.append(int(m.group(1)))
+        return sorted(out)
+
+    def read(self, index: int) -> Scan:
+        return read_scan(self.root / f"scan_{index:04d}")
+
+    def __iter__(self):
+        for i in self.indices():
+            yield self.read(i)
+
+    def __len__(self) -> int:
+        return len(self.indices())
+
+
+def read_scan(folder: Path) -> Scan:
+    """Read one scan folder (from simulation or hardware)."""
+    folder = Path(folder)
+    meta_path = folder / "scan.json"
+    if not meta_path.exists():
+        raise FileError(f"{folder} is not a scan (no scan.json)", hint="point to a scan_NNNN folder")
+    try:
+        meta = json.loads(meta_path.read_text())
+    except json.JSONDecodeError as exc:
+        raise FileError(f"{meta_path}:{exc.lineno}: broken JSON ({exc.msg})") from None
+    depth_raw = cv2.imread(str(folder / "depth.png"), cv2.IMREAD_UNCHANGED)
+    if depth_raw is None:
+        raise FileError(f"{folder / 'depth.png'} is missing or unreadable")
+    depth = depth_raw.astype(np.float64) / float(meta["depth_scale"])
+    color = None
+    if (folder / "color.png").exists():
+        bgr = cv2.imread(str(folder / "color.png"), cv2.IMREAD_COLOR)
+        color = None if bgr is None else cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    gt = None
+    if (folder / "ground_truth.json").exists():
+        gt = json.loads((folder / "ground_truth.json").read_text())
+    marker = meta.get("marker_T_camera")
+    known = {"format", "index", "intrinsics", "depth_scale", "depth_unit", "joints",
+             "world_T_camera_fk", "marker_T_camera"}
+    return Scan(
+        index=int(meta["index"]), color=color, depth=depth,
+        intrinsics=Intrinsics.from_dict(meta["intrinsics"]),
+        joints={k: float(v) for k, v in meta["joints"].items()},
+        world_T_camera_fk=np.asarray(meta["world_T_camera_fk"], dtype=float),
+        meta={k: v for k, v in meta.items() if k not in known},
+        marker_T_camera=None if marker is None else np.asarray(marker, dtype=float),
+        ground_truth=gt, path=folder,
+    )

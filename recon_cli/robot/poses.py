@@ -1,0 +1,29 @@
+"""Named joint configurations of the cells (robot/poses.yaml)."""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+import yaml
+
+from recon_cli.errors import UnknownNameError
+from recon_cli.paths import ROBOT_DIR
+from recon_cli.robot.description import CellKind
+
+
+@functools.lru_cache(maxsize=1)
+def _poses() -> dict:
+    with open(ROBOT_DIR / "poses.yaml") as f:
+        return yaml.safe_load(f)
+
+
+def named_configuration(kind: CellKind, name: str, joint_names: tuple[str, ...]) -> np.ndarray:
+    """A named configuration in SI units (prismatic in m, revolute converted from deg)."""
+    table = _poses()[kind.value]
+    if name not in table:
+        raise UnknownNameError(f"configuration of the {kind.value} cell", name, list(table))
+    values = table[name]
+    return np.array([float(v) if j.startswith("base_joint") else math.radians(float(v))
+                     for j, v in zip(joint_names, values, strict=True)])

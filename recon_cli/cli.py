@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 
 from recon_cli.errors import InputError, ReconError
@@ -105,7 +106,6 @@ def ik(
     seed: SeedOpt = 0,
 ) -> None:
     """Solve inverse kinematics for a camera view (f, r, theta, phi, alpha)."""
-    import numpy as np
 
     from recon_cli.console import console
     from recon_cli.errors import UnknownNameError
@@ -125,6 +125,82 @@ def ik(
                           options=IKOptions(max_solutions=solutions))
     console.print(f"camera goal: {pose_text(T)}")
     console.print(ik_table(c, result))
+
+
+def _view(focus: str, radius: float, theta: float, phi: float, alpha: float, frame: str):
+    from recon_cli.errors import UnknownNameError
+    from recon_cli.geometry.view import Frame, View
+
+    try:
+        ref = Frame(frame.lower())
+    except ValueError:
+        raise UnknownNameError("frame", frame, [f.value for f in Frame]) from None
+    return View.from_degrees(parse_vector(focus, 3, "--focus", "metres"), radius, theta, phi, alpha, ref)
+
+
+@app.command()
+def objects() -> None:
+    """List the objects that can be scanned (built-in, YCB when present, or any mesh file)."""
+    from rich.table import Table
+
+    from recon_cli.console import console
+    from recon_cli.objects import available_objects, load_object
+
+    table = Table(title="objects")
+    for col in ("name", "size x × y × z (m)", "description"):
+        table.add_column(col)
+    for name, description in available_objects().items():
+        ext = load_object(name).extent
+        table.add_row(name, " × ".join(f"{v:.3f}" for v in ext), description)
+    console.print(table)
+    console.print("any OBJ/PLY/STL file works too: recon capture --object path/to/mesh.stl --scale 0.001")
+
+
+@app.command()
+def capture(
+    object_name: Annotated[str, typer.Option("--object", help="Built-in object, YCB object or mesh file.")] = "drill",
+    scale: Annotated[float, typer.Option(help="Scale of a mesh file (0.001 for millimetres).")] = 1.0,
+    focus: Annotated[str, typer.Option(help="Focus point f as x,y,z [m].")] = "0,0,0.78",
+    radius: Annotated[float, typer.Option("--radius", "-r", help="Camera distance r from f [m].")] = 0.6,
+    theta: Annotated[float, typer.Option(help="Polar angle from the vertical [deg].")] = 70.0,
+    phi: Annotated[float, typer.Option(help="Azimuth [deg].")] = 0.0,
+    alpha: Annotated[float, typer.Option(help="Camera roll about its viewing axis [deg].")] = 0.0,
+    frame: Annotated[str, typer.Option(help="Frame of f and the angles: world or marker.")] = "world",
+    out: Annotated[Path | None, typer.Option(help="Session folder (default runs/capture-<time>).")] = None,
+    noise: Annotated[bool, typer.Option("--noise/--no-noise", help="Depth noise model on or off.")] = True,
+    resolution: Annotated[float, typer.Option(min=0.05, max=1.0, help="Image size relative to 1600 x 1200.")] = 1.0,
+    planner: Annotated[str, typer.Option(help="OMPL planner.")] = "RRTConnect",
+    planning_time: Annotated[float, typer.Option(min=0.1, help="Planning time limit [s].")] = 5.0,
+    cell: CellOpt = "gantry",
+    safety: SafetyOpt = 0.03,
+    seed: SeedOpt = 0,
+) -> None:
+    """Move the simulated robot to one view and write one scan into a scan store."""
+
+    from recon_cli.capture import CaptureOptions, run_capture
+    from recon_cli.console import console, progress_bar, run_folder
+    from recon_cli.planning.planner import PlanOptions
+    from recon_cli.robot.description import CellConfig, CellKind
+
+    view = _view(focus, radius, theta, phi, alpha, frame)
+    config = CellConfig(kind=CellKind.parse(cell), safety_distance=safety)
+    plan = PlanOptions(planner=planner, time_limit=planning_time)
+    if not math.isfinite(scale) or scale <= 0:
+        raise InputError(f"--scale {scale} is not a positive number", hint="e.g. 0.001 for millimetres")
+    folder = run_folder(out, "capture")
+    options = CaptureOptions(view=view, out=folder, object_name=object_name, object_scale=scale,
+                             cell=config, seed=seed, noise=noise, resolution=resolution, plan=plan)
+    with progress_bar() as update:
+        result = run_capture(options, update)
+    m = result.move
+    console.print(f"planned with {m.plan.planner} in {m.plan.total_time:.2f} s "
+                  f"({len(m.plan.path)} waypoints), trajectory {m.execution.duration:.2f} s")
+    console.print(f"executed: max tracking error {np.max(m.execution.max_tracking_error):.2e}, "
+                  f"settled after {m.execution.settle_time:.3f} s, camera pose error from tracking "
+                  f"{m.camera_position_error * 1e3:.4f} mm / {np.degrees(m.camera_rotation_error):.5f}°")
+    console.print(f"captured {result.points} points in {result.capture_seconds:.2f} s "
+                  f"({result.scan.intrinsics.width} x {result.scan.intrinsics.height})")
+    console.print(f"scan: {result.scan.path}")
 
 
 @bench_app.command("ik")
@@ -170,6 +246,46 @@ def bench_ik(
         table.add_row(*row)
     console.print(table)
     console.print(f"results: {folder / 'bench_ik.json'}")
+
+
+@bench_app.command("sim")
+def bench_sim(
+    object_name: Annotated[str, typer.Option("--object", help="Object on the board.")] = "drill",
+    seed: SeedOpt = 0,
+    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/bench-sim-<time>).")] = None,
+) -> None:
+    """Board detection in the 24 views of eq. 4.1, capture time, execution precision."""
+    from dataclasses import asdict
+
+    import numpy as np
+    from rich.table import Table
+
+    from recon_cli.bench.sim import run_sim_bench
+    from recon_cli.console import console, progress_bar, run_folder, write_json
+
+    folder = run_folder(out, "bench-sim")
+    with progress_bar() as update:
+        result = run_sim_bench(folder, object_name, seed, update)
+    write_json(folder / "bench_sim.json", {"object": result.object_name, "views": [asdict(r) for r in result.rows],
+                                           "move": result.move})
+    table = Table(title=f"24 views of eq. 4.1 around the {result.object_name}: board found in "
+                        f"{result.found} of {len(result.rows)}")
+    for col in ("view", "corners", "markers", "ChArUco pose error", "reprojection", "capture", "points"):
+        table.add_column(col, justify="right")
+    for r in result.rows:
+        err = (f"{r.translation_error_mm:.3f} mm / {r.rotation_error_deg:.4f}°" if r.found else "not found")
+        rep = f"{r.reprojection_px:.3f} px" if r.found else "-"
+        table.add_row(str(r.view), str(r.corners), str(r.markers), err, rep, f"{r.capture_s:.3f} s", str(r.points))
+    console.print(table)
+    found = [r for r in result.rows if r.found]
+    if found:
+        console.print(f"mean ChArUco pose error {np.mean([r.translation_error_mm for r in found]):.3f} mm, "
+                      f"{np.mean([r.rotation_error_deg for r in found]):.4f}° (thesis Table 4.2: 1.532 mm, 0.0853°)")
+    times = [r.capture_s for r in result.rows]
+    console.print(f"capture time (render + noise, 1600 x 1200): median {np.median(times):.3f} s, "
+                  f"max {max(times):.3f} s")
+    console.print(f"move home -> view 1: {result.move}")
+    console.print(f"results: {folder / 'bench_sim.json'}, picture: {folder / 'eq_4_1_views.png'}")
 
 
 def main(argv: list[str] | None = None) -> int:

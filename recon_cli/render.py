@@ -43,7 +43,7 @@ def cell_tables(cell: Cell, q_show: np.ndarray, q_label: str) -> list:
 
     shapes = Table(title=f"collision shapes (inflated by the safety distance "
                          f"{cell.config.safety_distance:.3f} m)")
-    for col in ("side", "link", "shape", "kind", "size [m]"):
+    for col in ("side", "link", "shape", "kind", "size (m)"):
         shapes.add_column(col)
     for side, group in (("robot", cell.collision.robot_shapes), ("environment", cell.collision.env_shapes)):
         for s in group:

@@ -4,7 +4,8 @@ Noise model: each valid pixel's depth z is perturbed along its ray by zero-mean 
 noise with sigma(z) = sigma_ref * (z / z_ref)^2 (triangulation noise grows with the square
 of the distance); depths outside [z_min, z_max] and surfaces seen at more than
 ``max_incidence`` from the ray return no depth (0), as a structured-light sensor returns
-nothing there. Everything is drawn from the ``numpy.random.Generator`` passed in.
+nothing there. The colour image gets Gaussian pixel noise (``color_noise_std`` levels).
+Everything is drawn from the ``numpy.random.Generator`` passed in.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ class SensorModel:
     noise_z_ref: float  # [m]
     max_incidence: float  # [rad]
     depth_scale: float  # depth PNG units per metre
+    color_noise_std: float = 0.0  # [8-bit levels]
 
     @property
     def fovy(self) -> float:
@@ -45,6 +47,13 @@ class SensorModel:
     def sigma(self, z: np.ndarray) -> np.ndarray:
         """Depth noise standard deviation [m] at depth z [m]."""
         return self.noise_sigma_ref * (np.asarray(z) / self.noise_z_ref) ** 2
+
+    def apply_color(self, color: np.ndarray, rng: np.random.Generator | None, noise: bool = True) -> np.ndarray:
+        """Colour image with Gaussian pixel noise (uint8, same shape)."""
+        if not noise or rng is None or self.color_noise_std <= 0:
+            return color
+        noisy = color.astype(np.float32) + rng.standard_normal(color.shape, dtype=np.float32) * self.color_noise_std
+        return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
 
     def apply(self, depth: np.ndarray, K: Intrinsics, rng: np.random.Generator | None,
               noise: bool = True) -> np.ndarray:
@@ -92,5 +101,5 @@ def motioncam_3d_m() -> SensorModel:
         hfov=math.radians(float(d["hfov_deg"])), z_min=float(d["z_min"]), z_max=float(d["z_max"]),
         noise_sigma_ref=float(d["noise_sigma_ref"]), noise_z_ref=float(d["noise_z_ref"]),
         max_incidence=math.radians(float(d["max_incidence_deg"])),
-        depth_scale=float(d["depth_scale"]),
+        depth_scale=float(d["depth_scale"]), color_noise_std=float(d.get("color_noise_std", 0.0)),
     )

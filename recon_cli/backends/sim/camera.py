@@ -67,4 +67,5 @@ class SimCamera:
         mujoco.mj_forward(self.scene.model, self.data)
         color, depth = render_rgbd(self.renderer, self.data, self.scene.camera_id)
         depth = self.scene.sensor.apply(depth, self.intrinsics, self.rng, self.noise)
+        color = self.scene.sensor.apply_color(color, self.rng, self.noise)
         return RGBDFrame(color, depth, self.intrinsics, float(self.data.time))

@@ -1,12 +1,13 @@
 """The simulated robot: MuJoCo plant under computed-torque control with integral action.
 
-Control law (thesis eqs. 2.12-2.14), at the plant's 1 kHz step:
+Control law (thesis eqs. 2.12-2.14), at the plant's 1 kHz step (gains in robot/drives.yaml):
     tau = M(q) v + C(q, qd) qd + g(q),   v = qdd_d - K0 e - K1 ed - KI int(e),   e = q - q_d
 with M, C, g from pinocchio's model of the same URDF plus the reflected rotor inertia of
 robot/drives.yaml. The plant additionally has viscous joint friction the controller does
 not know; the integral term removes the resulting error. After the trajectory the final
-configuration is held until the robot has settled: every joint within ``settle_position``
-of the goal and slower than ``settle_velocity`` for ``settle_hold`` seconds.
+configuration is held until the robot has settled: the camera within ``position`` [m] and
+``rotation`` [rad] of its goal pose (forward kinematics of the measured joints) and every
+joint slower than ``velocity``, for ``hold`` seconds.
 """
 
 from __future__ import annotations
@@ -24,20 +25,24 @@ from recon_cli.robot.kinematics import Kinematics
 
 @dataclass(frozen=True)
 class ControllerGains:
-    K0: float = 1200.0
-    K1: float = 80.0
-    KI: float = 200.0
+    """Diagonal gains of eq. 2.14 (same for every joint) [1/s^2, 1/s, 1/s^3]."""
+
+    K0: float
+    K1: float
+    KI: float
 
     @classmethod
-    def thesis(cls) -> ControllerGains:
+    def from_drives(cls) -> ControllerGains:
+        """The gains of robot/drives.yaml."""
         c = drives()["controller"]
         return cls(float(c["K0"]), float(c["K1"]), float(c["KI"]))
 
 
 @dataclass(frozen=True)
 class SettleCriterion:
-    position: float = 2e-6  # [rad or m] per joint
-    velocity: float = 1e-4  # [rad/s or m/s] per joint
+    position: float = 2.5e-5  # [m] camera position error
+    rotation: float = 2.5e-5  # [rad] camera rotation error
+    velocity: float = 1e-3  # [rad/s or m/s] per joint
     hold: float = 0.05  # [s]
     timeout: float = 3.0  # [s]
 
@@ -53,7 +58,7 @@ class SimRobot:
         self.data = data
         self.kin = kin
         self.joint_names = scene.joint_names
-        self.gains = gains or ControllerGains.thesis()
+        self.gains = gains or ControllerGains.from_drives()
         self.settle = settle or SettleCriterion()
         self._pin_data = kin.model.createData()
         arm = drives()["armature"]
@@ -82,6 +87,11 @@ class SimRobot:
         tau = pin.rnea(self.kin.model, self._pin_data, q, qd, v) + self._armature * v
         return np.clip(tau, -self._effort, self._effort)
 
+    def _camera_close(self, goal_inv: np.ndarray, q: np.ndarray) -> bool:
+        D = goal_inv @ self.kin.world_T_camera(q)
+        angle = np.arccos(np.clip((np.trace(D[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))
+        return bool(np.linalg.norm(D[:3, 3]) < self.settle.position and angle < self.settle.rotation)
+
     def execute(self, trajectory: Trajectory) -> ExecutionReport:
         model, data = self.scene.model, self.data
         qi, di = self.scene.qpos_index, self.scene.dof_index
@@ -99,6 +109,7 @@ class SimRobot:
             mujoco.mj_step(model, data)
         # hold the goal until settled
         goal = trajectory.goal
+        goal_inv = np.linalg.inv(self.kin.world_T_camera(goal))
         zero = np.zeros(len(qi))
         s = self.settle
         held = 0.0
@@ -108,7 +119,7 @@ class SimRobot:
             q, qd = data.qpos[qi], data.qvel[di]
             e = q - goal
             np.maximum(max_err, np.abs(e), out=max_err)
-            if np.all(np.abs(e) < s.position) and np.all(np.abs(qd) < s.velocity):
+            if np.all(np.abs(qd) < s.velocity) and self._camera_close(goal_inv, q):
                 held += dt
                 if held >= s.hold:
                     settled = True

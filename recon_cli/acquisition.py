@@ -1,0 +1,108 @@
+"""Moving the camera and taking scans: planning + execution + capture + scan store.
+
+``Acquisition`` works on any backend pair (simulation or hardware): it plans a checked
+trajectory to a camera goal, lets the robot backend execute it, waits for the settled
+robot, captures an RGB-D frame and writes the scan atomically with everything the
+registration needs (measured joints, forward-kinematics camera pose, planned view).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from recon_cli.backends.base import CameraBackend, ExecutionReport, RobotBackend
+from recon_cli.errors import ReconError
+from recon_cli.geometry.transforms import pose_error
+from recon_cli.geometry.view import View
+from recon_cli.planning.planner import MotionPlanner, PlanOptions, PlanResult
+from recon_cli.reconstruction.scan_store import Scan, ScanStore
+from recon_cli.robot.cell import Cell
+
+
+class PlanningError(ReconError):
+    """A move that could not be planned (no path, invalid start or goal)."""
+
+
+@dataclass(frozen=True)
+class MoveReport:
+    plan: PlanResult
+    execution: ExecutionReport
+    camera_position_error: float  # [m] FK(measured) vs FK(goal), due to tracking
+    camera_rotation_error: float  # [rad]
+
+    def to_dict(self) -> dict:
+        return {
+            "planner": self.plan.planner,
+            "plan_time_s": self.plan.plan_time,
+            "simplify_time_s": self.plan.simplify_time,
+            "planning_total_s": self.plan.total_time,
+            "path_waypoints": None if self.plan.path is None else len(self.plan.path),
+            "trajectory_duration_s": self.execution.duration,
+            "settle_time_s": self.execution.settle_time,
+            "settled": self.execution.settled,
+            "max_tracking_error": self.execution.max_tracking_error,
+            "final_joint_error": self.execution.final_error,
+            "camera_position_error_m": self.camera_position_error,
+            "camera_rotation_error_rad": self.camera_rotation_error,
+        }
+
+
+def view_record(view: View | None, world_T_camera: np.ndarray) -> dict:
+    rec: dict = {"world_T_camera_goal": world_T_camera}
+    if view is not None:
+        rec.update(focus=list(view.focus), radius=view.radius, theta=view.theta, phi=view.phi,
+                   alpha=view.alpha, frame=view.frame.value, angle_unit="rad")
+    return rec
+
+
+class Acquisition:
+    def __init__(self, cell: Cell, robot: RobotBackend, camera: CameraBackend, store: ScanStore,
+                 rng: np.random.Generator, plan_options: PlanOptions = PlanOptions(),  # noqa: B008
+                 depth_scale: float = 20000.0,
+                 ground_truth: Callable[[], dict] | None = None) -> None:
+        self.cell = cell
+        self.robot = robot
+        self.camera = camera
+        self.store = store
+        self.rng = rng
+        self.planner = MotionPlanner(cell, plan_options)
+        self.depth_scale = depth_scale
+        self.ground_truth = ground_truth
+
+    def move_to_pose(self, world_T_camera: np.ndarray, what: str = "view") -> MoveReport:
+        q0 = self.robot.measured_joints()
+        plan = self.planner.plan_to_pose(q0, world_T_camera, self.rng, what=what)
+        if not plan.ok:
+            raise PlanningError(f"cannot move to the {what}: {plan.status.value} ({plan.message})",
+                                hint="try another view, a longer planning time or another planner")
+        execution = self.robot.execute(plan.trajectory)
+        q = self.robot.measured_joints()
+        dp, dr = pose_error(self.cell.kin.world_T_camera(q), self.cell.kin.world_T_camera(plan.trajectory.goal))
+        return MoveReport(plan, execution, dp, dr)
+
+    def scan(self, planned: dict, move: MoveReport | None = None) -> Scan:
+        t0 = time.time()
+        frame = self.camera.capture()
+        t1 = time.time()
+        q = self.robot.measured_joints()
+        scan = Scan(
+            index=self.store.next_index(),
+            color=frame.color,
+            depth=frame.depth,
+            intrinsics=frame.intrinsics,
+            joints=dict(zip(self.cell.joint_names, q.tolist(), strict=True)),
+            world_T_camera_fk=self.cell.kin.world_T_camera(q),
+            meta={
+                "planned_view": planned,
+                "move": None if move is None else move.to_dict(),
+                "timestamps": {"capture_start": t0, "capture_end": t1, "backend_time": frame.timestamp},
+                "capture_seconds": t1 - t0,
+            },
+            ground_truth=self.ground_truth() if self.ground_truth else None,
+        )
+        self.store.write(scan, self.depth_scale)
+        return scan

@@ -1,0 +1,46 @@
+"""The simulated station: scene, robot backend and camera backend of one session."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from recon_cli.backends.sim.camera import SimCamera
+from recon_cli.backends.sim.robot import SimRobot
+from recon_cli.backends.sim.scene import build_scene, mujoco
+from recon_cli.objects import SceneObject
+from recon_cli.robot.cell import Cell
+
+
+class SimStation:
+    """MuJoCo scene of a cell with an object; robot at rest at ``start``. Close it (or use it
+    as a context manager) to free the offscreen renderer."""
+
+    backend = "sim"
+
+    def __init__(self, cell: Cell, scene_object: SceneObject | None, start: np.ndarray,
+                 rng: np.random.Generator, noise: bool = True, resolution: float = 1.0) -> None:
+        self.cell = cell
+        self.scene_object = scene_object
+        self.scene = build_scene(cell.config, scene_object)
+        self.data = mujoco.MjData(self.scene.model)
+        self.robot = SimRobot(self.scene, self.data, cell.kin)
+        self.robot.reset(np.asarray(start, dtype=float))
+        self.camera = SimCamera(self.scene, self.data, rng, noise=noise, scale=resolution)
+
+    def ground_truth(self) -> dict:
+        """What only a simulation knows; stored apart from the scan data, for evaluation."""
+        truth = {"world_T_camera": self.camera.world_T_camera_truth(),
+                 "joints": dict(zip(self.robot.joint_names, self.robot.measured_joints().tolist(), strict=True))}
+        if self.scene_object is not None:
+            truth["object"] = self.scene_object.name
+            truth["world_T_object"] = self.scene_object.world_T_object
+        return truth
+
+    def close(self) -> None:
+        self.camera.close()
+
+    def __enter__(self) -> SimStation:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -30,3 +30,22 @@ def ceiling() -> Cell:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
+
+
+_EXIT_STATUS: list[int] = []
+
+
+def pytest_sessionfinish(session, exitstatus):
+    _EXIT_STATUS.append(int(exitstatus))
+
+
+def pytest_unconfigure(config):
+    """The OMPL wheel's nanobind bindings print spurious "leaked" reports at interpreter
+    teardown, after pytest's summary line; the summary is printed and flushed by now."""
+    import os
+    import sys
+
+    if "ompl" in sys.modules and _EXIT_STATUS:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(_EXIT_STATUS[-1])

@@ -3,14 +3,13 @@
 Collision checking samples the trajectory so densely that no point of the robot moves more
 than ``max_step`` (5 mm by default) between two checked samples. The bound on a point's
 displacement for a joint step dq is sum_j |dq_j| * r_j, with r_j the largest distance from
-joint j's axis to any point of the robot beyond it (1 for prismatic joints), computed once
-from the kinematic chain and the collision shapes (a triangle-inequality bound, so the
-sampling is conservative).
+joint j's axis to any point of the robot beyond it (1 for prismatic joints); the bound is
+taken per collision shape (``CollisionModel.lever``, a triangle-inequality bound along the
+chain), so the sampling is conservative.
 """
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,50 +35,14 @@ class TrajectoryCheck:
         return self.within_limits and not self.collision
 
 
-def _shape_reach(shape) -> float:
-    """Largest distance of a shape's points from its own origin [m]."""
-    d = shape.dims
-    if shape.kind == "box":
-        return float(np.linalg.norm(np.asarray(d) / 2.0))
-    if shape.kind in ("capsule", "cylinder"):
-        return float(d[1] / 2.0 + d[0])
-    return float(d[0])
-
-
-@functools.lru_cache(maxsize=8)
-def _lever_arms(cell_key: int, cell: Cell) -> np.ndarray:
-    model = cell.kin.model
-    # distance from each joint's origin to the farthest point of each body beyond it, along
-    # the chain: sum of joint-origin offsets + shape reach (triangle inequality)
-    reach_body = np.zeros(model.njoints)
-    for s in cell.collision.robot_shapes:
-        reach_body[s.joint] = max(reach_body[s.joint],
-                                  np.linalg.norm(s.joint_T_shape[:3, 3]) + _shape_reach(s))
-    lever = np.zeros(model.nq)
-    for j in range(1, model.njoints):
-        best = 0.0
-        for k in range(j, model.njoints):
-            # chain from joint j to joint k: sum of the placements in between
-            dist, i = 0.0, k
-            while i != j and i > 0:
-                dist += float(np.linalg.norm(model.jointPlacements[i].translation))
-                i = model.parents[i]
-            if i == j:
-                best = max(best, dist + reach_body[k])
-        idx = model.joints[j].idx_q
-        is_prismatic = "P" in model.joints[j].shortname()
-        lever[idx] = 1.0 if is_prismatic else best
-    return lever
-
-
 def lever_arms(cell: Cell) -> np.ndarray:
     """r_j of the module docstring, shape (n,) [m per rad, or 1 for prismatic joints]."""
-    return _lever_arms(id(cell), cell)
+    return cell.collision.lever.max(axis=1)
 
 
 def point_step_bound(cell: Cell, dq: np.ndarray) -> np.ndarray:
     """Upper bound on any robot point's displacement [m] for joint steps dq (..., n)."""
-    return np.abs(dq) @ lever_arms(cell)
+    return cell.collision.point_step_bound(dq)
 
 
 def check_trajectory(traj: Trajectory, cell: Cell, velocity_scale: float = 1.0,
@@ -101,10 +64,8 @@ def check_trajectory(traj: Trajectory, cell: Cell, velocity_scale: float = 1.0,
                   and vr <= 1 + tol and ar <= 1 + tol)
     collision: tuple[tuple[str, str], ...] = ()
     when = None
-    for k in range(len(t)):
-        report = cell.collision.check(q[k])
-        if report.colliding:
-            collision, when = report.pairs, float(t[k])
-            break
+    k = cell.collision.first_collision(q)
+    if k >= 0:
+        collision, when = cell.collision.check(q[k]).pairs, float(t[k])
     return TrajectoryCheck(len(t), step, vr, ar, within, collision, when)
 

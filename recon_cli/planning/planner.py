@@ -4,8 +4,9 @@ A request goes from a start configuration to a joint goal or to a camera pose (a
 several IK solutions, OMPL goal states). The state space is the cell's joint space within
 the soft limits; a state is valid when the collision model says it is free; a motion is
 valid when every configuration on the straight segment, sampled so that no robot point
-moves more than ``max_step`` between samples, is free (checked in vectorized batches,
-coarse to fine). After the search the path is simplified (shortcutting, smoothing), time-
+moves more than ``max_step`` between samples, is free (``CollisionModel.segment_free``: a
+vectorized swept check at coarse samples, exact checks only where something is near).
+After the search the path is simplified (shortcutting, smoothing), time-
 parameterized with toppra and checked once more along its dense course. Failures are
 results (``PlanStatus``), never exceptions.
 """
@@ -21,7 +22,7 @@ from enum import StrEnum
 import numpy as np
 
 from recon_cli.errors import UnknownNameError
-from recon_cli.planning.checks import TrajectoryCheck, check_trajectory, lever_arms
+from recon_cli.planning.checks import TrajectoryCheck, check_trajectory
 from recon_cli.planning.trajectory import Trajectory, parameterize, stop_and_go
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.ik import IKOptions
@@ -124,7 +125,6 @@ class MotionPlanner:
         self.setup = og.SimpleSetup(self.space)
         self.si = self.setup.getSpaceInformation()
         self.setup.setStateValidityChecker(self._state_valid)
-        self._lever = lever_arms(cell)
         planner = self
 
         class _SegmentValidator(ob.MotionValidator):
@@ -145,18 +145,7 @@ class MotionPlanner:
 
     def _motion_valid(self, a: np.ndarray, b: np.ndarray) -> bool:
         self.stats["motions"] += 1
-        k = max(1, int(np.ceil(float(np.abs(b - a) @ self._lever) / self.options.max_step)))
-        # coarse to fine: bit-reversed order of the k samples after a (b is included)
-        order = np.argsort([int(format(i, "b")[::-1], 2) / (1 << len(format(i, "b")))
-                            for i in range(1, k + 1)], kind="stable")
-        t = (np.arange(1, k + 1) / k)[order]
-        qs = a + t[:, None] * (b - a)
-        for start in range(0, k, 64):
-            chunk = qs[start:start + 64]
-            self.stats["motion_samples"] += len(chunk)
-            if self.cell.collision.first_collision(chunk) >= 0:
-                return False
-        return True
+        return self.cell.collision.segment_free(a, b, self.options.max_step)
 
     # ------------------------------------------------------------------ requests
     def _state(self, q: np.ndarray):
@@ -236,6 +225,7 @@ class MotionPlanner:
         """Plan to a camera pose: IK (several solutions, raises when none), then plan to any."""
         ik = self.cell.solve_pose(world_T_camera, rng, seed=q_start,
                                   options=IKOptions(max_solutions=self.options.ik_solutions), what=what)
-        goals = sorted((s.q for s in ik.solutions), key=lambda g: float(np.abs(g - q_start) @ self._lever))
+        step = self.cell.collision.point_step_bound
+        goals = sorted((s.q for s in ik.solutions), key=lambda g: float(step(g - q_start)))
         result = self.plan_to_joints(q_start, goals, seed=int(rng.integers(1 << 30)))
         return result

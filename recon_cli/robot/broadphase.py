@@ -54,21 +54,34 @@ def world_aabbs(box_R: np.ndarray, box_c: np.ndarray, box_h: np.ndarray) -> tupl
 
 def segments_hit_boxes(p0: np.ndarray, p1: np.ndarray, radius: np.ndarray,
                        box_c: np.ndarray, box_h: np.ndarray) -> np.ndarray:
-    """May capsules (segments p0-p1 (..., R, 3), radii (R,)) touch world-aligned boxes (E,
-    centres box_c (E, 3), half extents box_h (E, 3))? -> (..., R, E). Slab test of each
-    segment against its box grown by the capsule radius."""
-    a = p0[..., :, None, :] - box_c  # (..., R, E, 3)
-    d = (p1 - p0)[..., :, None, :]
-    H = box_h + radius[:, None, None]  # (R, E, 3)
+    """May capsules (segments p0-p1 (..., R, 3), radii (R,) or (..., R)) touch world-aligned
+    boxes (E, centres box_c (E, 3), half extents box_h (E, 3))? -> (..., R, E).
+
+    First the capsules' own axis-aligned boxes against the boxes (cheap, dense), then, for
+    the overlapping pairs only, a slab test of the segment against its box grown by the
+    capsule radius."""
+    lo = np.minimum(p0, p1) - radius[..., None]  # (..., R, 3)
+    hi = np.maximum(p0, p1) + radius[..., None]
+    box_lo, box_hi = box_c - box_h, box_c + box_h  # (E, 3)
+    near = np.all((lo[..., :, None, :] <= box_hi) & (hi[..., :, None, :] >= box_lo), axis=-1)
+    idx = np.nonzero(near)
+    if len(idx[0]) == 0:
+        return near
+    e = idx[-1]
+    rs = idx[:-1]
+    a = p0[rs] - box_c[e]  # (M, 3)
+    d = p1[rs] - p0[rs]
+    r = np.broadcast_to(radius, p0.shape[:-1])[rs]
+    H = box_h[e] + r[:, None]
     small = np.abs(d) < 1e-12
     inv = 1.0 / np.where(small, 1.0, d)
     t1 = (-H - a) * inv
     t2 = (H - a) * inv
-    lo = np.where(small, np.where(np.abs(a) <= H, -np.inf, np.inf), np.minimum(t1, t2))
-    hi = np.where(small, np.inf, np.maximum(t1, t2))
-    tmin = np.maximum(lo.max(axis=-1), 0.0)
-    tmax = np.minimum(hi.min(axis=-1), 1.0)
-    return tmin <= tmax
+    tlo = np.where(small, np.where(np.abs(a) <= H, -np.inf, np.inf), np.minimum(t1, t2))
+    thi = np.where(small, np.inf, np.maximum(t1, t2))
+    hit = np.maximum(tlo.max(axis=-1), 0.0) <= np.minimum(thi.min(axis=-1), 1.0)
+    near[idx] = hit
+    return near
 
 
 def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> np.ndarray:

@@ -26,6 +26,7 @@ from lxml import etree
 
 from recon_cli.geometry.transforms import pose_from_xyz_rpy
 from recon_cli.paths import ROBOT_DIR
+from recon_cli.robot.batch_fk import BatchFK
 from recon_cli.robot.broadphase import (
     bounding_box,
     bounding_capsule,
@@ -106,6 +107,16 @@ class DistanceReport:
         return min(self.environment, self.self_)
 
 
+def _shape_reach(shape: CollisionShape) -> float:
+    """Largest distance of a shape's points from its own origin [m]."""
+    d = shape.dims
+    if shape.kind == "box":
+        return float(np.linalg.norm(np.asarray(d) / 2.0))
+    if shape.kind in ("capsule", "cylinder"):
+        return float(np.hypot(d[1] / 2.0, d[0])) if shape.kind == "cylinder" else float(d[1] / 2.0 + d[0])
+    return float(d[0])
+
+
 def _geometry(kind: str, dims: tuple[float, ...]) -> fcl.CollisionGeometry:
     if kind == "box":
         return fcl.Box(*dims)
@@ -156,6 +167,14 @@ def _declared_allowed() -> tuple[frozenset[str], ...]:
     return tuple(frozenset(e["links"]) for e in entries)
 
 
+@functools.lru_cache(maxsize=1)
+def allowed_shape_pairs() -> frozenset[frozenset[str]]:
+    """Shape pairs ("link/shape" labels) never checked, from robot/collision.yaml."""
+    with open(ROBOT_DIR / "collision.yaml") as f:
+        entries = yaml.safe_load(f).get("shapes", [])
+    return frozenset(frozenset(pair) for pair in entries)
+
+
 def allowed_link_pairs(urdf: str, kin: Kinematics) -> set[frozenset[str]]:
     """Link pairs that are never checked (same rigid body, URDF parent/child, declared)."""
     root = etree.fromstring(urdf.encode())
@@ -198,13 +217,99 @@ class CollisionModel:
         self._cap_b = np.stack([c[1] for c in caps])
         self._cap_r = np.array([c[2] for c in caps])  # (R,)
         # robot shape pairs to check against each other
+        shape_allowed = allowed_shape_pairs()
         self._self_pairs = np.array([
             (i, j) for i, j in itertools.combinations(range(len(self.robot_shapes)), 2)
             if frozenset((self.robot_shapes[i].link, self.robot_shapes[j].link)) not in self._allowed
+            and frozenset((self.robot_shapes[i].label, self.robot_shapes[j].label)) not in shape_allowed
         ], dtype=int).reshape(-1, 2)
         self._self_r = self._cap_r[self._self_pairs[:, 0]] + self._cap_r[self._self_pairs[:, 1]]
         self._request = fcl.CollisionRequest()
+        self._batch_fk = BatchFK(kin.model)
+        self.lever = self._shape_lever_arms()  # (n, R)
+        self._pair_lever = self._self_pair_levers()  # (P, n)
+        self.certified_pairs = self._drop_separated_pairs()
         self.set_object_box(object_box)
+
+    def _drop_separated_pairs(self) -> list[tuple[str, str, float]]:
+        """Remove self pairs that no configuration can bring into contact.
+
+        A pair whose relative pose depends on one joint only is swept over that joint's
+        whole range by conservative advancement (at distance d, the next angle is d / lever
+        further, never more than 0.01 rad): if the distance stays positive the pair is
+        certified separated and not checked again. Returns (pair, smallest distance [m])."""
+        model = self.kin.model
+        keep = np.ones(len(self._self_pairs), dtype=bool)
+        certified = []
+        req = fcl.DistanceRequest()
+        lim = self.kin.limits
+        for p, (i, j) in enumerate(self._self_pairs):
+            joints = np.nonzero(self._pair_lever[p])[0]
+            if len(joints) != 1 or lim.prismatic[joints[0]]:
+                continue
+            k = int(joints[0])
+            lever = float(self._pair_lever[p, k])
+            q = pin.neutral(model)
+            theta, smallest, separated = float(lim.lower[k]), np.inf, True
+            while True:
+                q[k] = theta
+                poses = self.shape_poses(q)
+                placed: set[int] = set()
+                d = fcl.distance(self._place(i, poses, placed), self._place(j, poses, placed), req,
+                                 fcl.DistanceResult())
+                smallest = min(smallest, d)
+                if d <= 1e-4:
+                    separated = False
+                    break
+                if theta >= lim.upper[k]:
+                    break
+                theta = min(theta + min(0.9 * d / lever, 0.01), float(lim.upper[k]))
+            if separated:
+                keep[p] = False
+                certified.append((self.robot_shapes[i].label, self.robot_shapes[j].label, float(smallest)))
+        self._self_pairs = self._self_pairs[keep]
+        self._self_r = self._self_r[keep]
+        self._pair_lever = self._pair_lever[keep]
+        return certified
+
+    def _self_pair_levers(self) -> np.ndarray:
+        """Relative-motion levers of the checked self pairs, (P, n): joints that move both
+        shapes alike (common ancestors) do not change their distance."""
+        model = self.kin.model
+
+        def ancestors(joint: int) -> set[int]:
+            out = set()
+            while joint > 0:
+                out.add(int(model.joints[joint].idx_q))
+                joint = model.parents[joint]
+            return out
+
+        levers = np.zeros((len(self._self_pairs), model.nq))
+        for p, (i, j) in enumerate(self._self_pairs):
+            ai = ancestors(self.robot_shapes[i].joint)
+            aj = ancestors(self.robot_shapes[j].joint)
+            for k in ai - aj:
+                levers[p, k] += self.lever[k, i]
+            for k in aj - ai:
+                levers[p, k] += self.lever[k, j]
+        return levers
+
+    def _shape_lever_arms(self) -> np.ndarray:
+        """r[j, s]: bound on how far any point of robot shape s moves per unit motion of
+        joint j [m/rad, or 1 for a prismatic joint; 0 when j does not move s]. Triangle
+        inequality along the chain: joint-origin offsets from j to the shape's joint, plus the
+        shape's offset and reach."""
+        model = self.kin.model
+        lever = np.zeros((model.nq, len(self.robot_shapes)))
+        for s_idx, shape in enumerate(self.robot_shapes):
+            reach = float(np.linalg.norm(shape.joint_T_shape[:3, 3])) + _shape_reach(shape)
+            k, dist = shape.joint, reach
+            while k > 0:
+                iq = model.joints[k].idx_q
+                lever[iq, s_idx] = 1.0 if model.joints[k].shortname().startswith("JointModelP") else dist
+                dist += float(np.linalg.norm(model.jointPlacements[k].translation))
+                k = model.parents[k]
+        return lever
 
     # ------------------------------------------------------------------ environment
     def set_object_box(self, box: ObjectBox | None) -> None:
@@ -227,8 +332,10 @@ class CollisionModel:
             np.stack([s.joint_T_shape[:3, :3] for s in env]),
             np.stack([s.joint_T_shape[:3, 3] for s in env]),
             np.stack([bounding_box(s.kind, s.dims) for s in env]))  # (E, 3) each
+        shape_allowed = allowed_shape_pairs()
         self._env_allowed = np.array([
-            [frozenset((r.link, e.link)) in self._allowed for e in env] for r in self.robot_shapes
+            [frozenset((r.link, e.link)) in self._allowed or frozenset((r.label, e.label)) in shape_allowed
+             for e in env] for r in self.robot_shapes
         ], dtype=bool)  # (R, E)
 
     # ------------------------------------------------------------------ placement
@@ -238,17 +345,21 @@ class CollisionModel:
         oMi = np.stack([self._data.oMi[j].homogeneous for j in range(self.kin.model.njoints)])
         return oMi[self._robot_joints] @ self._robot_local
 
-    def _candidates(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _candidates(self, poses: np.ndarray, grow: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
         """Broad phase for poses (..., R, 4, 4): env candidates (..., R, E) and self
-        candidates (..., P) (indices into the checked self pairs)."""
+        candidates (..., P) (indices into the checked self pairs). ``grow`` (R,) enlarges
+        each robot shape's bounding capsule [m] (swept-motion checks)."""
         R, t = poses[..., :3, :3], poses[..., :3, 3]
         a = (R @ self._cap_a[:, :, None])[..., 0] + t
         b = (R @ self._cap_b[:, :, None])[..., 0] + t
-        env = segments_hit_boxes(a, b, self._cap_r, self._env_c, self._env_h)
+        radius = self._cap_r if grow is None else self._cap_r + grow
+        env = segments_hit_boxes(a, b, radius, self._env_c, self._env_h)
         env &= ~self._env_allowed
         i, j = self._self_pairs[:, 0], self._self_pairs[:, 1]
         dist = segment_distance(a[..., i, :], b[..., i, :], a[..., j, :], b[..., j, :])
-        return env, dist <= self._self_r
+        reach = self._self_r if grow is None else self._self_r + grow[i] + grow[j]
+        return env, dist <= reach
 
     def _exact(self, poses: np.ndarray, env_c: np.ndarray, self_c: np.ndarray,
                first_only: bool) -> list[tuple[str, str]]:
@@ -291,17 +402,110 @@ class CollisionModel:
             return False
         return bool(self._exact(poses, env_c, self_c, first_only=True))
 
+    def shape_poses_batch(self, qs: np.ndarray) -> np.ndarray:
+        """World poses of the robot shapes at many configurations, (K, R, 4, 4)."""
+        oMi = self._batch_fk.joint_poses(qs)
+        return oMi[:, self._robot_joints] @ self._robot_local
+
+    def point_step_bound(self, dq: np.ndarray) -> np.ndarray:
+        """Bound on the displacement [m] of any robot point for joint steps dq (..., n)."""
+        return np.max(np.abs(dq) @ self.lever, axis=-1)
+
+    def segment_free(self, a: np.ndarray, b: np.ndarray, max_step: float = 0.005,
+                     sweep: float = 0.03) -> bool:
+        """Is the straight joint-space motion a -> b collision-free?
+
+        1. Coarse samples, at which every shape's bounding capsule is grown by half the
+           largest motion of that shape between samples (at most ``sweep`` [m]), cover the
+           swept volume in one vectorized broad phase; a pair that never meets there cannot
+           collide anywhere on the segment.
+        2. Around coarse samples where a grown capsule meets something, the flagged shape
+           pairs are followed by conservative advancement with FCL distances: at distance d
+           a pair cannot touch before its shapes have moved d, so the next check is that far
+           along - but never further than ``max_step`` [m] of robot-point motion, the
+           resolution every executed trajectory is checked at.
+        """
+        a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        per_shape = np.abs(b - a) @ self.lever  # (R,) motion bound of each shape over a -> b
+        longest = float(per_shape.max())
+        m = max(1, int(np.ceil(longest / (2.0 * sweep))))
+        t = np.linspace(0.0, 1.0, m + 1)
+        poses = self.shape_poses_batch(a + t[:, None] * (b - a))
+        env_c, self_c = self._candidates(poses, per_shape / (2.0 * m))
+        flagged = env_c.any(axis=(1, 2)) | self_c.any(axis=1)
+        if not flagged.any():
+            return True
+        min_dt = max_step / longest if longest > 0 else 1.0
+        k = 0
+        while k <= m:
+            if not flagged[k]:
+                k += 1
+                continue
+            first = k
+            while k + 1 <= m and flagged[k + 1]:
+                k += 1
+            lo, hi = max(first - 1, 0), min(k + 1, m)
+            env_pairs = np.argwhere(env_c[lo:hi + 1].any(axis=0))
+            chosen = np.nonzero(self_c[lo:hi + 1].any(axis=0))[0]
+            pair_speed = self._pair_lever[chosen] @ np.abs(b - a)
+            if not self._advance(a, b, t[lo], t[hi], env_pairs, self._self_pairs[chosen], pair_speed,
+                                 per_shape, min_dt):
+                return False
+            k += 1
+        return True
+
+    def _advance(self, a, b, t0: float, t1: float, env_pairs: np.ndarray, self_pairs: np.ndarray,
+                 pair_speed: np.ndarray, per_shape: np.ndarray, min_dt: float) -> bool:
+        """Conservative advancement of a few shape pairs over a -> b for t in [t0, t1]."""
+        req = fcl.DistanceRequest()
+        t = t0
+        while True:
+            poses = self.shape_poses(a + t * (b - a))
+            placed: set[int] = set()
+            dt = np.inf
+            for s_idx, e_idx in env_pairs:
+                obj = self._place(s_idx, poses, placed)
+                d = fcl.distance(obj, self._env_objs[e_idx], req, fcl.DistanceResult())
+                if d <= 0.0:
+                    return False
+                if per_shape[s_idx] > 0:
+                    dt = min(dt, d / per_shape[s_idx])
+            for (i, j), speed in zip(self_pairs, pair_speed, strict=True):
+                d = fcl.distance(self._place(i, poses, placed), self._place(j, poses, placed), req,
+                                 fcl.DistanceResult())
+                if d <= 0.0:
+                    return False
+                if speed > 0:
+                    dt = min(dt, d / speed)
+            if t >= t1:
+                return True
+            t = min(t + max(dt, min_dt), t1) if np.isfinite(dt) else t1
+
+    def _place(self, k: int, poses: np.ndarray, placed: set[int]) -> fcl.CollisionObject:
+        obj = self._robot_objs[k]
+        if k not in placed:
+            T = poses[k]
+            obj.setTransform(fcl.Transform(T[:3, :3], T[:3, 3]))
+            placed.add(k)
+        return obj
+
     def first_collision(self, qs: np.ndarray) -> int:
         """Index of the first colliding configuration of qs (K, n), or -1 if all are free.
 
         The broad phase runs for all K configurations in one vectorized call."""
-        qs = np.asarray(qs, dtype=float)
-        poses = np.stack([self.shape_poses(q) for q in qs])  # (K, R, 4, 4)
-        env_c, self_c = self._candidates(poses)
-        suspect = np.nonzero(env_c.any(axis=(1, 2)) | self_c.any(axis=1))[0]
-        for k in suspect:
-            if self._exact(poses[k], env_c[k], self_c[k], first_only=True):
-                return int(k)
+        qs = np.atleast_2d(np.asarray(qs, dtype=float))
+        hit = -1
+        for start in range(0, len(qs), 256):
+            chunk = qs[start:start + 256]
+            poses = self.shape_poses_batch(chunk)  # (K, R, 4, 4)
+            env_c, self_c = self._candidates(poses)
+            suspect = np.nonzero(env_c.any(axis=(1, 2)) | self_c.any(axis=1))[0]
+            for k in suspect:
+                if self._exact(poses[k], env_c[k], self_c[k], first_only=True):
+                    hit = start + int(k)
+                    break
+            if hit >= 0:
+                return hit
         return -1
 
     def distance(self, q: np.ndarray) -> DistanceReport:

@@ -42,9 +42,19 @@ class PlanStatus(StrEnum):
 
 @dataclass(frozen=True)
 class PlanOptions:
+    """Options of a planning request. Optimizing planners (RRT*, PRM*, BIT*, ...) stop at
+    their first exact solution: the request asks for a path, shortened afterwards.
+
+    simplify: "reduce" (OMPL's reduceVertices: shortcuts between random vertex pairs, fast),
+    "full" (OMPL's simplifySolution within ``simplify_time``), or "none".
+    range: RRT-family step length in joint space (0 lets OMPL choose).
+    """
+
     planner: str = "RRTConnect"
     time_limit: float = 5.0  # [s] for the search
-    simplify_time: float = 1.0  # [s] at most for simplification
+    simplify: str = "reduce"
+    simplify_time: float = 1.0  # [s] budget of the "full" simplification
+    range: float = 1.5
     velocity_scale: float = 0.15  # of the joint velocity limits (thesis script manager)
     acceleration_scale: float = 0.3  # of the joint acceleration limits
     max_step: float = 0.005  # [m] largest robot-point motion between checked samples
@@ -53,6 +63,8 @@ class PlanOptions:
     def __post_init__(self) -> None:
         if self.planner not in PLANNERS:
             raise UnknownNameError("planner", self.planner, PLANNERS)
+        if self.simplify not in ("reduce", "full", "none"):
+            raise UnknownNameError("simplification", self.simplify, ("reduce", "full", "none"))
 
 
 @dataclass(frozen=True)
@@ -147,6 +159,13 @@ class MotionPlanner:
         self.stats["motions"] += 1
         return self.cell.collision.segment_free(a, b, self.options.max_step)
 
+    def _first_solution_objective(self):
+        """Path length with an infinite cost threshold: optimizing planners stop at their
+        first exact solution instead of using up the time limit."""
+        obj = self._ob.PathLengthOptimizationObjective(self.si)
+        obj.setCostThreshold(self._ob.Cost(float("inf")))
+        return obj
+
     # ------------------------------------------------------------------ requests
     def _state(self, q: np.ndarray):
         s = self.si.allocState()
@@ -190,7 +209,11 @@ class MotionPlanner:
                 for g in valid_goals:
                     goal.addState(self._state(g))
                 self.setup.setGoal(goal)
-            self.setup.setPlanner(getattr(self._og, opt.planner)(self.si))
+            planner = getattr(self._og, opt.planner)(self.si)
+            if opt.range > 0 and hasattr(planner, "setRange"):
+                planner.setRange(opt.range)
+            self.setup.setPlanner(planner)
+            self.setup.setOptimizationObjective(self._first_solution_objective())
             self.setup.setup()
             t1 = time.perf_counter()
             status = self.setup.solve(opt.time_limit)
@@ -201,9 +224,13 @@ class MotionPlanner:
                                   time.perf_counter() - t0,
                                   message=f"{opt.planner} found no path within {opt.time_limit:g} s")
             t2 = time.perf_counter()
-            self.setup.simplifySolution(opt.simplify_time)
-            simplify_time = time.perf_counter() - t2
             path_geo = self.setup.getSolutionPath()
+            if opt.simplify == "reduce":
+                self._og.PathSimplifier(self.si).reduceVertices(path_geo)
+            elif opt.simplify == "full":
+                self.setup.simplifySolution(opt.simplify_time)
+                path_geo = self.setup.getSolutionPath()
+            simplify_time = time.perf_counter() - t2
             path = np.array([[path_geo.getState(k)[i] for i in range(self.n)]
                              for k in range(path_geo.getStateCount())])
         lim = self.cell.limits

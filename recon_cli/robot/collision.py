@@ -412,7 +412,7 @@ class CollisionModel:
         return np.max(np.abs(dq) @ self.lever, axis=-1)
 
     def segment_free(self, a: np.ndarray, b: np.ndarray, max_step: float = 0.005,
-                     sweep: float = 0.03) -> bool:
+                     sweep: float = 0.05) -> bool:
         """Is the straight joint-space motion a -> b collision-free?
 
         1. Coarse samples, at which every shape's bounding capsule is grown by half the
@@ -435,6 +435,15 @@ class CollisionModel:
         flagged = env_c.any(axis=(1, 2)) | self_c.any(axis=1)
         if not flagged.any():
             return True
+        # most blocked motions already collide at a coarse sample: check those exactly first,
+        # the samples with the most candidate pairs first
+        exact_env, exact_self = self._candidates(poses[flagged])
+        count = exact_env.sum(axis=(1, 2)) + exact_self.sum(axis=1)
+        for k in np.argsort(-count, kind="stable"):
+            if count[k] == 0:
+                break
+            if self._exact(poses[flagged][k], exact_env[k], exact_self[k], first_only=True):
+                return False
         min_dt = max_step / longest if longest > 0 else 1.0
         k = 0
         while k <= m:
@@ -456,30 +465,41 @@ class CollisionModel:
 
     def _advance(self, a, b, t0: float, t1: float, env_pairs: np.ndarray, self_pairs: np.ndarray,
                  pair_speed: np.ndarray, per_shape: np.ndarray, min_dt: float) -> bool:
-        """Conservative advancement of a few shape pairs over a -> b for t in [t0, t1]."""
+        """Conservative advancement of a few shape pairs over a -> b for t in [t0, t1].
+
+        A pair whose distance exceeds the motion it can still make before t1 is dropped."""
         req = fcl.DistanceRequest()
+        env = [(int(s_idx), int(e_idx), float(per_shape[s_idx])) for s_idx, e_idx in env_pairs]
+        slf = [(int(i), int(j), float(v)) for (i, j), v in zip(self_pairs, pair_speed, strict=True)]
         t = t0
-        while True:
+        while env or slf:
             poses = self.shape_poses(a + t * (b - a))
             placed: set[int] = set()
             dt = np.inf
-            for s_idx, e_idx in env_pairs:
-                obj = self._place(s_idx, poses, placed)
-                d = fcl.distance(obj, self._env_objs[e_idx], req, fcl.DistanceResult())
+            remaining = t1 - t
+            keep_env = []
+            for s_idx, e_idx, speed in env:
+                d = fcl.distance(self._place(s_idx, poses, placed), self._env_objs[e_idx], req,
+                                 fcl.DistanceResult())
                 if d <= 0.0:
                     return False
-                if per_shape[s_idx] > 0:
-                    dt = min(dt, d / per_shape[s_idx])
-            for (i, j), speed in zip(self_pairs, pair_speed, strict=True):
+                if speed * remaining >= d:
+                    keep_env.append((s_idx, e_idx, speed))
+                    dt = min(dt, d / speed)
+            keep_self = []
+            for i, j, speed in slf:
                 d = fcl.distance(self._place(i, poses, placed), self._place(j, poses, placed), req,
                                  fcl.DistanceResult())
                 if d <= 0.0:
                     return False
-                if speed > 0:
+                if speed * remaining >= d:
+                    keep_self.append((i, j, speed))
                     dt = min(dt, d / speed)
+            env, slf = keep_env, keep_self
             if t >= t1:
                 return True
             t = min(t + max(dt, min_dt), t1) if np.isfinite(dt) else t1
+        return True
 
     def _place(self, k: int, poses: np.ndarray, placed: set[int]) -> fcl.CollisionObject:
         obj = self._robot_objs[k]

@@ -289,6 +289,70 @@ def bench_sim(
     console.print(f"results: {folder / 'bench_sim.json'}, picture: {folder / 'eq_4_1_views.png'}")
 
 
+@bench_app.command("planners")
+def bench_planners(
+    n: Annotated[int, typer.Option("--n", min=1, help="Requests per planner.")] = 1000,
+    planners: Annotated[str, typer.Option(help="Comma-separated OMPL planners, or 'default'.")] = "default",
+    time_limit: Annotated[float, typer.Option(min=0.1, help="Time limit per request [s].")] = 5.0,
+    quick: Annotated[bool, typer.Option(help="CI mode: 10 requests of RRTConnect and RRT.")] = False,
+    peer: Annotated[str, typer.Option(help="Also run a peer on the same problem: 'mplib' or 'none'.")] = "none",
+    peer_n: Annotated[int, typer.Option(min=1, help="Requests for the peer (per RRT range tried).")] = 200,
+    seed: SeedOpt = 0,
+    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/bench-planners-<time>).")] = None,
+) -> None:
+    """The Table 4.1 planning benchmark (thesis 4.1): success, plan times, path lengths."""
+    import numpy as np
+    from rich.table import Table
+
+    from recon_cli.bench.planners import DEFAULT_PLANNERS, run_planner_bench, thesis_times, write_results
+    from recon_cli.console import console, progress_bar, run_folder
+    from recon_cli.planning.planner import PLANNERS
+
+    names = list(DEFAULT_PLANNERS) if planners == "default" else [p.strip() for p in planners.split(",") if p.strip()]
+    if quick:
+        names, n = ["RRTConnect", "RRT"], min(n, 10)
+    for name in names:
+        if name not in PLANNERS:
+            from recon_cli.errors import UnknownNameError
+
+            raise UnknownNameError("planner", name, PLANNERS)
+    if peer not in ("none", "mplib"):
+        raise InputError(f"--peer '{peer}' is not known", hint="use mplib or none")
+    folder = run_folder(out, "bench-planners")
+    with progress_bar() as update:
+        rows = run_planner_bench(names, n, time_limit, seed, update)
+    peer_summary = None
+    if peer == "mplib":
+        from recon_cli.bench.mplib_peer import run_mplib
+
+        with console.status("mplib 0.2.1 on the same problem ..."):
+            peer_summary = run_mplib(folder, peer_n, time_limit)
+    meta = {"n": n, "time_limit": time_limit, "seed": seed, "planners": names, "problem": "Table 4.1",
+            "plan_time": "search + simplification (reduceVertices), one core"}
+    summary = write_results(folder, rows, meta, peer_summary)
+    table = Table(title=f"Table 4.1 problem, {n} requests per planner, {time_limit:g} s each")
+    for col in ("planner", "solved", "min", "median", "p90", "max", "path length", "trajectory"):
+        table.add_column(col, justify="right")
+    for name, sm in summary.items():
+        table.add_row(name, f"{sm['success_rate'] * 100:.1f} %", f"{sm['time_min']:.3f} s",
+                      f"{sm['time_median']:.3f} s", f"{sm['time_p90']:.3f} s", f"{sm['time_max']:.3f} s",
+                      f"{sm['path_length_median']:.2f}", f"{sm['trajectory_duration_median']:.2f} s")
+    for name, t in thesis_times().items():
+        table.add_row(f"{name} (thesis)", "", f"{t.min():.3f} s", f"{float(np.median(t)):.3f} s",
+                      f"{np.percentile(t, 90):.3f} s", f"{t.max():.3f} s", "", "")
+    if peer_summary:
+        ps = peer_summary
+        table.add_row(f"RRTConnect (mplib, range {ps['range']:g})", f"{ps['success_rate'] * 100:.1f} %",
+                      "", f"{ps['time_median']:.3f} s", "", "", f"{ps['path_length_median']:.2f}", "")
+    console.print(table)
+    if peer_summary and "RRTConnect" in summary:
+        ours = summary["RRTConnect"]["time_median"]
+        console.print(f"RRTConnect median: recon {ours:.3f} s, mplib {peer_summary['time_median']:.3f} s, "
+                      f"ratio recon/mplib {ours / peer_summary['time_median']:.2f}")
+    console.print(f"results: {folder / 'bench_planners.json'}, {folder / 'requests.csv'}, "
+                  f"plot: {folder / 'plan_times.png'}")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the app and return the exit code; user errors become one line on stderr."""
     from recon_cli.console import err_console

@@ -1,0 +1,149 @@
+"""Planner benchmark of thesis section 4.1 (``recon bench planners``).
+
+The problem of Table 4.1: 9-DoF gantry cell, start and goal as given, the 0.3 m cube on the
+table (inflated by the 3 cm safety distance like every other shape), 5 s per request. Every
+request is independent (a fresh search from the start state). Measured per request: success,
+plan time (search + simplification, the figure MoveIt's benchmark reports as "time"),
+post-processing time (toppra timing + the dense final check), path length (sum of absolute
+joint differences, rad and m mixed, as MoveIt) and trajectory duration (velocity and
+acceleration scaling 0.15 / 0.3, as the thesis' benchmark requests).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from recon_cli.bench.scenarios import BENCH_CUBE, TABLE_4_1_GOAL, TABLE_4_1_START
+from recon_cli.paths import SHARED_DATA_DIR
+from recon_cli.planning.planner import MotionPlanner, PlanOptions, seed_ompl
+from recon_cli.robot.cell import Cell
+from recon_cli.robot.description import CellConfig
+
+#: planners that stop at a first solution by design; the optimizing ones are asked for
+#: their first exact solution too (PlanOptions), so all of them answer the same request
+DEFAULT_PLANNERS = ("RRTConnect", "RRT", "KPIECE1", "BKPIECE1", "LBKPIECE1", "PRM", "RRTstar",
+                    "BITstar", "AORRTC")
+THESIS_PLANNERS = ("RRTConnect", "BiEST", "RRT", "ProjEST")
+
+
+@dataclass(frozen=True)
+class RequestRow:
+    planner: str
+    request: int
+    solved: bool
+    status: str
+    plan_time: float  # search + simplification [s]
+    search_time: float
+    simplify_time: float
+    post_time: float  # toppra + final check [s]
+    path_length: float
+    trajectory_duration: float
+
+
+def summarize(rows: list[RequestRow]) -> dict:
+    t = np.array([r.plan_time for r in rows])
+    ok = np.array([r.solved for r in rows])
+    ts = t[ok] if ok.any() else np.array([np.nan])
+    pl = np.array([r.path_length for r in rows if r.solved] or [np.nan])
+    td = np.array([r.trajectory_duration for r in rows if r.solved] or [np.nan])
+    return {
+        "requests": len(rows), "solved": int(ok.sum()), "success_rate": float(ok.mean()),
+        "time_min": float(np.min(ts)), "time_median": float(np.median(ts)),
+        "time_p90": float(np.percentile(ts, 90)), "time_max": float(np.max(ts)),
+        "time_median_all": float(np.median(t)),
+        "path_length_median": float(np.median(pl)), "trajectory_duration_median": float(np.median(td)),
+        "post_time_median": float(np.median([r.post_time for r in rows if r.solved] or [np.nan])),
+    }
+
+
+def run_planner_bench(planners: list[str], n: int, time_limit: float, seed: int,
+                      progress: Callable[[str, int, int], None] | None = None) -> list[RequestRow]:
+    seed_ompl(seed)
+    cell = Cell(CellConfig(), object_box=BENCH_CUBE)
+    rows: list[RequestRow] = []
+    for name in planners:
+        planner = MotionPlanner(cell, PlanOptions(planner=name, time_limit=time_limit))
+        for k in range(n):
+            t0 = time.perf_counter()
+            r = planner.plan_to_joints(TABLE_4_1_START, TABLE_4_1_GOAL, seed=seed)
+            total = time.perf_counter() - t0
+            plan_time = r.plan_time + r.simplify_time
+            rows.append(RequestRow(
+                name, k, r.ok, r.status.value, plan_time, r.plan_time, r.simplify_time,
+                max(total - plan_time, 0.0) if r.ok else 0.0, r.path_length if r.ok else float("nan"),
+                r.trajectory.duration if r.ok else float("nan")))
+            if progress:
+                progress(name, k + 1, n)
+    return rows
+
+
+def thesis_times() -> dict[str, np.ndarray]:
+    """Per-request total planning times of the thesis' MoveIt benchmark (benchmark4 CSVs,
+    solved runs only), when ../shared/data/thesis is present."""
+    out = {}
+    folder = SHARED_DATA_DIR / "thesis" / "benchmark4"
+    for name in THESIS_PLANNERS:
+        path = folder / f"{name}.csv"
+        if path.exists():
+            with open(path) as f:
+                out[name] = np.array([float(row["time"]) for row in csv.DictReader(f)])
+    return out
+
+
+def write_results(folder: Path, rows: list[RequestRow], meta: dict, peer: dict | None = None) -> dict:
+    summary = {name: summarize([r for r in rows if r.planner == name])
+               for name in dict.fromkeys(r.planner for r in rows)}
+    with open(folder / "requests.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(asdict(rows[0]).keys()))
+        writer.writeheader()
+        for r in rows:
+            writer.writerow(asdict(r))
+    data = {"meta": meta, "summary": summary, "requests": [asdict(r) for r in rows]}
+    if peer is not None:
+        data["peer"] = peer
+    (folder / "bench_planners.json").write_text(json.dumps(data, indent=2, default=float) + "\n")
+    _box_plot(folder / "plan_times.png", rows, thesis_times(), peer)
+    return summary
+
+
+def _box_plot(path: Path, rows: list[RequestRow], thesis: dict[str, np.ndarray], peer: dict | None) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    labels, data, colors = [], [], []
+    for name in dict.fromkeys(r.planner for r in rows):
+        t = [r.plan_time for r in rows if r.planner == name and r.solved]
+        if t:
+            labels.append(f"{name}\n(recon)")
+            data.append(t)
+            colors.append("#2b7bba")
+    if peer and peer.get("times"):
+        labels.append("RRTConnect\n(mplib)")
+        data.append(peer["times"])
+        colors.append("#3a9e4f")
+    for name, t in thesis.items():
+        labels.append(f"{name}\n(thesis, MoveIt)")
+        data.append(t)
+        colors.append("#c0504d")
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(labels)), 4.5))
+    box = ax.boxplot(data, patch_artist=True, showfliers=True)
+    for patch, c in zip(box["boxes"], colors, strict=True):
+        patch.set_facecolor(c)
+        patch.set_alpha(0.6)
+    ax.set_xticks(range(1, len(labels) + 1), labels, fontsize=7)
+    ax.set_yscale("log")
+    ax.set_ylabel("plan time (search + simplification) [s]")
+    ax.set_title("Table 4.1 problem: plan time per request (log scale; cf. thesis Figure 4.2)")
+    ax.grid(True, which="both", axis="y", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)

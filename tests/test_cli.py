@@ -108,3 +108,20 @@ def test_bench_output_folder_not_writable(capsys, tmp_path):
     blocker.write_text("x")
     code, _, err = run(capsys, "bench", "ik", "--n", "1", "--out", str(blocker / "sub"))
     assert code == 1 and "not writable" in err
+
+
+def test_bench_planners_small(capsys, tmp_path):
+    code, out, _ = run(capsys, "bench", "planners", "--planners", "RRTConnect", "--n", "3",
+                       "--out", str(tmp_path))
+    assert code == 0
+    data = json.loads((tmp_path / "bench_planners.json").read_text())
+    assert data["summary"]["RRTConnect"]["requests"] == 3
+    assert (tmp_path / "plan_times.png").stat().st_size > 0
+    assert (tmp_path / "requests.csv").read_text().startswith("planner,request,solved")
+
+
+def test_bench_planners_bad_names(capsys):
+    code, _, err = run(capsys, "bench", "planners", "--planners", "EST", "--n", "1")
+    assert code == 1 and "unknown planner 'EST'" in err
+    code, _, err = run(capsys, "bench", "planners", "--peer", "moveit", "--n", "1")
+    assert code == 1 and "--peer 'moveit'" in err

@@ -78,3 +78,31 @@ def test_capsule_is_exact(gantry):
         probe = fcl.CollisionObject(fcl.Sphere(1e-5),
                                     fcl.Transform(np.array([0, 0, length / 2 + r + gap])))
         assert fcl.collide(cap, probe, fcl.CollisionRequest(), fcl.CollisionResult()) == hit
+
+
+def test_declared_gaps_are_constant(gantry):
+    """collision.yaml skips carriage/base vs rails: their vertical gap never changes."""
+    from recon_cli.robot.collision import allowed_shape_pairs
+
+    cm = gantry.collision
+    rng = np.random.default_rng(0)
+    labels = {s.label: s for s in cm.env_shapes}
+    for pair in allowed_shape_pairs():
+        robot_label, env_label = sorted(pair, key=lambda x: x.startswith("frame_link"))
+        shape = next(s for s in cm.robot_shapes if s.label == robot_label)
+        rail = labels[env_label]
+        rail_bottom = rail.joint_T_shape[2, 3] - rail.dims[2] / 2
+        tops = []
+        for _ in range(50):
+            q = gantry.limits.sample_soft(rng)
+            T = cm.shape_poses(q)[cm.robot_shapes.index(shape)]
+            half = np.asarray(shape.dims) / 2 if shape.kind == "box" else np.array([0, 0, shape.dims[1] / 2])
+            top = T[2, 3] + np.abs(T[2, :3]) @ half
+            tops.append(top)
+        assert np.ptp(tops) < 1e-9 and max(tops) < rail_bottom
+
+
+def test_certified_pairs(gantry):
+    labels = {(a, b) for a, b, _ in gantry.collision.certified_pairs}
+    assert ("arm_link_6/arm_link_6_capsule", "camera_link_1/camera_housing") in labels
+    assert all(d > 0 for _, _, d in gantry.collision.certified_pairs)

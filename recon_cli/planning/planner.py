@@ -16,7 +16,7 @@ from __future__ import annotations
 import contextlib
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import StrEnum
 
 import numpy as np
@@ -78,6 +78,7 @@ class PlanResult:
     trajectory: Trajectory | None = None
     check: TrajectoryCheck | None = None
     message: str = ""
+    attempts: int = 1  # searches run (a rejected trajectory is re-planned)
 
     @property
     def ok(self) -> bool:
@@ -198,15 +199,50 @@ class MotionPlanner:
             return PlanResult(PlanStatus.INVALID_GOAL, opt.planner, 0.0, 0.0, time.perf_counter() - t0,
                               message=f"goal configuration {self._config_problem(goals[0])}")
         seed_ompl(seed)
+        plan_time = simplify_time = 0.0
+        attempts = 0
+        last: PlanResult | None = None
+        # a timed trajectory the final dense check rejects (rare: it samples other instants
+        # than the planner did) is re-planned while the time limit lasts
+        while True:
+            attempts += 1
+            remaining = opt.time_limit - plan_time - simplify_time
+            if remaining <= 0.0:
+                break
+            found = self._search(q_start, valid_goals, remaining)
+            plan_time += found[1]
+            simplify_time += found[2]
+            if found[0] is None:
+                break
+            path = found[0]
+            traj, check = self._time_and_check(path)
+            message = "" if check.ok else (
+                f"the timed trajectory collides ({check.collision[0][0]} with {check.collision[0][1]} at "
+                f"t = {check.collision_time:.2f} s)" if check.collision else "the timed trajectory exceeds a limit")
+            last = PlanResult(PlanStatus.SOLVED if check.ok else PlanStatus.TRAJECTORY_REJECTED, opt.planner,
+                              plan_time, simplify_time, time.perf_counter() - t0, path,
+                              traj if check.ok else None, check, message, attempts)
+            if check.ok:
+                return last
+        if last is not None:
+            return replace(last, plan_time=plan_time, simplify_time=simplify_time,
+                           total_time=time.perf_counter() - t0, attempts=attempts)
+        return PlanResult(PlanStatus.TIMEOUT, opt.planner, plan_time, simplify_time, time.perf_counter() - t0,
+                          message=f"{opt.planner} found no path within {opt.time_limit:g} s", attempts=attempts)
+
+    def _search(self, q_start: np.ndarray, goals: list[np.ndarray], time_limit: float
+                ) -> tuple[np.ndarray | None, float, float]:
+        """One OMPL search + simplification: (path (K, n) or None, search s, simplify s)."""
+        opt = self.options
         with _quiet_ompl():
             self.setup.clear()
             self.setup.clearStartStates()
             self.setup.setStartState(self._state(q_start))
-            if len(valid_goals) == 1:
-                self.setup.setGoalState(self._state(valid_goals[0]))
+            if len(goals) == 1:
+                self.setup.setGoalState(self._state(goals[0]))
             else:
                 goal = self._ob.GoalStates(self.si)
-                for g in valid_goals:
+                for g in goals:
                     goal.addState(self._state(g))
                 self.setup.setGoal(goal)
             planner = getattr(self._og, opt.planner)(self.si)
@@ -216,13 +252,10 @@ class MotionPlanner:
             self.setup.setOptimizationObjective(self._first_solution_objective())
             self.setup.setup()
             t1 = time.perf_counter()
-            status = self.setup.solve(opt.time_limit)
-            plan_time = time.perf_counter() - t1
-            exact = bool(status) and self.setup.haveExactSolutionPath()
-            if not exact:
-                return PlanResult(PlanStatus.TIMEOUT, opt.planner, plan_time, 0.0,
-                                  time.perf_counter() - t0,
-                                  message=f"{opt.planner} found no path within {opt.time_limit:g} s")
+            status = self.setup.solve(time_limit)
+            search = time.perf_counter() - t1
+            if not (bool(status) and self.setup.haveExactSolutionPath()):
+                return None, search, 0.0
             t2 = time.perf_counter()
             path_geo = self.setup.getSolutionPath()
             if opt.simplify == "reduce":
@@ -230,22 +263,21 @@ class MotionPlanner:
             elif opt.simplify == "full":
                 self.setup.simplifySolution(opt.simplify_time)
                 path_geo = self.setup.getSolutionPath()
-            simplify_time = time.perf_counter() - t2
+            simplify = time.perf_counter() - t2
             path = np.array([[path_geo.getState(k)[i] for i in range(self.n)]
                              for k in range(path_geo.getStateCount())])
-        lim = self.cell.limits
+        return path, search, simplify
+
+    def _time_and_check(self, path: np.ndarray) -> tuple[Trajectory, TrajectoryCheck]:
+        """toppra along the path (a smooth spline through the waypoints); if that leaves the
+        checked segments into a collision, stop-and-go along the segments themselves."""
+        opt, lim = self.options, self.cell.limits
         traj = parameterize(path, lim.velocity, lim.acceleration, opt.velocity_scale, opt.acceleration_scale)
         check = check_trajectory(traj, self.cell, opt.velocity_scale, opt.acceleration_scale, opt.max_step)
         if not check.ok and len(path) > 2:
-            # the smooth spline left the checked segments: follow them exactly instead
             traj = stop_and_go(path, lim.velocity, lim.acceleration, opt.velocity_scale, opt.acceleration_scale)
             check = check_trajectory(traj, self.cell, opt.velocity_scale, opt.acceleration_scale, opt.max_step)
-        status_out = PlanStatus.SOLVED if check.ok else PlanStatus.TRAJECTORY_REJECTED
-        message = "" if check.ok else (
-            f"the timed trajectory collides ({check.collision[0][0]} with {check.collision[0][1]} "
-            f"at t = {check.collision_time:.2f} s)" if check.collision else "the timed trajectory exceeds a limit")
-        return PlanResult(status_out, opt.planner, plan_time, simplify_time, time.perf_counter() - t0,
-                          path, traj if check.ok else None, check, message)
+        return traj, check
 
     def plan_to_pose(self, q_start: np.ndarray, world_T_camera: np.ndarray,
                      rng: np.random.Generator, what: str = "view") -> PlanResult:

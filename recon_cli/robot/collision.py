@@ -544,11 +544,40 @@ class CollisionModel:
         env = segments_hit_boxes(a, b, self._cap_r + grow, self._env_c, self._env_h) & ~self._env_allowed
         i, j = self._self_pairs[:, 0], self._self_pairs[:, 1]
         dist = segment_distance(a[:, i, :], b[:, i, :], a[:, j, :], b[:, j, :])
-        near = env.any(axis=(1, 2)) | (dist <= self._self_r + grow[:, i] + grow[:, j]).any(axis=1)
-        for k in np.nonzero(near)[0]:
-            hit = self.first_collision(qs[starts[k]:ends[k] + 1])
+        self_near = dist <= self._self_r + grow[:, i] + grow[:, j]  # (B, P)
+        for k in np.nonzero(env.any(axis=(1, 2)) | self_near.any(axis=1))[0]:
+            hit = self._advance_samples(qs, cum, int(starts[k]), int(ends[k]),
+                                        np.argwhere(env[k]), self._self_pairs[self_near[k]])
             if hit >= 0:
-                return int(starts[k] + hit)
+                return hit
+        return -1
+
+    def _advance_samples(self, qs: np.ndarray, cum: np.ndarray, start: int, end: int,
+                         env_pairs: np.ndarray, self_pairs: np.ndarray) -> int:
+        """Conservative advancement over samples start..end of a dense motion for a few
+        candidate pairs: after measuring distance d, samples whose accumulated motion bound
+        (``cum``, per shape) stays below d are skipped. Returns the first colliding sample."""
+        req = fcl.DistanceRequest()
+        k = start
+        while k <= end:
+            poses = self.shape_poses(qs[k])
+            placed: set[int] = set()
+            nxt = end + 1
+            for s_idx, e_idx in env_pairs:
+                d = fcl.distance(self._place(s_idx, poses, placed), self._env_objs[e_idx], req,
+                                 fcl.DistanceResult())
+                if d <= 0.0:
+                    return k
+                moved = cum[k + 1:end + 1, s_idx] - cum[k, s_idx]
+                nxt = min(nxt, k + 1 + int(np.searchsorted(moved, d)))
+            for i, j in self_pairs:
+                d = fcl.distance(self._place(i, poses, placed), self._place(j, poses, placed), req,
+                                 fcl.DistanceResult())
+                if d <= 0.0:
+                    return k
+                moved = (cum[k + 1:end + 1, i] - cum[k, i]) + (cum[k + 1:end + 1, j] - cum[k, j])
+                nxt = min(nxt, k + 1 + int(np.searchsorted(moved, d)))
+            k = max(nxt, k + 1)
         return -1
 
     def first_collision(self, qs: np.ndarray) -> int:

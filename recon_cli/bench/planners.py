@@ -142,7 +142,7 @@ def _box_plot(path: Path, rows: list[RequestRow], thesis: dict[str, np.ndarray],
     ax.set_xticks(range(1, len(labels) + 1), labels, fontsize=7)
     ax.set_yscale("log")
     ax.set_ylabel("plan time (search + simplification) [s]")
-    ax.set_title("Table 4.1 problem: plan time per request (log scale; cf. thesis Figure 4.2)")
+    ax.set_title("Table 4.1 problem: plan time per request (cf. thesis Figure 4.2)")
     ax.grid(True, which="both", axis="y", alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=130)

@@ -159,7 +159,9 @@ def objects() -> None:
 
 @app.command()
 def capture(
-    object_name: Annotated[str, typer.Option("--object", help="Built-in object, YCB object or mesh file.")] = "drill",
+    object_name: Annotated[
+        str, typer.Option("--object", help="Built-in object, YCB object or mesh file; 'auto': the drill if the "
+                                           "YCB data is here, else the built-in bottle.")] = "auto",
     scale: Annotated[float, typer.Option(help="Scale of a mesh file (0.001 for millimetres).")] = 1.0,
     focus: Annotated[str, typer.Option(help="Focus point f as x,y,z [m].")] = "0,0,0.78",
     radius: Annotated[float, typer.Option("--radius", "-r", help="Camera distance r from f [m].")] = 0.6,
@@ -180,9 +182,12 @@ def capture(
 
     from recon_cli.capture import CaptureOptions, run_capture
     from recon_cli.console import console, progress_bar, run_folder
+    from recon_cli.objects import available_objects
     from recon_cli.planning.planner import PlanOptions
     from recon_cli.robot.description import CellConfig, CellKind
 
+    if object_name == "auto":
+        object_name = "drill" if "drill" in available_objects() else "bottle"
     view = _view(focus, radius, theta, phi, alpha, frame)
     config = CellConfig(kind=CellKind.parse(cell), safety_distance=safety)
     plan = PlanOptions(planner=planner, time_limit=planning_time)
@@ -258,7 +263,6 @@ def bench_sim(
     """Board detection in the 24 views of eq. 4.1, capture time, execution precision."""
     from dataclasses import asdict
 
-    import numpy as np
     from rich.table import Table
 
     from recon_cli.bench.sim import run_sim_bench
@@ -301,7 +305,6 @@ def bench_planners(
     out: Annotated[Path | None, typer.Option(help="Output folder (default runs/bench-planners-<time>).")] = None,
 ) -> None:
     """The Table 4.1 planning benchmark (thesis 4.1): success, plan times, path lengths."""
-    import numpy as np
     from rich.table import Table
 
     from recon_cli.bench.planners import DEFAULT_PLANNERS, run_planner_bench, thesis_times, write_results

@@ -31,6 +31,12 @@ app.add_typer(bench_app, name="bench")
 CellOpt = Annotated[str, typer.Option("--cell", help="gantry (9 DoF, linear axes) or ceiling (7 DoF).")]
 SafetyOpt = Annotated[float, typer.Option("--safety", help="Safety distance [m] that inflates every collision shape.")]
 SeedOpt = Annotated[int, typer.Option("--seed", help="Seed of the random number generator.")]
+FocusOpt = Annotated[str, typer.Option("--focus", help="Focus point f as x,y,z [m].")]
+RadiusOpt = Annotated[float, typer.Option("--radius", "-r", help="Camera distance r from f [m].")]
+ThetaOpt = Annotated[float, typer.Option("--theta", help="Polar angle from the vertical [deg].")]
+PhiOpt = Annotated[float, typer.Option("--phi", help="Azimuth [deg].")]
+AlphaOpt = Annotated[float, typer.Option("--alpha", help="Camera roll about its viewing axis [deg].")]
+FrameOpt = Annotated[str, typer.Option("--frame", help="Frame of f and the angles: world or marker.")]
 
 
 def parse_vector(text: str, n: int, option: str, unit: str) -> tuple[float, ...]:
@@ -92,12 +98,12 @@ def cell(
 
 @app.command()
 def ik(
-    focus: Annotated[str, typer.Option(help="Focus point f as x,y,z [m].")] = "0,0,0.78",
-    radius: Annotated[float, typer.Option("--radius", "-r", help="Camera distance r from f [m].")] = 0.6,
-    theta: Annotated[float, typer.Option(help="Polar angle from the vertical [deg].")] = 70.0,
-    phi: Annotated[float, typer.Option(help="Azimuth [deg].")] = 0.0,
-    alpha: Annotated[float, typer.Option(help="Camera roll about its viewing axis [deg].")] = 0.0,
-    frame: Annotated[str, typer.Option(help="Frame of f and the angles: world or marker.")] = "world",
+    focus: FocusOpt = "0,0,0.78",
+    radius: RadiusOpt = 0.6,
+    theta: ThetaOpt = 70.0,
+    phi: PhiOpt = 0.0,
+    alpha: AlphaOpt = 0.0,
+    frame: FrameOpt = "world",
     object_box: Annotated[
         str | None, typer.Option(help="Object bounding box on the table centre, sx,sy,sz [m]; 'none' for no box.")
     ] = "0.3,0.3,0.3",
@@ -163,12 +169,12 @@ def capture(
         str, typer.Option("--object", help="Built-in object, YCB object or mesh file; 'auto': the drill if the "
                                            "YCB data is here, else the built-in bottle.")] = "auto",
     scale: Annotated[float, typer.Option(help="Scale of a mesh file (0.001 for millimetres).")] = 1.0,
-    focus: Annotated[str, typer.Option(help="Focus point f as x,y,z [m].")] = "0,0,0.78",
-    radius: Annotated[float, typer.Option("--radius", "-r", help="Camera distance r from f [m].")] = 0.6,
-    theta: Annotated[float, typer.Option(help="Polar angle from the vertical [deg].")] = 70.0,
-    phi: Annotated[float, typer.Option(help="Azimuth [deg].")] = 0.0,
-    alpha: Annotated[float, typer.Option(help="Camera roll about its viewing axis [deg].")] = 0.0,
-    frame: Annotated[str, typer.Option(help="Frame of f and the angles: world or marker.")] = "world",
+    focus: FocusOpt = "0,0,0.78",
+    radius: RadiusOpt = 0.6,
+    theta: ThetaOpt = 70.0,
+    phi: PhiOpt = 0.0,
+    alpha: AlphaOpt = 0.0,
+    frame: FrameOpt = "world",
     out: Annotated[Path | None, typer.Option(help="Session folder (default runs/capture-<time>).")] = None,
     noise: Annotated[bool, typer.Option("--noise/--no-noise", help="Depth noise model on or off.")] = True,
     resolution: Annotated[float, typer.Option(min=0.05, max=1.0, help="Image size relative to 1600 x 1200.")] = 1.0,

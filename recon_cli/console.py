@@ -10,11 +10,11 @@ from collections.abc import Callable, Iterator
 from datetime import datetime
 from pathlib import Path
 
-import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from recon_cli.errors import FileError
+from recon_cli.serialization import to_jsonable
 
 # piped output (logs, CI, tests) gets wide tables instead of rich's 80 columns
 _WIDTH = None if sys.stdout.isatty() else int(os.environ.get("COLUMNS", "140"))
@@ -54,20 +54,8 @@ def run_folder(base: Path | None, name: str) -> Path:
     return base
 
 
-def _jsonable(value):
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.floating | np.integer):
-        return value.item()
-    if isinstance(value, np.bool_):
-        return bool(value)
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(type(value))
-
-
 def write_json(path: Path, data) -> None:
     """Write JSON atomically (temporary name, then rename)."""
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, default=_jsonable) + "\n")
+    tmp.write_text(json.dumps(data, indent=2, default=to_jsonable) + "\n")
     os.replace(tmp, path)

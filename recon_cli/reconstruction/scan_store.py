@@ -31,6 +31,7 @@ import numpy as np
 from recon_cli.errors import FileError
 from recon_cli.geometry.transforms import transform_points
 from recon_cli.perception.camera_model import Intrinsics, backproject
+from recon_cli.serialization import to_jsonable
 
 SCAN_DIR = re.compile(r"^scan_(\d{4,})$")
 FORMAT_VERSION = 1
@@ -80,23 +81,9 @@ class Scan:
         return cloud
 
 
-def _jsonable(value):
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.floating | np.integer):
-        return value.item()
-    if isinstance(value, np.bool_):
-        return bool(value)
-    if isinstance(value, Path):
-        return str(value)
-    if hasattr(value, "to_dict"):
-        return value.to_dict()
-    raise TypeError(f"not JSON serializable: {type(value)}")
-
-
 def _write_json(path: Path, data) -> None:
     with open(path, "w") as f:
-        json.dump(data, f, indent=2, default=_jsonable)
+        json.dump(data, f, indent=2, default=to_jsonable)
         f.write("\n")
         f.flush()
         os.fsync(f.fileno())

@@ -378,23 +378,16 @@ class CollisionModel:
         """Narrow phase with FCL on the candidate pairs of one configuration."""
         pairs: list[tuple[str, str]] = []
         placed: set[int] = set()
-
-        def place(k: int) -> fcl.CollisionObject:
-            obj = self._robot_objs[k]
-            if k not in placed:
-                T = poses[k]
-                obj.setTransform(fcl.Transform(T[:3, :3], T[:3, 3]))
-                placed.add(k)
-            return obj
-
         for r, e in zip(*np.nonzero(env_c), strict=True):
-            if fcl.collide(place(r), self._env_objs[e], self._request, fcl.CollisionResult()):
+            if fcl.collide(self._place(r, poses, placed), self._env_objs[e], self._request,
+                           fcl.CollisionResult()):
                 pairs.append((self.robot_shapes[r].label, self.env_shapes[e].label))
                 if first_only:
                     return pairs
         for p in np.nonzero(self_c)[0]:
             i, j = self._self_pairs[p]
-            if fcl.collide(place(i), place(j), self._request, fcl.CollisionResult()):
+            if fcl.collide(self._place(i, poses, placed), self._place(j, poses, placed), self._request,
+                           fcl.CollisionResult()):
                 pairs.append((self.robot_shapes[i].label, self.robot_shapes[j].label))
                 if first_only:
                     return pairs

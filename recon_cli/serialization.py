@@ -1,0 +1,23 @@
+"""JSON conversion of the values recon writes (numpy arrays and scalars, paths, dataclasses
+with ``to_dict``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def to_jsonable(value):
+    """``default=`` hook for ``json.dump``."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.floating | np.integer):
+        return value.item()
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, Path):
+        return str(value)
+    if hasattr(value, "to_dict"):
+        return value.to_dict()
+    raise TypeError(f"not JSON serializable: {type(value)}")

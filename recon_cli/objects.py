@@ -119,21 +119,11 @@ class SceneObject:
         keep = p[:, 2] >= exclude_base
         if len(self.primitives) > 1:
             # a point of one primitive's surface inside (or on) another one is hidden
-            owner = _triangle_owner(self.primitives)[k]
+            owner = np.concatenate([np.full(len(p.mesh().triangles), i)
+                                    for i, p in enumerate(self.primitives)])[k]
             for i, prim in enumerate(self.primitives):
                 keep &= ~(prim.contains(p, eps=1e-5) & (owner != i))
         return transform_points(self.world_T_object, p[keep])
-
-
-_OWNER_CACHE: dict[int, np.ndarray] = {}
-
-
-def _triangle_owner(prims: tuple[Primitive, ...]) -> np.ndarray:
-    key = id(prims)
-    if key not in _OWNER_CACHE:
-        _OWNER_CACHE[key] = np.concatenate(
-            [np.full(len(p.mesh().triangles), i) for i, p in enumerate(prims)])
-    return _OWNER_CACHE[key]
 
 
 def _from_primitives(name: str, description: str, prims: list[Primitive],

@@ -35,16 +35,6 @@ class TrajectoryCheck:
         return self.within_limits and not self.collision
 
 
-def lever_arms(cell: Cell) -> np.ndarray:
-    """r_j of the module docstring, shape (n,) [m per rad, or 1 for prismatic joints]."""
-    return cell.collision.lever.max(axis=1)
-
-
-def point_step_bound(cell: Cell, dq: np.ndarray) -> np.ndarray:
-    """Upper bound on any robot point's displacement [m] for joint steps dq (..., n)."""
-    return cell.collision.point_step_bound(dq)
-
-
 def check_trajectory(traj: Trajectory, cell: Cell, velocity_scale: float = 1.0,
                      acceleration_scale: float = 1.0, max_step: float = 0.005) -> TrajectoryCheck:
     lim = cell.limits
@@ -53,7 +43,7 @@ def check_trajectory(traj: Trajectory, cell: Cell, velocity_scale: float = 1.0,
     while True:
         t = np.linspace(0.0, traj.duration, n)
         q, qd, qdd = traj.sample(t)
-        step = float(np.max(point_step_bound(cell, np.diff(q, axis=0)))) if n > 1 else 0.0
+        step = float(np.max(cell.collision.point_step_bound(np.diff(q, axis=0)))) if n > 1 else 0.0
         if step <= max_step or n > 200_000:
             break
         n = int(np.ceil(n * step / max_step * 1.05)) + 1

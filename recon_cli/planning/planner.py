@@ -146,7 +146,7 @@ class MotionPlanner:
 
         self._validator = _SegmentValidator(self.si)
         self.si.setMotionValidator(self._validator)
-        self.stats = {"states": 0, "motions": 0, "motion_samples": 0}
+        self.stats = {"states": 0, "motions": 0}
 
     # ------------------------------------------------------------------ validity
     def _vec(self, state) -> np.ndarray:

@@ -147,6 +147,7 @@ class MotionPlanner:
         self._validator = _SegmentValidator(self.si)
         self.si.setMotionValidator(self._validator)
         self.stats = {"states": 0, "motions": 0}
+        self._known_free: set[bytes] = set()  # configurations found free in this search
 
     # ------------------------------------------------------------------ validity
     def _vec(self, state) -> np.ndarray:
@@ -154,11 +155,21 @@ class MotionPlanner:
 
     def _state_valid(self, state) -> bool:
         self.stats["states"] += 1
-        return not self.cell.collision.in_collision(self._vec(state))
+        q = self._vec(state)
+        valid = not self.cell.collision.in_collision(q)
+        if valid:
+            self._known_free.add(q.tobytes())
+        return valid
 
     def _motion_valid(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """States already found free (checked states, ends of free motions: the tree nodes)
+        are not checked again as the end of a motion."""
         self.stats["motions"] += 1
-        return self.cell.collision.segment_free(a, b, self.options.max_step)
+        free = self.cell.collision.segment_free(a, b, self.options.max_step,
+                                                end_known_free=b.tobytes() in self._known_free)
+        if free:
+            self._known_free.update((a.tobytes(), b.tobytes()))
+        return free
 
     def _first_solution_objective(self):
         """Path length with an infinite cost threshold: optimizing planners stop at their
@@ -234,6 +245,7 @@ class MotionPlanner:
                 ) -> tuple[np.ndarray | None, float, float]:
         """One OMPL search + simplification: (path (K, n) or None, search s, simplify s)."""
         opt = self.options
+        self._known_free = {np.asarray(q_start, float).tobytes()} | {np.asarray(g, float).tobytes() for g in goals}
         with _quiet_ompl():
             self.setup.clear()
             self.setup.clearStartStates()

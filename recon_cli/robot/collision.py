@@ -35,8 +35,10 @@ from recon_cli.robot.broadphase import (
     world_aabbs,
 )
 from recon_cli.robot.kinematics import Kinematics
+from recon_cli.robot.pair_field import PairField
 
 OBJECT_LINK = "object"
+_FIELD_CACHE: dict[tuple[str, str, str], PairField] = {}
 
 
 @dataclass(frozen=True)
@@ -229,48 +231,126 @@ class CollisionModel:
         self.lever = self._shape_lever_arms()  # (n, R)
         self._pair_lever = self._self_pair_levers()  # (P, n)
         self.certified_pairs = self._drop_separated_pairs()
+        self._fields = self._pair_fields(urdf)  # (self pair index, PairField)
+        self._static_separated: list[tuple[int, int, float]] | None = None
         self.set_object_box(object_box)
 
-    def _drop_separated_pairs(self) -> list[tuple[str, str, float]]:
-        """Remove self pairs that no configuration can bring into contact.
+    def _separation_bound(self, distance, levers: np.ndarray, budget: int = 10000) -> float | None:
+        """Certify that a shape pair cannot touch anywhere in the joint range.
 
-        A pair whose relative pose depends on one joint only is swept over that joint's
-        whole range by conservative advancement (at distance d, the next angle is d / lever
-        further, never more than 0.01 rad): if the distance stays positive the pair is
-        certified separated and not checked again. Returns (pair, smallest distance [m])."""
-        model = self.kin.model
+        ``distance(q)`` is the pair's exact distance at q; ``levers`` (n,) bound how far the
+        two shapes can move relative to each other per unit of each joint (0 for joints that
+        do not change their relative pose). The box of joint ranges is split recursively: in
+        a box with centre c and half widths h the pair moves by at most levers . h from its
+        pose at c, so the box is clear when distance(c) is larger. Returns a positive lower
+        bound of the pair's distance over all configurations, or None when the pair can touch
+        (or the proof needs more than ``budget`` distance queries)."""
+        joints = np.nonzero(levers)[0]
+        lim = self.kin.limits
+        q = pin.neutral(self.kin.model)
+        stack = [(lim.lower[joints].astype(float), lim.upper[joints].astype(float))]
+        bound, evals = np.inf, 0
+        while stack:
+            lo, hi = stack.pop()
+            centre, half = (lo + hi) / 2.0, (hi - lo) / 2.0
+            q[joints] = centre
+            d = distance(q)
+            evals += 1
+            if d <= 1e-4 or evals > budget:
+                return None
+            reach = float(levers[joints] @ half)
+            if d > reach:
+                bound = min(bound, d - reach)
+                continue
+            k = int(np.argmax(levers[joints] * half))
+            mid = centre[k]
+            hi_a, lo_b = hi.copy(), lo.copy()
+            hi_a[k], lo_b[k] = mid, mid
+            stack += [(lo, hi_a), (lo_b, hi)]
+        return float(bound)
+
+    def _drop_separated_pairs(self) -> list[tuple[str, str, float]]:
+        """Remove self pairs whose relative pose depends on at most two joints and that no
+        configuration can bring into contact (``_separation_bound``). Returns the certified
+        pairs with their distance lower bound [m]."""
         keep = np.ones(len(self._self_pairs), dtype=bool)
         certified = []
         req = fcl.DistanceRequest()
-        lim = self.kin.limits
         for p, (i, j) in enumerate(self._self_pairs):
-            joints = np.nonzero(self._pair_lever[p])[0]
-            if len(joints) != 1 or lim.prismatic[joints[0]]:
+            if np.count_nonzero(self._pair_lever[p]) > 2:
                 continue
-            k = int(joints[0])
-            lever = float(self._pair_lever[p, k])
-            q = pin.neutral(model)
-            theta, smallest, separated = float(lim.lower[k]), np.inf, True
-            while True:
-                q[k] = theta
+
+            def distance(q, i=i, j=j):
                 poses = self.shape_poses(q)
                 placed: set[int] = set()
-                d = fcl.distance(self._place(i, poses, placed), self._place(j, poses, placed), req,
-                                 fcl.DistanceResult())
-                smallest = min(smallest, d)
-                if d <= 1e-4:
-                    separated = False
-                    break
-                if theta >= lim.upper[k]:
-                    break
-                theta = min(theta + min(0.9 * d / lever, 0.01), float(lim.upper[k]))
-            if separated:
+                return fcl.distance(self._place(i, poses, placed), self._place(j, poses, placed), req,
+                                    fcl.DistanceResult())
+
+            bound = self._separation_bound(distance, self._pair_lever[p])
+            if bound is not None:
                 keep[p] = False
-                certified.append((self.robot_shapes[i].label, self.robot_shapes[j].label, float(smallest)))
+                certified.append((self.robot_shapes[i].label, self.robot_shapes[j].label, bound))
         self._self_pairs = self._self_pairs[keep]
         self._self_r = self._self_r[keep]
         self._pair_lever = self._pair_lever[keep]
         return certified
+
+    def _pair_fields(self, urdf: str) -> list[tuple[int, PairField]]:
+        """Distance lower-bound tables for the checked self pairs moved by two joints or fewer
+        relative to each other (``PairField``); cached per robot description."""
+        out = []
+        for p, (i, j) in enumerate(self._self_pairs):
+            joints = tuple(int(k) for k in np.nonzero(self._pair_lever[p])[0])
+            if not 1 <= len(joints) <= 2:
+                continue
+            key = (urdf, self.robot_shapes[i].label, self.robot_shapes[j].label)
+            if key not in _FIELD_CACHE:
+                _FIELD_CACHE[key] = self._build_field(i, j, joints, self._pair_lever[p][list(joints)])
+            out.append((p, _FIELD_CACHE[key]))
+        return out
+
+    def _build_field(self, i: int, j: int, joints: tuple[int, ...], levers: np.ndarray) -> PairField:
+        req = fcl.DistanceRequest()
+        lim = self.kin.limits
+
+        def distances(x: np.ndarray) -> np.ndarray:
+            qs = np.tile(pin.neutral(self.kin.model), (len(x), 1))
+            qs[:, list(joints)] = x
+            poses = self.shape_poses_batch(qs)
+            out = np.empty(len(x))
+            for k in range(len(x)):
+                out[k] = fcl.distance(self._place(i, poses[k], set()), self._place(j, poses[k], set()), req,
+                                      fcl.DistanceResult())
+            return out
+
+        return PairField.build(distances, joints, levers, lim.lower[list(joints)], lim.upper[list(joints)])
+
+    def _field_cleared(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Indices of the self pairs whose distance tables clear the whole motion a -> b."""
+        return np.array([p for p, field in self._fields if field.along(a, b) > 0.0], dtype=int)
+
+    def _separated_env_pairs(self, env: list[CollisionShape], objs: list[fcl.CollisionObject],
+                             skip: np.ndarray) -> list[tuple[int, int, float]]:
+        """Robot-environment pairs that can never touch: robot shapes moved by at most two
+        joints (the gantry axes and what rides on them) against every environment shape."""
+        req = fcl.DistanceRequest()
+        out = []
+        for r in range(len(self.robot_shapes)):
+            levers = self.lever[:, r]
+            if np.count_nonzero(levers) > 2:
+                continue
+            for e, obj in enumerate(objs):
+                if skip[r, e]:
+                    continue
+
+                def distance(q, r=r, obj=obj):
+                    poses = self.shape_poses(q)
+                    return fcl.distance(self._place(r, poses, set()), obj, req, fcl.DistanceResult())
+
+                bound = self._separation_bound(distance, levers)
+                if bound is not None:
+                    out.append((r, e, bound))
+        return out
 
     def _self_pair_levers(self) -> np.ndarray:
         """Relative-motion levers of the checked self pairs, (P, n): joints that move both
@@ -333,10 +413,24 @@ class CollisionModel:
             np.stack([s.joint_T_shape[:3, 3] for s in env]),
             np.stack([bounding_box(s.kind, s.dims) for s in env]))  # (E, 3) each
         shape_allowed = allowed_shape_pairs()
-        self._env_allowed = np.array([
+        skip = np.array([
             [frozenset((r.link, e.link)) in self._allowed or frozenset((r.label, e.label)) in shape_allowed
              for e in env] for r in self.robot_shapes
         ], dtype=bool)  # (R, E)
+        # pairs certified separated over the whole joint range are not checked either; the
+        # static environment is certified once, the object box each time it changes
+        n_static = len(self._static_env_shapes)
+        if self._static_separated is None:
+            self._static_separated = self._separated_env_pairs(
+                env[:n_static], self._env_objs[:n_static], skip[:, :n_static])
+        separated = list(self._static_separated)
+        if box is not None:
+            separated += [(r, n_static, b) for r, _, b in self._separated_env_pairs(
+                env[n_static:], self._env_objs[n_static:], skip[:, n_static:])]
+        for r, e, _ in separated:
+            skip[r, e] = True
+        self.certified_env_pairs = [(self.robot_shapes[r].label, env[e].label, b) for r, e, b in separated]
+        self._env_allowed = skip
 
     # ------------------------------------------------------------------ placement
     def shape_poses(self, q: np.ndarray) -> np.ndarray:
@@ -417,7 +511,7 @@ class CollisionModel:
         return np.max(np.abs(dq) @ self.lever, axis=-1)
 
     def segment_free(self, a: np.ndarray, b: np.ndarray, max_step: float = 0.005,
-                     sweep: float = 0.05) -> bool:
+                     sweep: float = 0.05, end_known_free: bool = False) -> bool:
         """Is the straight joint-space motion a -> b collision-free?
 
         1. Coarse samples, at which every shape's bounding capsule is grown by half the
@@ -429,26 +523,30 @@ class CollisionModel:
            a pair cannot touch before its shapes have moved d, so the next check is that far
            along - but never further than ``max_step`` [m] of robot-point motion, the
            resolution every executed trajectory is checked at.
+
+        A planner's tree extends toward random states and most blocked extensions end in
+        collision: the end configuration is checked alone first (one configuration is far
+        cheaper than the segment), unless the caller knows it is free (``end_known_free``).
         """
         a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        if not end_known_free and self.in_collision(b):
+            return False
         per_shape = np.abs(b - a) @ self.lever  # (R,) motion bound of each shape over a -> b
         longest = float(per_shape.max())
         m = max(1, int(np.ceil(longest / (2.0 * sweep))))
         t = np.linspace(0.0, 1.0, m + 1)
         poses = self.shape_poses_batch(a + t[:, None] * (b - a))
         env_c, self_c = self._candidates(poses, per_shape / (2.0 * m))
+        cleared = self._field_cleared(a, b) if self_c.any() else np.zeros(0, dtype=int)
+        self_c[:, cleared] = False
         flagged = env_c.any(axis=(1, 2)) | self_c.any(axis=1)
         if not flagged.any():
             return True
-        # most blocked motions already collide at a coarse sample: check those exactly first,
-        # the samples with the most candidate pairs first
-        exact_env, exact_self = self._candidates(poses[flagged])
-        count = exact_env.sum(axis=(1, 2)) + exact_self.sum(axis=1)
-        for k in np.argsort(-count, kind="stable"):
-            if count[k] == 0:
-                break
-            if self._exact(poses[flagged][k], exact_env[k], exact_self[k], first_only=True):
-                return False
+        # a blocked motion usually collides where the most pairs are near: check the
+        # coarse sample with the most candidates exactly before following pairs along it
+        k = int(np.argmax(env_c.sum(axis=(1, 2)) + self_c.sum(axis=1)))
+        if self._exact(poses[k], *self._candidates(poses[k]), first_only=True):
+            return False
         min_dt = max_step / longest if longest > 0 else 1.0
         k = 0
         while k <= m:
@@ -538,6 +636,12 @@ class CollisionModel:
         i, j = self._self_pairs[:, 0], self._self_pairs[:, 1]
         dist = segment_distance(a[:, i, :], b[:, i, :], a[:, j, :], b[:, j, :])
         self_near = dist <= self._self_r + grow[:, i] + grow[:, j]  # (B, P)
+        if self._fields:  # pairs whose distance tables are positive at every sample of a block
+            block_of = np.arange(K) // block
+            for p, field in self._fields:
+                low = np.full(len(starts), np.inf)
+                np.minimum.at(low, block_of, field.at(qs))
+                self_near[low > 0.0, p] = False
         for k in np.nonzero(env.any(axis=(1, 2)) | self_near.any(axis=1))[0]:
             hit = self._advance_samples(qs, cum, int(starts[k]), int(ends[k]),
                                         np.argwhere(env[k]), self._self_pairs[self_near[k]])

@@ -106,3 +106,70 @@ def test_certified_pairs(gantry):
     labels = {(a, b) for a, b, _ in gantry.collision.certified_pairs}
     assert ("arm_link_6/arm_link_6_capsule", "camera_link_1/camera_housing") in labels
     assert all(d > 0 for _, _, d in gantry.collision.certified_pairs)
+
+
+def test_certified_env_pairs_hold_over_random_configurations(gantry):
+    """Robot-environment pairs proven separated (the arm base under the roof, ...) really
+    keep at least their certified distance, over random configurations in the hard limits."""
+    import fcl
+
+    cm = gantry.collision
+    labels = {(a, b) for a, b, _ in cm.certified_env_pairs}
+    assert ("arm_link_0/arm_base_box", "frame_link/roof") in labels
+    rng = np.random.default_rng(3)
+    robot = [s.label for s in cm.robot_shapes]
+    env = [s.label for s in cm.env_shapes]
+    for _ in range(200):
+        q = rng.uniform(gantry.limits.lower, gantry.limits.upper)
+        poses = cm.shape_poses(q)
+        for a, b, bound in cm.certified_env_pairs:
+            r = robot.index(a)
+            d = fcl.distance(cm._place(r, poses, set()), cm._env_objs[env.index(b)], fcl.DistanceRequest(),
+                             fcl.DistanceResult())
+            assert d >= bound - 1e-9
+
+
+def test_pair_field_is_a_lower_bound(gantry):
+    """The distance tables of two-joint pairs (wrist and camera) never exceed the exact
+    distance, at configurations and along motions."""
+    import fcl
+
+    cm = gantry.collision
+    assert len(cm._fields) >= 2
+    rng = np.random.default_rng(4)
+    for p, field in cm._fields:
+        i, j = cm._self_pairs[p]
+        qs = rng.uniform(gantry.limits.lower, gantry.limits.upper, size=(300, 9))
+        exact = []
+        for q in qs:
+            poses = cm.shape_poses(q)
+            placed: set[int] = set()
+            exact.append(fcl.distance(cm._place(i, poses, placed), cm._place(j, poses, placed),
+                                      fcl.DistanceRequest(), fcl.DistanceResult()))
+        assert np.all(field.at(qs) <= np.array(exact) + 1e-9)
+        for a, b in zip(qs[:20], qs[20:40], strict=True):
+            t = np.linspace(0, 1, 400)
+            dense = [fcl.distance(cm._place(i, P, set()), cm._place(j, P, set()), fcl.DistanceRequest(),
+                                  fcl.DistanceResult()) for P in cm.shape_poses_batch(a + t[:, None] * (b - a))]
+            assert field.along(a, b) <= min(dense) + 1e-9
+
+
+def test_segment_free_agrees_with_dense_sampling(gantry):
+    """The planner's motion check says 'free' only for motions that are free at 2 mm steps
+    of robot-point motion."""
+    cm = gantry.collision
+    rng = np.random.default_rng(5)
+    seen = {True: 0, False: 0}
+    for _ in range(60):
+        a = gantry.limits.sample_soft(rng)
+        if cm.in_collision(a):
+            continue
+        b = a + rng.normal(0.0, 0.3, 9)
+        b = gantry.limits.clip_soft(b)
+        steps = int(np.ceil(float(cm.point_step_bound(b - a)) / 0.002)) + 1
+        dense = a + np.linspace(0, 1, steps)[:, None] * (b - a)
+        free = cm.segment_free(a, b)
+        seen[free] += 1
+        if free:
+            assert cm.first_collision(dense) == -1
+    assert seen[True] > 5

@@ -16,7 +16,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from recon_cli.errors import InputError, ReconError
+from recon_cli.errors import InputError, ReconError, UnknownNameError
 
 app = typer.Typer(
     name="recon",
@@ -115,17 +115,10 @@ def ik(
     """Solve inverse kinematics for a camera view (f, r, theta, phi, alpha)."""
 
     from recon_cli.console import console
-    from recon_cli.errors import UnknownNameError
-    from recon_cli.geometry.view import Frame, View
     from recon_cli.render import ik_table, pose_text
     from recon_cli.robot.ik import IKOptions
 
-    try:
-        ref = Frame(frame.lower())
-    except ValueError:
-        raise UnknownNameError("frame", frame, [f.value for f in Frame]) from None
-    view = View.from_degrees(parse_vector(focus, 3, "--focus", "metres"), radius, theta, phi,
-                             alpha, ref)
+    view = _view(focus, radius, theta, phi, alpha, frame)
     c = _cell(cell, safety, object_box if object_box and object_box.lower() != "none" else None)
     T = c.view_pose(view)
     result = c.solve_pose(T, np.random.default_rng(seed),
@@ -135,7 +128,6 @@ def ik(
 
 
 def _view(focus: str, radius: float, theta: float, phi: float, alpha: float, frame: str):
-    from recon_cli.errors import UnknownNameError
     from recon_cli.geometry.view import Frame, View
 
     try:
@@ -183,8 +175,12 @@ def capture(
     cell: CellOpt = "gantry",
     safety: SafetyOpt = 0.03,
     seed: SeedOpt = 0,
+    views: Annotated[str, typer.Option(help="'single' (the view given by --focus ... --alpha) or 'eq-4.1' "
+                                            "(the thesis' 24 views around f = (0, 0, 0.78) m, r = 0.6 m).")] = "single",
+    cover_board: Annotated[str, typer.Option(help="Views (1-based, comma-separated) with a sheet over the "
+                                                  "ChArUco board, e.g. '3,7'.")] = "",
 ) -> None:
-    """Move the simulated robot to one view and write one scan into a scan store."""
+    """Move the simulated robot through views and write one scan per view into a scan store."""
 
     from recon_cli.capture import CaptureOptions, run_capture
     from recon_cli.console import console, progress_bar, run_folder
@@ -194,25 +190,145 @@ def capture(
 
     if object_name == "auto":
         object_name = "drill" if "drill" in available_objects() else "bottle"
-    view = _view(focus, radius, theta, phi, alpha, frame)
+    if views == "single":
+        view_list = (_view(focus, radius, theta, phi, alpha, frame),)
+    elif views == "eq-4.1":
+        from recon_cli.bench.scenarios import eq_4_1_views
+
+        view_list = tuple(eq_4_1_views())
+    else:
+        raise UnknownNameError("view set", views, ("single", "eq-4.1"))
+    covered = _index_list(cover_board, "--cover-board", len(view_list))
     config = CellConfig(kind=CellKind.parse(cell), safety_distance=safety)
     plan = PlanOptions(planner=planner, time_limit=planning_time)
     if not math.isfinite(scale) or scale <= 0:
         raise InputError(f"--scale {scale} is not a positive number", hint="e.g. 0.001 for millimetres")
     folder = run_folder(out, "capture")
-    options = CaptureOptions(view=view, out=folder, object_name=object_name, object_scale=scale,
-                             cell=config, seed=seed, noise=noise, resolution=resolution, plan=plan)
+    options = CaptureOptions(views=view_list, out=folder, object_name=object_name, object_scale=scale,
+                             cell=config, seed=seed, noise=noise, resolution=resolution, plan=plan,
+                             cover_board=frozenset(covered))
     with progress_bar() as update:
         result = run_capture(options, update)
-    m = result.move
-    console.print(f"planned with {m.plan.planner} in {m.plan.total_time:.2f} s "
-                  f"({len(m.plan.path)} waypoints), trajectory {m.execution.duration:.2f} s")
-    console.print(f"executed: max tracking error {np.max(m.execution.max_tracking_error):.2e}, "
-                  f"settled after {m.execution.settle_time:.3f} s, camera pose error from tracking "
-                  f"{m.camera_position_error * 1e3:.4f} mm / {np.degrees(m.camera_rotation_error):.5f}°")
-    console.print(f"captured {result.points} points in {result.capture_seconds:.2f} s "
-                  f"({result.scan.intrinsics.width} x {result.scan.intrinsics.height})")
-    console.print(f"scan: {result.scan.path}")
+    for m, scan, n_points, t_cap in zip(result.moves, result.scans, result.points, result.capture_seconds,
+                                        strict=True):
+        console.print(f"scan {scan.index}: planned with {m.plan.planner} in {m.plan.total_time:.2f} s "
+                      f"({len(m.plan.path)} waypoints), trajectory {m.execution.duration:.2f} s, settled after "
+                      f"{m.execution.settle_time:.3f} s (camera pose error from tracking "
+                      f"{m.camera_position_error * 1e3:.4f} mm / {np.degrees(m.camera_rotation_error):.5f}°); "
+                      f"{n_points} points in {t_cap:.2f} s")
+    for f in result.failures:
+        console.print(f"[yellow]view {f.view} skipped:[/] {f.message}")
+    console.print(f"{len(result.scans)} of {len(view_list)} views scanned in {result.total_seconds:.1f} s; "
+                  f"scan store: {folder}")
+    if not result.scans:
+        raise typer.Exit(1)
+
+
+def _index_list(text: str, option: str, n: int) -> list[int]:
+    """Parse '3,7' into [3, 7] (1-based indices up to n)."""
+    out = []
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        if not part.isdigit() or not 1 <= int(part) <= n:
+            raise InputError(f"{option} {text!r}: {part!r} is not a view number 1..{n}", hint="e.g. 3,7")
+        out.append(int(part))
+    return out
+
+
+@app.command()
+def register(
+    folder: Annotated[Path, typer.Argument(help="Scan store folder (simulated or recorded).")],
+    out: Annotated[Path | None, typer.Option(help="Output folder (default <folder>/reconstruction).")] = None,
+    box: Annotated[str | None, typer.Option(help="Crop box cx,cy,cz,sx,sy,sz [m] (default: the session's "
+                                                 "object box).")] = None,
+    box_frame: Annotated[str, typer.Option(help="Frame of --box: world or marker.")] = "world",
+    board: Annotated[bool, typer.Option("--board/--no-board", help="Use the ChArUco board (else kinematics "
+                                                                   "for every scan).")] = True,
+    local: Annotated[bool, typer.Option("--local/--global-only", help="Pose-graph local registration.")] = True,
+    loop_closures: Annotated[str, typer.Option(help="Initialize loop closures by 'icp' or with the 'global' "
+                                                    "alignment (the thesis).")] = "icp",
+    voxel: Annotated[float, typer.Option(min=0.0001, help="Voxel of the fused cloud [m].")] = 0.001,
+    depth: Annotated[int, typer.Option(min=5, max=12, help="Poisson octree depth.")] = 9,
+    trim: Annotated[float, typer.Option(min=0.0, max=0.5, help="Poisson density quantile trimmed.")] = 0.02,
+) -> None:
+    """Register all scans of a folder (ChArUco or kinematics, pose-graph ICP), fuse, mesh."""
+    from dataclasses import replace
+
+    from recon_cli.console import console, progress_bar
+    from recon_cli.reconstruction.crop import CropBox
+    from recon_cli.reconstruction.pipeline import RegisterOptions, run_register
+
+    if box_frame not in ("world", "marker"):
+        raise UnknownNameError("box frame", box_frame, ("world", "marker"))
+    if loop_closures not in ("icp", "global"):
+        raise UnknownNameError("loop closure initialization", loop_closures, ("icp", "global"))
+    crop = None
+    if box is not None:
+        v = parse_vector(box, 6, "--box", "metres")
+        T = np.eye(4)
+        T[:3, 3] = v[:3]
+        if min(v[3:]) <= 0:
+            raise InputError(f"--box {box}: sizes must be positive", hint="cx,cy,cz,sx,sy,sz in metres")
+        crop = CropBox(T, tuple(v[3:]))
+    options = RegisterOptions(box=crop, box_frame=box_frame, use_board=board, local=local)
+    options = replace(options, multiway=replace(options.multiway, loop_closure_init=loop_closures),
+                      surface=replace(options.surface, voxel=voxel, poisson_depth=depth, density_quantile=trim))
+    with progress_bar() as update:
+        result = run_register(folder, out or Path(folder) / "reconstruction", options, update)
+    sources = {}
+    for r in result.used:
+        sources[r.pose.source.value] = sources.get(r.pose.source.value, 0) + 1
+    console.print(f"{len(result.used)} of {len(result.scans)} scans registered (pose sources: "
+                  + ", ".join(f"{k} {v}" for k, v in sources.items()) + ")")
+    for r in result.scans:
+        if r.skipped:
+            console.print(f"[yellow]scan {r.index} skipped:[/] {r.skipped}")
+        elif r.pose.source.value == "kinematics":
+            console.print(f"scan {r.index}: kinematics ({r.pose.reason})")
+    errors = [r.charuco_error for r in result.scans if r.charuco_error is not None]
+    if errors:
+        console.print(f"ChArUco pose error vs ground truth: mean {np.mean([e[0] for e in errors]) * 1e3:.3f} mm / "
+                      f"{np.degrees(np.mean([e[1] for e in errors])):.4f}° over {len(errors)} scans")
+    if result.multiway is not None:
+        e = result.multiway.edges
+        console.print(f"pose graph: {sum(x.kind == 'odometry' for x in e)} odometry edges, "
+                      f"{sum(x.kind == 'loop_closure' for x in e)} loop closures "
+                      f"({result.multiway.pruned} pruned)")
+    console.print(f"done in {result.timings['total_s']:.1f} s; frame: {result.frame}")
+    console.print(f"cloud: {result.cloud}\nmesh: {result.mesh}\nreport: {result.report}")
+
+
+@app.command()
+def evaluate(
+    reconstruction: Annotated[Path, typer.Argument(help="Reconstructed cloud or mesh (PLY, ...).")],
+    reference: Annotated[Path, typer.Option(help="Reference mesh (ground truth).")],
+    tolerance: Annotated[float, typer.Option(min=1e-5, help="Coverage tolerance [m].")] = 0.001,
+    views: Annotated[Path | None, typer.Option(help="Scan store whose camera poses define the visible "
+                                                    "surface (coverage of what could be seen).")] = None,
+    align: Annotated[str, typer.Option(help="'none' (frames agree) or 'icp' (register the reconstruction "
+                                            "to the reference first, reported).")] = "none",
+    samples: Annotated[int, typer.Option(min=1000, help="Reference surface samples.")] = 200_000,
+    out: Annotated[Path | None, typer.Option(help="Output folder (default: beside the reconstruction).")] = None,
+) -> None:
+    """Signed distances to a reference mesh, their statistics and histogram, and coverage."""
+    from recon_cli.console import console
+    from recon_cli.reconstruction.assessment import run_evaluate
+
+    if align not in ("none", "icp"):
+        raise UnknownNameError("alignment", align, ("none", "icp"))
+    result = run_evaluate(reconstruction, reference, tolerance, views, align, samples,
+                          out or reconstruction.parent)
+    e = result.evaluation
+    console.print(f"{e.points} points: signed distance mean {e.mean * 1e3:+.4f} mm, std {e.std * 1e3:.4f} mm, "
+                  f"RMS {e.rms * 1e3:.4f} mm; " + ", ".join(f"{k}: {v * 100:.1f} %" for k, v in e.within.items()))
+    line = f"coverage (tolerance {e.tolerance * 1e3:g} mm): {e.coverage * 100:.2f} % of the reference surface"
+    if e.coverage_visible is not None:
+        line += (f", {e.coverage_visible * 100:.2f} % of the part the cameras could see "
+                 f"({e.visible_share * 100:.1f} % of the surface)")
+    console.print(line)
+    if result.alignment is not None:
+        console.print(f"aligned to the reference by ICP: moved {result.alignment[0] * 1e3:.3f} mm / "
+                      f"{np.degrees(result.alignment[1]):.4f}°")
+    console.print(f"report: {result.report}\nhistogram: {result.histogram}")
 
 
 @bench_app.command("ik")
@@ -322,7 +438,6 @@ def bench_planners(
         names, n = ["RRTConnect", "RRT"], min(n, 10)
     for name in names:
         if name not in PLANNERS:
-            from recon_cli.errors import UnknownNameError
 
             raise UnknownNameError("planner", name, PLANNERS)
     if peer not in ("none", "mplib"):

@@ -3,6 +3,7 @@ with ``to_dict``)."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -20,4 +21,6 @@ def to_jsonable(value):
         return str(value)
     if hasattr(value, "to_dict"):
         return value.to_dict()
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return dataclasses.asdict(value)
     raise TypeError(f"not JSON serializable: {type(value)}")

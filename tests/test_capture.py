@@ -23,7 +23,7 @@ def drill_capture(tmp_path_factory):
     name = "drill" if (SHARED_DATA / "ycb").exists() else "bottle"
     out = tmp_path_factory.mktemp("capture")
     view = View.from_degrees((0, 0, 0.78), 0.6, 70, 0)
-    return run_capture(CaptureOptions(view=view, out=out, object_name=name, seed=1))
+    return run_capture(CaptureOptions(views=(view,), out=out, object_name=name, seed=1))
 
 
 def test_scan_points_lie_on_the_object(drill_capture):

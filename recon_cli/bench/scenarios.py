@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from recon_cli.geometry.view import View
 from recon_cli.robot.collision import ObjectBox
 
 #: start state of Table 4.1 (9-DoF gantry cell): base_joint_1 = -1 m, all others 0
@@ -22,3 +23,10 @@ BENCH_CUBE = ObjectBox(center=(0.0, 0.0, 0.83), size=(0.3, 0.3, 0.3))
 
 #: focus point of the 24-view scenario of eq. 4.1 [m, world]
 EQ_4_1_FOCUS = (0.0, 0.0, 0.78)
+
+
+def eq_4_1_views() -> list[View]:
+    """The 24 views of thesis eq. 4.1 (section 4.2): f = (0, 0, 0.78) m, r = 0.6 m, alpha = 0,
+    phi_i = 30 deg (i - 1), theta_i = 70 deg for i <= 12 and 50 deg after."""
+    return [View.from_degrees(EQ_4_1_FOCUS, 0.6, 70.0 if i <= 12 else 50.0, 30.0 * (i - 1))
+            for i in range(1, 25)]

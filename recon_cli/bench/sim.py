@@ -19,9 +19,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from recon_cli.bench.scenarios import EQ_4_1_FOCUS
+from recon_cli.bench.scenarios import eq_4_1_views
 from recon_cli.geometry.transforms import invert, pose_error
-from recon_cli.geometry.view import View
 from recon_cli.objects import load_object
 from recon_cli.perception.charuco import detect, estimate_pose, thesis_board
 from recon_cli.planning.planner import MotionPlanner, PlanOptions, seed_ompl
@@ -29,12 +28,6 @@ from recon_cli.robot.cell import Cell
 from recon_cli.robot.description import CellConfig
 from recon_cli.robot.ik import IKOptions
 from recon_cli.robot.poses import named_configuration
-
-
-def eq_4_1_views() -> list[View]:
-    """The 24 views of thesis eq. 4.1."""
-    return [View.from_degrees(EQ_4_1_FOCUS, 0.6, 70.0 if i <= 12 else 50.0, 30.0 * (i - 1))
-            for i in range(1, 25)]
 
 
 @dataclass(frozen=True)

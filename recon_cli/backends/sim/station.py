@@ -27,6 +27,16 @@ class SimStation:
         self.robot.reset(np.asarray(start, dtype=float))
         self.camera = SimCamera(self.scene, self.data, rng, noise=noise, scale=resolution)
 
+    def cover_board(self, covered: bool) -> None:
+        """Lay a plain grey sheet over the printed ChArUco board (or take it away): the
+        board is then not found and registration has to use the robot's kinematics."""
+        model = self.scene.model
+        gid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "charuco_print")
+        if not hasattr(self, "_board_look"):
+            self._board_look = (int(model.geom_matid[gid]), model.geom_rgba[gid].copy())
+        model.geom_matid[gid] = -1 if covered else self._board_look[0]
+        model.geom_rgba[gid] = [0.6, 0.6, 0.6, 1.0] if covered else self._board_look[1]
+
     def ground_truth(self) -> dict:
         """What only a simulation knows; stored apart from the scan data, for evaluation."""
         truth = {"world_T_camera": self.camera.world_T_camera_truth(),

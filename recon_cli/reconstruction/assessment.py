@@ -1,0 +1,113 @@
+"""``recon evaluate``: a reconstruction (cloud or mesh file) against a reference mesh.
+
+Loads both files, optionally aligns the reconstruction to the reference by point-to-plane
+ICP (only when asked: ``align="icp"``; the transform is reported), computes the signed
+distances and coverage of ``evaluation.evaluate`` (coverage of the visible part when a scan
+store gives the camera poses), writes a JSON report and a histogram PNG.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from recon_cli.errors import FileError
+from recon_cli.geometry.transforms import pose_error
+from recon_cli.reconstruction.evaluation import CameraView, Evaluation, evaluate, histogram_png, signed_distances
+from recon_cli.reconstruction.scan_store import ScanStore
+
+
+@dataclass(frozen=True)
+class EvaluateResult:
+    evaluation: Evaluation
+    alignment: tuple[float, float] | None  # [m, rad] of the ICP alignment, when asked
+    report: Path
+    histogram: Path
+
+
+def load_points(path: Path, samples: int = 500_000) -> np.ndarray:
+    """Points of a cloud file, or uniform samples of a mesh file's surface."""
+    import open3d as o3d
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileError(f"{path} does not exist", hint="give a PLY/PCD/OBJ/STL file")
+    mesh = o3d.geometry.TriangleMesh()
+    if path.suffix.lower() in (".ply", ".obj", ".stl", ".off"):
+        with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+            mesh = o3d.io.read_triangle_mesh(str(path))
+    if len(mesh.triangles):
+        return np.asarray(mesh.sample_points_uniformly(number_of_points=samples).points)
+    cloud = o3d.io.read_point_cloud(str(path))
+    if len(cloud.points) == 0:
+        raise FileError(f"{path} holds no points", hint="give a non-empty point cloud or mesh")
+    return np.asarray(cloud.points)
+
+
+def load_mesh(path: Path):
+    import open3d as o3d
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileError(f"reference {path} does not exist", hint="give the ground-truth mesh file")
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    if len(mesh.triangles) == 0:
+        raise FileError(f"reference {path} has no triangles", hint="the reference must be a mesh")
+    return mesh
+
+
+def camera_views(folder: Path) -> list[CameraView]:
+    """Camera poses of a scan store (forward kinematics of the measured joints) with the
+    sensor's depth range."""
+    from recon_cli.perception.sensor import motioncam_3d_m
+
+    store = ScanStore(folder)
+    if not store.indices():
+        raise FileError(f"{folder} holds no scans", hint="--views takes a scan store folder")
+    sensor = motioncam_3d_m()
+    return [CameraView(s.world_T_camera_fk, s.intrinsics, sensor.z_min, sensor.z_max, sensor.max_incidence)
+            for s in store]
+
+
+def align_icp(points: np.ndarray, reference, distance: float = 0.005) -> np.ndarray:
+    """Rigid transform taking the points onto the reference surface (point-to-plane ICP)."""
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)).voxel_down_sample(0.001)
+    tgt = reference.sample_points_uniformly(number_of_points=200_000)
+    tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.004, max_nn=30))
+    T = np.eye(4)
+    for d in (distance, distance / 2, distance / 5):
+        T = reg.registration_icp(src, tgt, d, T, reg.TransformationEstimationPointToPlane(),
+                                 reg.ICPConvergenceCriteria(max_iteration=60)).transformation
+    return np.asarray(T)
+
+
+def run_evaluate(reconstruction: Path, reference: Path, tolerance: float = 0.001, views: Path | None = None,
+                 align: str = "none", samples: int = 200_000, out: Path | None = None) -> EvaluateResult:
+    from recon_cli.console import write_json
+
+    points = load_points(reconstruction)
+    mesh = load_mesh(reference)
+    alignment = None
+    T = np.eye(4)
+    if align == "icp":
+        T = align_icp(points, mesh)
+        points = points @ T[:3, :3].T + T[:3, 3]
+        alignment = pose_error(T, np.eye(4))
+    cams = camera_views(views) if views is not None else None
+    result = evaluate(points, mesh, tolerance, samples, cams)
+    out = Path(out or Path(reconstruction).parent)
+    out.mkdir(parents=True, exist_ok=True)
+    stem = Path(reconstruction).stem
+    hist = out / f"{stem}_distances.png"
+    histogram_png(hist, {stem: signed_distances(points, mesh)},
+                  f"{Path(reconstruction).name} vs {Path(reference).name}")
+    report = out / f"{stem}_evaluation.json"
+    write_json(report, {"reconstruction": str(reconstruction), "reference": str(reference),
+                        "alignment": align, "alignment_transform": T if alignment else None,
+                        **result.to_dict()})
+    return EvaluateResult(result, alignment, report, hist)

@@ -1,0 +1,60 @@
+"""Cropping a scan to the object (thesis 4.2): keep the points inside the object's bounding
+box and above its support plane, which removes the table and the marker board."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from recon_cli.geometry.transforms import invert, transform_points
+
+
+@dataclass(frozen=True)
+class CropBox:
+    """An oriented box: frame_T_box places the box (centre, axes) in the frame the points are
+    given in; size is the full edge lengths [m]. ``support_margin`` [m] drops the points this
+    close above the bottom face (the table the object stands on: measured table points
+    scatter around it by the sensor noise)."""
+
+    frame_T_box: np.ndarray
+    size: tuple[float, float, float]
+    support_margin: float = 0.0015
+
+    def inside(self, points: np.ndarray) -> np.ndarray:
+        local = transform_points(invert(self.frame_T_box), points)
+        half = np.asarray(self.size) / 2.0
+        ok = np.all(np.abs(local) <= half, axis=1)
+        return ok & (local[:, 2] >= -half[2] + self.support_margin)
+
+    def moved(self, new_T_frame: np.ndarray) -> CropBox:
+        """The same box expressed in another frame."""
+        return CropBox(new_T_frame @ self.frame_T_box, self.size, self.support_margin)
+
+
+def crop_cloud(cloud, box: CropBox, plane_slab: float = 0.006, plane_tolerance: float = 0.0015):
+    """The Open3D cloud's points inside the box (a new cloud), without the support surface.
+
+    A scan placed with a slightly wrong pose (real global registration) lifts table points
+    above the box's bottom face; so the support plane is also found in the data: RANSAC on
+    the points within ``plane_slab`` of the bottom face, and the points within
+    ``plane_tolerance`` of (or below) a plane found there that is nearly parallel to the
+    bottom face are removed."""
+    pts = np.asarray(cloud.points)
+    local = transform_points(invert(box.frame_T_box), pts)
+    half = np.asarray(box.size) / 2.0
+    inside = np.all(np.abs(local) <= half + np.array([0, 0, plane_slab]), axis=1)
+    keep = inside & (local[:, 2] >= -half[2] + box.support_margin)
+    slab = inside & (local[:, 2] < -half[2] + plane_slab)
+    if slab.sum() >= 200:
+        import open3d as o3d
+
+        sub = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(local[slab]))
+        o3d.utility.random.seed(0)
+        plane, inliers = sub.segment_plane(plane_tolerance / 2.0, 3, 200)
+        n = np.asarray(plane[:3])
+        if len(inliers) >= 100 and abs(n[2]) > np.cos(np.radians(5.0)):
+            a, b, c, d = (v / np.linalg.norm(n) * np.sign(n[2]) for v in plane)
+            height = local @ np.array([a, b, c]) + d  # above the plane (+z side of the box)
+            keep = inside & (height > plane_tolerance) & (local[:, 2] <= half[2])
+    return cloud.select_by_index(np.nonzero(keep)[0])

@@ -1,0 +1,278 @@
+"""``recon register``: scan store folder -> globally and locally registered, fused cloud and
+Poisson mesh, with a JSON report (thesis 2.4.2-2.4.3, 3.2).
+
+Steps: global pose of every scan (ChArUco, else kinematics); back-projection and cropping
+with the object box (removes table and board); normals toward each camera; pose-graph
+local registration; fusion; Poisson with density trimming. The fused cloud of the global
+registration alone is written too (``cloud_global.ply``), so the gain of the local step can
+be measured. Outputs are in the world frame when the session knows the marker's world pose
+(the cell's calibration), else in the marker frame; the report says which.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from recon_cli.errors import FileError, InputError
+from recon_cli.geometry.transforms import invert, pose_error
+from recon_cli.perception.charuco import BoardSpec, thesis_board
+from recon_cli.reconstruction.crop import CropBox, crop_cloud
+from recon_cli.reconstruction.global_registration import GlobalPose, PoseSource, global_pose
+from recon_cli.reconstruction.pose_graph import MultiwayOptions, MultiwayResult, register_multiway
+from recon_cli.reconstruction.scan_store import ScanStore
+from recon_cli.reconstruction.surface import SurfaceOptions, fuse, oriented_cloud, poisson_mesh
+
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True)
+class RegisterOptions:
+    box: CropBox | None = None  # in the world frame (default: the session's object box)
+    box_frame: str = "world"  # frame of ``box``: world | marker
+    use_board: bool = True  # False: every pose from kinematics
+    min_corners: int = 6
+    local: bool = True  # pose-graph local registration
+    mesh: bool = True
+    multiway: MultiwayOptions = field(default_factory=MultiwayOptions)
+    surface: SurfaceOptions = field(default_factory=SurfaceOptions)
+    board: BoardSpec | None = None
+    # evaluation aid: move every global pose by this translation [m] and rotation [rad] in
+    # random directions (seeded), e.g. the thesis' ChArUco errors on a simulated camera whose
+    # poses are otherwise nearly exact; recorded in the report
+    perturb: tuple[float, float] | None = None
+    seed: int = 0
+
+
+@dataclass
+class ScanRecord:
+    index: int
+    pose: GlobalPose | None
+    points: int = 0  # after cropping
+    skipped: str = ""  # why the scan is not in the result
+    charuco_error: tuple[float, float] | None = None  # [m, rad] vs simulation ground truth
+    final_marker_T_camera: np.ndarray | None = None
+    true_marker_T_camera: np.ndarray | None = None  # simulation only (evaluation)
+
+    gauge: dict[str, np.ndarray] = field(default_factory=dict)  # see _set_gauges
+
+    def pose_errors(self) -> dict[str, tuple[float, float]]:
+        """[m, rad] against the truth (simulation only) of the global and the final pose, and
+        of both relative to the first registered scan ("global_relative", "final_relative":
+        the scan set moved as a whole so that the first scan is exact; local registration
+        keeps the first scan fixed, so this is the error it can remove)."""
+        if self.true_marker_T_camera is None or self.pose is None or self.final_marker_T_camera is None:
+            return {}
+        out = {"global": pose_error(self.pose.marker_T_camera, self.true_marker_T_camera),
+               "final": pose_error(self.final_marker_T_camera, self.true_marker_T_camera)}
+        if self.gauge:
+            out["global_relative"] = pose_error(self.gauge["global"] @ self.pose.marker_T_camera,
+                                                self.true_marker_T_camera)
+            out["final_relative"] = pose_error(self.gauge["final"] @ self.final_marker_T_camera,
+                                               self.true_marker_T_camera)
+        return out
+
+
+    def to_dict(self) -> dict:
+        d = {"scan": self.index, "points": self.points, "skipped": self.skipped or None,
+             "pose": None if self.pose is None else self.pose.to_dict(),
+             "final_marker_T_camera": self.final_marker_T_camera}
+        if self.charuco_error is not None:
+            d["charuco_error"] = {"translation_mm": self.charuco_error[0] * 1e3,
+                                  "rotation_deg": float(np.degrees(self.charuco_error[1]))}
+        for name, (dp, dr) in self.pose_errors().items():
+            d[f"{name}_pose_error"] = {"translation_mm": dp * 1e3, "rotation_deg": float(np.degrees(dr))}
+        return d
+
+
+def _set_gauges(used: list[ScanRecord]) -> None:
+    ref = used[0]
+    if ref.true_marker_T_camera is None:
+        return
+    gauge = {"global": ref.true_marker_T_camera @ invert(ref.pose.marker_T_camera),
+             "final": ref.true_marker_T_camera @ invert(ref.final_marker_T_camera)}
+    for r in used:
+        r.gauge = gauge
+
+
+@dataclass
+class RegisterResult:
+    folder: Path  # the output folder
+    cloud: Path
+    cloud_global: Path
+    mesh: Path | None
+    report: Path
+    frame: str
+    scans: list[ScanRecord]
+    multiway: MultiwayResult | None
+    timings: dict[str, float]
+
+    @property
+    def used(self) -> list[ScanRecord]:
+        return [s for s in self.scans if not s.skipped]
+
+
+def perturbed(T: np.ndarray, translation: float, rotation: float, rng: np.random.Generator) -> np.ndarray:
+    """T moved by ``translation`` [m] and turned by ``rotation`` [rad] about its origin, both
+    in uniformly random directions."""
+    import cv2
+
+    axis, shift = rng.normal(size=3), rng.normal(size=3)
+    out = np.array(T, dtype=float)
+    out[:3, :3] = out[:3, :3] @ cv2.Rodrigues(axis / np.linalg.norm(axis) * rotation)[0]
+    out[:3, 3] += shift / np.linalg.norm(shift) * translation
+    return out
+
+
+def _crop_box(options: RegisterOptions, session: dict, world_T_marker: np.ndarray | None) -> CropBox:
+    """The crop box in the marker frame."""
+    box, frame = options.box, options.box_frame
+    if box is None:
+        spec = session.get("crop_box")
+        if spec is None:
+            raise InputError("the session has no crop box", hint="pass --box cx,cy,cz,sx,sy,sz")
+        T = np.eye(4)
+        T[:3, 3] = spec["center"]
+        box, frame = CropBox(T, tuple(spec["size"])), spec.get("frame", "world")
+    if frame == "marker":
+        return box
+    if world_T_marker is None:
+        raise InputError("the crop box is in the world frame but the session has no world_T_marker",
+                         hint="give the box in the marker frame (--box-frame marker)")
+    return box.moved(invert(world_T_marker))
+
+
+def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOptions(),  # noqa: B008
+                 progress: Progress | None = None) -> RegisterResult:
+    import open3d as o3d
+
+    from recon_cli.console import write_json
+
+    t0 = time.perf_counter()
+    step = progress or (lambda *a: None)
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileError(f"{folder} is not a folder", hint="point to a scan store (a folder of scan_NNNN)")
+    store = ScanStore(folder)
+    indices = store.indices()
+    if not indices:
+        raise FileError(f"{folder} holds no scans (no scan_NNNN/scan.json)",
+                        hint="record scans first, e.g. recon capture --views eq-4.1")
+    session = store.session()
+    wtm = session.get("world_T_marker")
+    world_T_marker = None if wtm is None else np.asarray(wtm, dtype=float)
+    box = _crop_box(options, session, world_T_marker)
+    board = options.board or thesis_board()
+    rng = np.random.default_rng(options.seed)
+
+    # 1. global registration, cropping, oriented normals (per scan)
+    records: list[ScanRecord] = []
+    clouds = []
+    for k, index in enumerate(indices):
+        scan = store.read(index)
+        pose = global_pose(scan, board, world_T_marker, options.min_corners, options.use_board)
+        if pose is not None and options.perturb is not None:
+            pose = replace(pose, marker_T_camera=perturbed(pose.marker_T_camera, *options.perturb, rng))
+        rec = ScanRecord(index, pose)
+        records.append(rec)
+        if pose is None:
+            rec.skipped = "board not found and no world_T_marker for the kinematic fallback"
+        else:
+            if scan.ground_truth and world_T_marker is not None:
+                truth = invert(world_T_marker) @ np.asarray(scan.ground_truth["world_T_camera"], dtype=float)
+                rec.true_marker_T_camera = truth
+                if pose.source is PoseSource.CHARUCO:
+                    rec.charuco_error = pose_error(pose.marker_T_camera, truth)
+            cloud = crop_cloud(scan.to_open3d_cloud(pose.marker_T_camera), box)
+            rec.points = len(cloud.points)
+            if rec.points < 100:
+                rec.skipped = f"{rec.points} points inside the crop box"
+            else:
+                clouds.append(oriented_cloud(cloud, pose.marker_T_camera[:3, 3], options.surface))
+        step("global registration", k + 1, len(indices))
+    used = [r for r in records if not r.skipped]
+    if not used:
+        reasons = sorted({r.skipped for r in records})
+        raise InputError(f"no scan of {folder} can be used ({'; '.join(reasons)})",
+                         hint="check the crop box (--box) and that the board or joint data is recorded")
+    t_global = time.perf_counter()
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    frame = "world" if world_T_marker is not None else "marker"
+    to_out = world_T_marker if world_T_marker is not None else np.eye(4)
+
+    def write_cloud(path: Path, cloud) -> Path:
+        c = o3d.geometry.PointCloud(cloud)
+        c.transform(to_out)
+        tmp = path.with_name(".tmp-" + path.name)
+        if not o3d.io.write_point_cloud(str(tmp), c):
+            raise FileError(f"cannot write {path}")
+        tmp.replace(path)
+        return path
+
+    cloud_global = write_cloud(out / "cloud_global.ply", fuse(clouds, options.surface))
+    step("fuse (global)", 1, 1)
+
+    # 2. local registration
+    multiway = None
+    if options.local and len(clouds) >= 2:
+        multiway = register_multiway(clouds, options.multiway, progress)
+        for c, T in zip(clouds, multiway.poses, strict=True):
+            c.transform(T)
+        for rec, T in zip(used, multiway.poses, strict=True):
+            rec.final_marker_T_camera = T @ rec.pose.marker_T_camera
+    else:
+        for rec in used:
+            rec.final_marker_T_camera = rec.pose.marker_T_camera
+    _set_gauges(used)
+    t_local = time.perf_counter()
+
+    # 3. surface
+    fused = fuse(clouds, options.surface)
+    cloud_path = write_cloud(out / "cloud.ply", fused)
+    mesh_path = None
+    if options.mesh:
+        mesh, _ = poisson_mesh(fused, options.surface)
+        mesh.transform(to_out)
+        mesh_path = out / "mesh.ply"
+        tmp = out / ".tmp-mesh.ply"
+        if not o3d.io.write_triangle_mesh(str(tmp), mesh):
+            raise FileError(f"cannot write {mesh_path}")
+        tmp.replace(mesh_path)
+    step("surface", 1, 1)
+    t_end = time.perf_counter()
+    timings = {"global_s": t_global - t0, "local_s": t_local - t_global, "surface_s": t_end - t_local,
+               "total_s": t_end - t0}
+    report = out / "report.json"
+    errors = [r.charuco_error for r in records if r.charuco_error is not None]
+    truth = [r.pose_errors() for r in used if r.pose_errors()]
+    write_json(report, {
+        "scan_store": str(folder), "frame": frame, "world_T_marker": world_T_marker,
+        "crop_box_marker": {"marker_T_box": box.frame_T_box, "size": box.size,
+                            "support_margin": box.support_margin},
+        "scans": [r.to_dict() for r in records],
+        "pose_sources": {s.value: sum(1 for r in used if r.pose.source is s) for s in PoseSource},
+        "charuco_error_mean": None if not errors else {
+            "translation_mm": float(np.mean([e[0] for e in errors]) * 1e3),
+            "rotation_deg": float(np.degrees(np.mean([e[1] for e in errors])))},
+        "pose_error_mean": None if not truth else {
+            name: {"translation_mm": float(np.mean([t[name][0] for t in truth]) * 1e3),
+                   "rotation_deg": float(np.degrees(np.mean([t[name][1] for t in truth])))}
+            for name in truth[0]},
+        "pose_graph": None if multiway is None else {
+            "edges": [e.to_dict() for e in multiway.edges], "pruned_loop_closures": multiway.pruned,
+            "odometry_edges": sum(e.kind == "odometry" for e in multiway.edges),
+            "loop_closures": sum(e.kind == "loop_closure" for e in multiway.edges)},
+        "points": {"fused": len(fused.points)},
+        "options": {"use_board": options.use_board, "local": options.local, "perturb": options.perturb,
+                    "multiway": options.multiway, "surface": options.surface},
+        "timings": timings,
+        "outputs": {"cloud": cloud_path.name, "cloud_global": cloud_global.name,
+                    "mesh": None if mesh_path is None else mesh_path.name},
+    })
+    return RegisterResult(out, cloud_path, cloud_global, mesh_path, report, frame, records, multiway, timings)

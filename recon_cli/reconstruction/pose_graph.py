@@ -1,0 +1,185 @@
+"""Local registration of many scans (thesis 2.4.2, "Full Registration").
+
+The clouds come globally registered (one common frame). For every pair, the number of
+point correspondences within the correspondence distance measures their overlap; a
+maximum spanning tree of those counts picks the odometry edges (the pairs that overlap
+most, whatever the scan order), every other overlapping pair is a loop closure. Odometry
+edges are initialized by pairwise point-to-plane ICP. Loop closures are initialized by
+ICP too (default) or, as in the thesis, with the identity (the global alignment); they
+enter the graph as uncertain edges that Open3D's Levenberg-Marquardt pose-graph
+optimization may prune. The result is one correction pose per cloud.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse.csgraph import minimum_spanning_tree
+
+
+@dataclass(frozen=True)
+class MultiwayOptions:
+    voxel: float = 0.0015  # [m] down-sampling of the clouds used for registration
+    # [m] finest ICP correspondence distance: larger ones let partly overlapping scans pull
+    # each other along their borders (biased by tenths of a millimetre)
+    max_correspondence: float = 0.0015
+    scales: tuple[float, ...] = (4.0, 2.0, 1.0)  # ICP runs at these multiples of it, in order
+    icp_iterations: int = 50  # per scale
+    min_overlap: float = 0.3  # pair overlaps: correspondences / smaller cloud above this
+    loop_closure_init: str = "icp"  # "icp" or "global" (identity, the thesis' choice)
+    edge_prune_threshold: float = 0.25
+    reference: int = 0  # node kept fixed during the optimization
+    # afterwards the whole set is moved to agree best with the global registration on
+    # average ("mean": independent global errors average out), or left with the reference
+    # node at its global pose ("reference")
+    anchor: str = "mean"
+
+    def __post_init__(self) -> None:
+        if self.loop_closure_init not in ("icp", "global"):
+            raise ValueError(f"loop_closure_init must be 'icp' or 'global', not {self.loop_closure_init!r}")
+        if self.anchor not in ("mean", "reference"):
+            raise ValueError(f"anchor must be 'mean' or 'reference', not {self.anchor!r}")
+
+
+@dataclass(frozen=True)
+class PairEdge:
+    source: int
+    target: int
+    kind: str  # odometry | loop_closure
+    correspondences: int  # at the global alignment (coarsest distance)
+    fitness: float  # ICP fitness (share of source points with a correspondence)
+    rmse: float  # ICP inlier RMSE [m]
+    transformation: np.ndarray  # source -> target
+
+    def to_dict(self) -> dict:
+        return {"source": self.source, "target": self.target, "kind": self.kind,
+                "correspondences": self.correspondences, "fitness": self.fitness, "rmse_m": self.rmse,
+                "transformation": self.transformation}
+
+
+@dataclass(frozen=True)
+class MultiwayResult:
+    poses: list[np.ndarray]  # correction of each cloud: corrected = poses[i] @ cloud_i
+    edges: list[PairEdge]
+    counts: np.ndarray  # (n, n) correspondence counts at the global alignment
+    pruned: int  # loop closures the optimization dropped
+
+
+def prepare(cloud, voxel: float):
+    """Down-sampled copy with normals (for point-to-plane ICP)."""
+    import open3d as o3d
+
+    down = cloud.voxel_down_sample(voxel)
+    down.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=voxel * 4.0, max_nn=30))
+    return down
+
+
+def pairwise_icp(source, target, init: np.ndarray, options: MultiwayOptions):
+    """Point-to-plane ICP from ``init``, coarse to fine correspondence distances."""
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    T = np.asarray(init, dtype=float)
+    result = None
+    for scale in options.scales:
+        result = reg.registration_icp(
+            source, target, options.max_correspondence * scale, T,
+            reg.TransformationEstimationPointToPlane(),
+            reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7,
+                                       max_iteration=options.icp_iterations))
+        T = result.transformation
+    return result
+
+
+def correspondence_counts(clouds: list, distance: float) -> np.ndarray:
+    """counts[i, j]: points of cloud i with a neighbour in cloud j within ``distance``
+    (clouds in one frame); symmetric by taking the smaller of both directions."""
+    import open3d as o3d
+
+    n = len(clouds)
+    counts = np.zeros((n, n), dtype=int)
+    for i in range(n):
+        for j in range(i + 1, n):
+            a = len(o3d.pipelines.registration.evaluate_registration(
+                clouds[i], clouds[j], distance, np.eye(4)).correspondence_set)
+            b = len(o3d.pipelines.registration.evaluate_registration(
+                clouds[j], clouds[i], distance, np.eye(4)).correspondence_set)
+            counts[i, j] = counts[j, i] = min(a, b)
+    return counts
+
+
+def maximum_spanning_tree(weights: np.ndarray) -> list[tuple[int, int]]:
+    """Edges (i < j) of a maximum spanning forest of a symmetric weight matrix (0: no edge)."""
+    w = np.triu(np.asarray(weights, dtype=float), 1)
+    top = w.max() + 1.0 if w.size else 1.0
+    inverted = np.where(w > 0, top - w, 0.0)  # scipy: zero entries are missing edges
+    tree = minimum_spanning_tree(inverted).tocoo()
+    return sorted((int(min(i, j)), int(max(i, j))) for i, j in zip(tree.row, tree.col, strict=True))
+
+
+def register_multiway(clouds: list, options: MultiwayOptions = MultiwayOptions(),  # noqa: B008
+                      progress: Callable[[str, int, int], None] | None = None) -> MultiwayResult:
+    """Pose-graph registration of globally registered clouds (Open3D point clouds)."""
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    n = len(clouds)
+    down = [prepare(c, options.voxel) for c in clouds]
+    coarse = options.max_correspondence * max(options.scales)
+    counts = correspondence_counts(down, coarse)
+    sizes = np.array([len(d.points) for d in down])
+    overlapping = counts >= options.min_overlap * np.minimum.outer(sizes, sizes)
+    np.fill_diagonal(overlapping, False)
+    tree = set(maximum_spanning_tree(np.where(overlapping, counts, 0)))
+    pairs = [(i, j) for i in range(n) for j in range(i + 1, n) if overlapping[i, j]]
+    graph = reg.PoseGraph()
+    for _ in range(n):
+        graph.nodes.append(reg.PoseGraphNode(np.eye(4)))
+    edges = []
+    for k, (i, j) in enumerate(pairs):
+        odometry = (i, j) in tree
+        if odometry or options.loop_closure_init == "icp":
+            result = pairwise_icp(down[i], down[j], np.eye(4), options)
+            T, fitness, rmse = result.transformation, result.fitness, result.inlier_rmse
+        else:
+            ev = reg.evaluate_registration(down[i], down[j], options.max_correspondence, np.eye(4))
+            T, fitness, rmse = np.eye(4), ev.fitness, ev.inlier_rmse
+        info = reg.get_information_matrix_from_point_clouds(down[i], down[j], options.max_correspondence, T)
+        graph.edges.append(reg.PoseGraphEdge(i, j, T, info, uncertain=not odometry))
+        edges.append(PairEdge(i, j, "odometry" if odometry else "loop_closure", int(counts[i, j]),
+                              float(fitness), float(rmse), np.asarray(T)))
+        if progress:
+            progress("pairwise ICP", k + 1, len(pairs))
+    before = len(graph.edges)
+    if len(graph.edges):
+        with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+            reg.global_optimization(
+                graph, reg.GlobalOptimizationLevenbergMarquardt(), reg.GlobalOptimizationConvergenceCriteria(),
+                reg.GlobalOptimizationOption(max_correspondence_distance=options.max_correspondence,
+                                             edge_prune_threshold=options.edge_prune_threshold,
+                                             reference_node=options.reference))
+    poses = [np.asarray(node.pose) for node in graph.nodes]
+    if options.anchor == "mean":
+        G = mean_anchor(down, poses)
+        poses = [G @ T for T in poses]
+    return MultiwayResult(poses, edges, counts, before - len(graph.edges))
+
+
+def mean_anchor(clouds: list, poses: list[np.ndarray]) -> np.ndarray:
+    """Rigid G that moves the locally registered set (poses[i] @ clouds[i]) closest, in the
+    least-squares sense over all points, to where the global registration put them."""
+    import open3d as o3d
+
+    corrected, original = [], []
+    for c, T in zip(clouds, poses, strict=True):
+        p = np.asarray(c.points)
+        corrected.append(p @ T[:3, :3].T + T[:3, 3])
+        original.append(p)
+    src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.vstack(corrected)))
+    tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.vstack(original)))
+    idx = np.arange(len(src.points))
+    pairs = o3d.utility.Vector2iVector(np.stack([idx, idx], axis=1))
+    return np.asarray(o3d.pipelines.registration.TransformationEstimationPointToPoint()
+                      .compute_transformation(src, tgt, pairs))

@@ -1,0 +1,62 @@
+"""From registered scans to a surface (thesis 2.4.3): merge, voxel down-sampling, outlier
+removal, normals oriented toward the cameras that saw them, Poisson reconstruction and
+density-based trimming of the surface Poisson extrapolated where no points were."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class SurfaceOptions:
+    voxel: float = 0.001  # [m] voxel of the fused cloud
+    normal_radius: float = 0.004  # [m] neighbourhood of the normal estimation
+    outlier_neighbors: int = 50  # statistical outlier removal (thesis: 50 neighbours, 3 sigma)
+    outlier_std_ratio: float = 3.0
+    poisson_depth: int = 9  # octree depth (thesis: 8)
+    density_quantile: float = 0.02  # drop mesh vertices below this quantile of Poisson density
+
+
+def oriented_cloud(cloud, camera_position: np.ndarray, options: SurfaceOptions):
+    """Normals of one scan's cloud, turned toward the camera that took it (a scanned
+    surface faces its camera, so this orientation is never ambiguous)."""
+    import open3d as o3d
+
+    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=options.normal_radius, max_nn=30))
+    cloud.orient_normals_towards_camera_location(np.asarray(camera_position, dtype=float))
+    return cloud
+
+
+def fuse(clouds: list, options: SurfaceOptions):
+    """Merge posed clouds (with oriented normals), down-sample on a voxel grid (which
+    averages points, colours and normals per voxel) and remove statistical outliers."""
+    import open3d as o3d
+
+    merged = o3d.geometry.PointCloud()
+    for c in clouds:
+        merged += c
+    fused = merged.voxel_down_sample(options.voxel)
+    if len(fused.points) > options.outlier_neighbors:
+        fused, _ = fused.remove_statistical_outlier(options.outlier_neighbors, options.outlier_std_ratio)
+    if fused.has_normals():
+        fused.normalize_normals()
+    return fused
+
+
+def poisson_mesh(cloud, options: SurfaceOptions):
+    """Poisson surface of an oriented cloud, with the low-density (extrapolated) part
+    removed. Returns (mesh, densities of the kept vertices)."""
+    import open3d as o3d
+
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+        mesh, densities = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(
+            cloud, depth=options.poisson_depth)
+    densities = np.asarray(densities)
+    if len(densities) and options.density_quantile > 0:
+        drop = densities < np.quantile(densities, options.density_quantile)
+        mesh.remove_vertices_by_mask(drop)
+        densities = densities[~drop]
+    mesh.compute_vertex_normals()
+    return mesh, densities

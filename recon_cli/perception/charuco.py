@@ -60,11 +60,17 @@ def thesis_board() -> BoardSpec:
 
 @dataclass(frozen=True)
 class CharucoDetection:
-    """Detected ChArUco corners. corners: (N, 2) pixels; ids: (N,) chessboard corner ids."""
+    """Detected ChArUco corners. corners: (N, 2) pixels; ids: (N,) chessboard corner ids;
+    marker_corners: (M, 4, 2) pixels of the detected ArUco markers, marker_ids: (M,)."""
 
     corners: np.ndarray
     ids: np.ndarray
-    marker_count: int
+    marker_corners: np.ndarray
+    marker_ids: np.ndarray
+
+    @property
+    def marker_count(self) -> int:
+        return len(self.marker_ids)
 
     @property
     def n_corners(self) -> int:
@@ -76,11 +82,15 @@ def detect(image: np.ndarray, spec: BoardSpec) -> CharucoDetection:
     grey = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) if image.ndim == 3 else image
     detector = cv2.aruco.CharucoDetector(spec.board())
     corners, ids, marker_corners, marker_ids = detector.detectBoard(grey)
+    if marker_ids is None or len(marker_ids) == 0:
+        markers, mids = np.zeros((0, 4, 2)), np.zeros(0, dtype=int)
+    else:
+        markers = np.stack([np.asarray(c, dtype=np.float64).reshape(4, 2) for c in marker_corners])
+        mids = np.asarray(marker_ids).reshape(-1).astype(int)
     if ids is None or len(ids) == 0:
-        return CharucoDetection(np.zeros((0, 2)), np.zeros(0, dtype=int),
-                                0 if marker_ids is None else len(marker_ids))
+        return CharucoDetection(np.zeros((0, 2)), np.zeros(0, dtype=int), markers, mids)
     return CharucoDetection(corners.reshape(-1, 2).astype(np.float64), ids.reshape(-1).astype(int),
-                            0 if marker_ids is None else len(marker_ids))
+                            markers, mids)
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,7 @@ class MultiwayOptions:
     # average ("mean": independent global errors average out), or left with the reference
     # node at its global pose ("reference")
     anchor: str = "mean"
+    rounds: int = 1  # graph built and optimized this many times
 
     def __post_init__(self) -> None:
         if self.loop_closure_init not in ("icp", "global"):
@@ -121,12 +122,35 @@ def maximum_spanning_tree(weights: np.ndarray) -> list[tuple[int, int]]:
 
 def register_multiway(clouds: list, options: MultiwayOptions = MultiwayOptions(),  # noqa: B008
                       progress: Callable[[str, int, int], None] | None = None) -> MultiwayResult:
-    """Pose-graph registration of globally registered clouds (Open3D point clouds)."""
+    """Pose-graph registration of globally registered clouds (Open3D point clouds). With
+    ``rounds`` > 1 the graph is built again from the optimized poses (every pairwise ICP then
+    starts closer to its answer, and pruned loop closures get a second chance)."""
+    down = [prepare(c, options.voxel) for c in clouds]
+    poses = [np.eye(4) for _ in clouds]
+    result = None
+    for r in range(options.rounds):
+        moved = [o3d_transformed(d, T) for d, T in zip(down, poses, strict=True)]
+        result = _one_round(moved, options, progress, r)
+        poses = [T_new @ T for T_new, T in zip(result.poses, poses, strict=True)]
+    if options.anchor == "mean":
+        G = mean_anchor(down, poses)
+        poses = [G @ T for T in poses]
+    return MultiwayResult(poses, result.edges, result.counts, result.pruned)
+
+
+def o3d_transformed(cloud, T: np.ndarray):
+    import open3d as o3d
+
+    c = o3d.geometry.PointCloud(cloud)
+    c.transform(T)
+    return c
+
+
+def _one_round(down: list, options: MultiwayOptions, progress, round_: int) -> MultiwayResult:
     import open3d as o3d
 
     reg = o3d.pipelines.registration
-    n = len(clouds)
-    down = [prepare(c, options.voxel) for c in clouds]
+    n = len(down)
     coarse = options.max_correspondence * max(options.scales)
     counts = correspondence_counts(down, coarse)
     sizes = np.array([len(d.points) for d in down])
@@ -138,6 +162,7 @@ def register_multiway(clouds: list, options: MultiwayOptions = MultiwayOptions()
     for _ in range(n):
         graph.nodes.append(reg.PoseGraphNode(np.eye(4)))
     edges = []
+    label = "pairwise ICP" if options.rounds == 1 else f"pairwise ICP {round_ + 1}/{options.rounds}"
     for k, (i, j) in enumerate(pairs):
         odometry = (i, j) in tree
         if odometry or options.loop_closure_init == "icp":
@@ -151,7 +176,7 @@ def register_multiway(clouds: list, options: MultiwayOptions = MultiwayOptions()
         edges.append(PairEdge(i, j, "odometry" if odometry else "loop_closure", int(counts[i, j]),
                               float(fitness), float(rmse), np.asarray(T)))
         if progress:
-            progress("pairwise ICP", k + 1, len(pairs))
+            progress(label, k + 1, len(pairs))
     before = len(graph.edges)
     if len(graph.edges):
         with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
@@ -160,11 +185,8 @@ def register_multiway(clouds: list, options: MultiwayOptions = MultiwayOptions()
                 reg.GlobalOptimizationOption(max_correspondence_distance=options.max_correspondence,
                                              edge_prune_threshold=options.edge_prune_threshold,
                                              reference_node=options.reference))
-    poses = [np.asarray(node.pose) for node in graph.nodes]
-    if options.anchor == "mean":
-        G = mean_anchor(down, poses)
-        poses = [G @ T for T in poses]
-    return MultiwayResult(poses, edges, counts, before - len(graph.edges))
+    return MultiwayResult([np.asarray(node.pose) for node in graph.nodes], edges, counts,
+                          before - len(graph.edges))
 
 
 def mean_anchor(clouds: list, poses: list[np.ndarray]) -> np.ndarray:

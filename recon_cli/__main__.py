@@ -1,3 +1,3 @@
-from recon_cli.cli import run
+from recon_cli.cli import entry
 
-run()
+entry()

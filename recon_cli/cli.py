@@ -331,6 +331,59 @@ def evaluate(
     console.print(f"report: {result.report}\nhistogram: {result.histogram}")
 
 
+@app.command()
+def validate(
+    script: Annotated[Path, typer.Argument(help="Automation script (recon or thesis dialect).")],
+) -> None:
+    """Expand xacro, validate against the XSD and list the commands a script would run."""
+    from recon_cli.console import console
+    from recon_cli.scripts.loader import load_script
+    from recon_cli.scripts.manager import check_order
+
+    s = load_script(script)
+    check_order(s)
+    dialect = "recon (schemas/recon_script.xsd)" if s.dialect == "recon" else \
+        "thesis system (schemas/thesis_script.xsd)"
+    console.print(f"{script}: valid, dialect {dialect}, script {s.name!r}, {len(s.commands)} commands, "
+                  f"on failure: {s.on_failure}" + (", sequence optimization requested" if s.optimize else ""))
+    for k, cmd in enumerate(s.commands, start=1):
+        console.print(f"{k:4d}  {cmd.source}  {cmd.describe()}")
+
+
+@app.command("run")
+def run_script(
+    script: Annotated[Path, typer.Argument(help="Automation script (recon or thesis dialect).")],
+    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/run-<time>).")] = None,
+    backend: Annotated[str | None, typer.Option(help="'sim' or 'hardware' (overrides the script).")] = None,
+    dry_run: Annotated[bool, typer.Option("--dry-run", help="Plan every move, move nothing, scan nothing.")] = False,
+    object_name: Annotated[str | None, typer.Option("--object", help="Simulated object (overrides the script; "
+                                                                     "default: the drill if present).")] = None,
+    seed: SeedOpt = 0,
+) -> None:
+    """Run an automation script: moves, scans, registration, reconstruction, exports."""
+    from recon_cli.console import console, progress_bar, run_folder
+    from recon_cli.scripts.loader import load_script
+    from recon_cli.scripts.manager import RunOptions, ScriptRunner
+
+    if backend is not None and backend not in ("sim", "hardware"):
+        raise UnknownNameError("backend", backend, ("sim", "hardware"))
+    s = load_script(script)
+    folder = run_folder(out, "run")
+    with progress_bar() as update:
+        result = ScriptRunner(s, RunOptions(folder, backend, seed, dry_run, object_name), update).run()
+    counts: dict[str, int] = {}
+    for r in result.reports:
+        counts[r.status] = counts.get(r.status, 0) + 1
+    console.print(f"{s.name}: {len(result.reports)} commands (" + ", ".join(f"{v} {k}" for k, v in counts.items())
+                  + f"), {result.scans} scans, {result.seconds:.1f} s")
+    for r in result.reports:
+        if r.status in ("failed", "skipped") and r.message != "dry run":
+            console.print(f"[yellow]{r.status}[/] {r.source} {r.command}: {r.message}")
+    for k, v in result.outputs.items():
+        console.print(f"{k}: {v}")
+    console.print(f"report: {folder / 'run_report.json'}")
+
+
 @bench_app.command("ik")
 def bench_ik(
     n: Annotated[int, typer.Option("--n", min=1, help="Number of camera poses.")] = 500,
@@ -538,7 +591,7 @@ def main(argv: list[str] | None = None) -> int:
     return result if isinstance(result, int) else 0
 
 
-def run() -> None:
+def entry() -> None:
     """Console-script entry point."""
     code = main()
     if "ompl" in sys.modules:
@@ -551,4 +604,4 @@ def run() -> None:
 
 
 if __name__ == "__main__":
-    run()
+    entry()

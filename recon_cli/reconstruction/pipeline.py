@@ -25,7 +25,14 @@ from recon_cli.reconstruction.crop import CropBox, crop_cloud
 from recon_cli.reconstruction.global_registration import GlobalPose, PoseSource, global_pose
 from recon_cli.reconstruction.pose_graph import MultiwayOptions, MultiwayResult, register_multiway
 from recon_cli.reconstruction.scan_store import ScanStore
-from recon_cli.reconstruction.surface import SurfaceOptions, fuse, oriented_cloud, poisson_mesh
+from recon_cli.reconstruction.surface import (
+    SurfaceOptions,
+    fuse,
+    oriented_cloud,
+    poisson_mesh,
+    write_cloud,
+    write_mesh,
+)
 
 Progress = Callable[[str, int, int], None]
 
@@ -110,6 +117,8 @@ class RegisterResult:
     scans: list[ScanRecord]
     multiway: MultiwayResult | None
     timings: dict[str, float]
+    clouds: list = field(default_factory=list)  # registered per-scan clouds (marker frame, normals)
+    out_T_marker: np.ndarray = field(default_factory=lambda: np.eye(4))  # marker -> output frame
 
     @property
     def used(self) -> list[ScanRecord]:
@@ -146,9 +155,23 @@ def _crop_box(options: RegisterOptions, session: dict, world_T_marker: np.ndarra
     return box.moved(invert(world_T_marker))
 
 
+def scan_cloud(scan, pose: GlobalPose, box: CropBox | None, surface: SurfaceOptions):
+    """A scan's points in the marker frame (placed by its global pose), cropped to the box
+    (when given), with normals turned toward its camera."""
+    cloud = scan.to_open3d_cloud(pose.marker_T_camera)
+    if box is not None:
+        cloud = crop_cloud(cloud, box)
+    return oriented_cloud(cloud, pose.marker_T_camera[:3, 3], surface)
+
+
+def crop_box_marker(options: RegisterOptions, session: dict) -> CropBox:
+    """The crop box of a session (or of the options) in the marker frame."""
+    wtm = session.get("world_T_marker")
+    return _crop_box(options, session, None if wtm is None else np.asarray(wtm, dtype=float))
+
+
 def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOptions(),  # noqa: B008
                  progress: Progress | None = None) -> RegisterResult:
-    import open3d as o3d
 
     from recon_cli.console import write_json
 
@@ -187,12 +210,12 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
                 rec.true_marker_T_camera = truth
                 if pose.source is PoseSource.CHARUCO:
                     rec.charuco_error = pose_error(pose.marker_T_camera, truth)
-            cloud = crop_cloud(scan.to_open3d_cloud(pose.marker_T_camera), box)
+            cloud = scan_cloud(scan, pose, box, options.surface)
             rec.points = len(cloud.points)
             if rec.points < 100:
                 rec.skipped = f"{rec.points} points inside the crop box"
             else:
-                clouds.append(oriented_cloud(cloud, pose.marker_T_camera[:3, 3], options.surface))
+                clouds.append(cloud)
         step("global registration", k + 1, len(indices))
     used = [r for r in records if not r.skipped]
     if not used:
@@ -206,16 +229,7 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
     frame = "world" if world_T_marker is not None else "marker"
     to_out = world_T_marker if world_T_marker is not None else np.eye(4)
 
-    def write_cloud(path: Path, cloud) -> Path:
-        c = o3d.geometry.PointCloud(cloud)
-        c.transform(to_out)
-        tmp = path.with_name(".tmp-" + path.name)
-        if not o3d.io.write_point_cloud(str(tmp), c):
-            raise FileError(f"cannot write {path}")
-        tmp.replace(path)
-        return path
-
-    cloud_global = write_cloud(out / "cloud_global.ply", fuse(clouds, options.surface))
+    cloud_global = write_cloud(out / "cloud_global.ply", fuse(clouds, options.surface), to_out)
     step("fuse (global)", 1, 1)
 
     # 2. local registration
@@ -234,16 +248,11 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
 
     # 3. surface
     fused = fuse(clouds, options.surface)
-    cloud_path = write_cloud(out / "cloud.ply", fused)
+    cloud_path = write_cloud(out / "cloud.ply", fused, to_out)
     mesh_path = None
     if options.mesh:
         mesh, _ = poisson_mesh(fused, options.surface)
-        mesh.transform(to_out)
-        mesh_path = out / "mesh.ply"
-        tmp = out / ".tmp-mesh.ply"
-        if not o3d.io.write_triangle_mesh(str(tmp), mesh):
-            raise FileError(f"cannot write {mesh_path}")
-        tmp.replace(mesh_path)
+        mesh_path = write_mesh(out / "mesh.ply", mesh, to_out)
     step("surface", 1, 1)
     t_end = time.perf_counter()
     timings = {"global_s": t_global - t0, "local_s": t_local - t_global, "surface_s": t_end - t_local,
@@ -275,4 +284,5 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
         "outputs": {"cloud": cloud_path.name, "cloud_global": cloud_global.name,
                     "mesh": None if mesh_path is None else mesh_path.name},
     })
-    return RegisterResult(out, cloud_path, cloud_global, mesh_path, report, frame, records, multiway, timings)
+    return RegisterResult(out, cloud_path, cloud_global, mesh_path, report, frame, records, multiway, timings,
+                          clouds, to_out)

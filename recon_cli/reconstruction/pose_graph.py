@@ -36,10 +36,13 @@ class MultiwayOptions:
     # node at its global pose ("reference")
     anchor: str = "mean"
     rounds: int = 1  # graph built and optimized this many times
+    method: str = "point_to_plane"  # pairwise ICP: point_to_plane | point_to_point | colored
 
     def __post_init__(self) -> None:
         if self.loop_closure_init not in ("icp", "global"):
             raise ValueError(f"loop_closure_init must be 'icp' or 'global', not {self.loop_closure_init!r}")
+        if self.method not in ("point_to_plane", "point_to_point", "colored"):
+            raise ValueError(f"method must be point_to_plane, point_to_point or colored, not {self.method!r}")
         if self.anchor not in ("mean", "reference"):
             raise ValueError(f"anchor must be 'mean' or 'reference', not {self.anchor!r}")
 
@@ -78,18 +81,25 @@ def prepare(cloud, voxel: float):
 
 
 def pairwise_icp(source, target, init: np.ndarray, options: MultiwayOptions):
-    """Point-to-plane ICP from ``init``, coarse to fine correspondence distances."""
+    """ICP from ``init`` (point-to-plane by default; point-to-point, or Open3D's coloured ICP
+    for clouds with colours), coarse to fine correspondence distances."""
     import open3d as o3d
 
     reg = o3d.pipelines.registration
     T = np.asarray(init, dtype=float)
+    criteria = reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7,
+                                          max_iteration=options.icp_iterations)
+    colored = options.method == "colored" and source.has_colors() and target.has_colors()
+    estimation = (reg.TransformationEstimationPointToPoint() if options.method == "point_to_point"
+                  else reg.TransformationEstimationForColoredICP() if colored
+                  else reg.TransformationEstimationPointToPlane())
     result = None
     for scale in options.scales:
-        result = reg.registration_icp(
-            source, target, options.max_correspondence * scale, T,
-            reg.TransformationEstimationPointToPlane(),
-            reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7,
-                                       max_iteration=options.icp_iterations))
+        distance = options.max_correspondence * scale
+        if colored:
+            result = reg.registration_colored_icp(source, target, distance, T, estimation, criteria)
+        else:
+            result = reg.registration_icp(source, target, distance, T, estimation, criteria)
         T = result.transformation
     return result
 

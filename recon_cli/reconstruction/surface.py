@@ -5,8 +5,11 @@ density-based trimming of the surface Poisson extrapolated where no points were.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+
+from recon_cli.errors import FileError
 
 
 @dataclass(frozen=True)
@@ -60,3 +63,37 @@ def poisson_mesh(cloud, options: SurfaceOptions):
         densities = densities[~drop]
     mesh.compute_vertex_normals()
     return mesh, densities
+
+
+def write_cloud(path: Path, cloud, transform: np.ndarray | None = None) -> Path:
+    """Write a point cloud (PLY/PCD/...) atomically, optionally transformed first."""
+    import open3d as o3d
+
+    c = o3d.geometry.PointCloud(cloud)
+    if transform is not None:
+        c.transform(transform)
+    return _atomic(path, lambda tmp: o3d.io.write_point_cloud(str(tmp), c))
+
+
+def write_mesh(path: Path, mesh, transform: np.ndarray | None = None) -> Path:
+    """Write a triangle mesh atomically, optionally transformed first."""
+    import open3d as o3d
+
+    m = o3d.geometry.TriangleMesh(mesh)
+    if transform is not None:
+        m.transform(transform)
+    return _atomic(path, lambda tmp: o3d.io.write_triangle_mesh(str(tmp), m))
+
+
+def _atomic(path: Path, write) -> Path:
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise FileError(f"cannot create {path.parent} ({exc.strerror})", hint="choose a writable folder") from None
+    tmp = path.with_name(".tmp-" + path.name)
+    if not write(tmp):
+        tmp.unlink(missing_ok=True)
+        raise FileError(f"cannot write {path}", hint="use a .ply, .pcd, .obj or .stl name in a writable folder")
+    tmp.replace(path)
+    return path

@@ -1,0 +1,104 @@
+"""`recon run`: the smoke script end to end, dry runs, failure policies, the thesis dialect."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from recon_cli.cli import main
+from recon_cli.paths import SCRIPTS_DIR
+from recon_cli.reconstruction.scan_store import ScanStore
+
+HEAD = '<?xml version="1.0"?>\n'
+GOOD = '<move focus="0 0 0.8" radius="0.6" theta="60" phi="{phi}"/>\n  <scan/>\n'
+UNREACHABLE = '<move focus="0 0 0.8" radius="2.5" theta="60" phi="90"/>\n  <scan/>\n'
+
+
+def _script(tmp_path: Path, body: str, policy: str = "skip") -> Path:
+    p = tmp_path / "s.xml"
+    p.write_text(HEAD + f'<recon name="t" on_failure="{policy}">\n  <cell resolution="0.25"/>\n'
+                 f'  <object name="bottle"/>\n  <box/>\n  {body}</recon>\n')
+    return p
+
+
+def test_smoke_script_end_to_end(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["run", str(SCRIPTS_DIR / "smoke.xml"), "--out", str(out)]) == 0
+    report = json.loads((out / "run_report.json").read_text())
+    assert [c["status"] for c in report["commands"]] == ["done"] * len(report["commands"])
+    assert report["scans"] == 3 and len(ScanStore(out / "scans")) == 3
+    for name in ("bottle_cloud.ply", "bottle_mesh.ply", "script.expanded.xml"):
+        assert (out / name).stat().st_size > 0
+    moves = [c for c in report["commands"] if c["command"].startswith("move")]
+    assert all(c["trajectory_s"] > 0 for c in moves)  # every move planned and timed
+    ev = next(c for c in report["commands"] if c["command"].startswith("evaluate"))
+    assert abs(ev["mean_mm"]) < 1.0
+
+
+def test_dry_run_plans_but_does_not_move(tmp_path):
+    out = tmp_path / "dry"
+    p = _script(tmp_path, GOOD.format(phi=0) + GOOD.format(phi=120) + "<register/>\n")
+    assert main(["run", str(p), "--out", str(out), "--dry-run"]) == 0
+    report = json.loads((out / "run_report.json").read_text())
+    statuses = [c["status"] for c in report["commands"] if c["command"].startswith(("move", "scan", "register"))]
+    assert statuses == ["planned", "skipped", "planned", "skipped", "skipped"]
+    assert not (out / "scans").exists()
+
+
+def test_failed_move_skips_its_scan(tmp_path, capsys):
+    out = tmp_path / "skip"
+    p = _script(tmp_path, GOOD.format(phi=0) + UNREACHABLE + GOOD.format(phi=180))
+    assert main(["run", str(p), "--out", str(out)]) == 0
+    report = json.loads((out / "run_report.json").read_text())
+    statuses = [c["status"] for c in report["commands"][3:]]
+    assert statuses == ["done", "done", "failed", "skipped", "done", "done"]
+    failed = report["commands"][5]
+    assert failed["source"] == "s.xml:8" and "out of reach" in failed["message"]
+    assert len(ScanStore(out / "scans")) == 2
+    assert "failed" in capsys.readouterr().out
+
+
+def test_abort_keeps_earlier_scans(tmp_path, capsys):
+    out = tmp_path / "abort"
+    p = _script(tmp_path, GOOD.format(phi=0) + UNREACHABLE + GOOD.format(phi=180), policy="abort")
+    assert main(["run", str(p), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "s.xml:8" in err and "abort" in err
+    assert len(ScanStore(out / "scans")) == 1  # the scan before the failure is kept
+    report = json.loads((out / "run_report.json").read_text())
+    assert report["aborted"] and report["commands"][-1]["status"] == "failed"
+
+
+def test_hardware_backend_is_a_clear_error(tmp_path, capsys):
+    p = _script(tmp_path, GOOD.format(phi=0))
+    assert main(["run", str(p), "--out", str(tmp_path / "hw"), "--backend", "hardware"]) == 0
+    report = json.loads((tmp_path / "hw" / "run_report.json").read_text())
+    assert "no hardware adapter" in report["commands"][3]["message"]
+
+
+def test_thesis_dialect_runs_unchanged(tmp_path):
+    p = tmp_path / "t.xml"
+    p.write_text(HEAD + """<script name="t" optimization="false">
+  <move reference="world"><sphere xyz="0 0 0.8" radius="0.6"/><coordinates phi="0" theta="1.0"/></move>
+  <scan name="a" path_color="/home/someone/a.png"/>
+  <move reference="world"><sphere xyz="0 0 0.8" radius="0.6"/><coordinates phi="0.8" theta="1.0"/></move>
+  <scan name="b"/>
+  <register source="b" target="a" threshold="0.01"/>
+  <multiway threshold="0.01"/>
+  <add fragment="a" target="all"/><add fragment="b" target="all"/>
+  <downsample fragment="all" voxel_size="0.002"/>
+  <hide fragment="a"/>
+  <export fragment="all" type="point_cloud" path="/somewhere/else/all.ply"/>
+  <export fragment="all" type="mesh" path="mesh.ply"/>
+  <delete fragment="b"/>
+</script>
+""")
+    out = tmp_path / "run"
+    assert main(["run", str(p), "--out", str(out), "--object", "bottle"]) == 0
+    report = json.loads((out / "run_report.json").read_text())
+    statuses = {c["command"]: c["status"] for c in report["commands"]}
+    assert statuses["hide a (display only, recorded)"] == "recorded"
+    assert all(s in ("done", "recorded") for s in statuses.values())
+    assert (out / "all.ply").stat().st_size > 0 and (out / "mesh.ply").stat().st_size > 0
+    scans = [c for c in report["commands"] if c["command"].startswith("scan")]
+    assert [c["fragment"] for c in scans] == ["a", "b"] and all(c["fragment_points"] > 100 for c in scans)

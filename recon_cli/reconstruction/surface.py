@@ -27,6 +27,8 @@ def oriented_cloud(cloud, camera_position: np.ndarray, options: SurfaceOptions):
     surface faces its camera, so this orientation is never ambiguous)."""
     import open3d as o3d
 
+    if len(cloud.points) == 0:
+        return cloud
     cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=options.normal_radius, max_nn=30))
     cloud.orient_normals_towards_camera_location(np.asarray(camera_position, dtype=float))
     return cloud

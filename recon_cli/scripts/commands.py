@@ -55,7 +55,8 @@ class SetObject(Command):
     scale: float = 1.0
 
     def describe(self) -> str:
-        return f"object {self.name}" + (f" (scale {self.scale:g})" if self.scale != 1.0 else "")
+        name = "the drill if the YCB data is here, else the bottle" if self.name == "auto" else self.name
+        return f"object {name}" + (f" (scale {self.scale:g})" if self.scale != 1.0 else "")
 
 
 @dataclass(frozen=True)

@@ -196,7 +196,8 @@ class ScriptRunner:
     def _do_SetObject(self, cmd: C.SetObject, report) -> None:  # noqa: N802
         from recon_cli.objects import load_object
 
-        load_object(cmd.name, cmd.scale)  # fails now, with the line, if it does not exist
+        if cmd.name != "auto":
+            load_object(cmd.name, cmd.scale)  # fails now, with the line, if it does not exist
         if self.options.object_name is None:
             self.object_name, self.object_scale = cmd.name, cmd.scale
 

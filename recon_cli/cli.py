@@ -292,7 +292,7 @@ def register(
         e = result.multiway.edges
         console.print(f"pose graph: {sum(x.kind == 'odometry' for x in e)} odometry edges, "
                       f"{sum(x.kind == 'loop_closure' for x in e)} loop closures "
-                      f"({result.multiway.pruned} pruned)")
+                      f"({result.multiway.pruned} pruned, {sum(x.rejected for x in e)} ICP results rejected)")
     console.print(f"done in {result.timings['total_s']:.1f} s; frame: {result.frame}")
     console.print(f"cloud: {result.cloud}\nmesh: {result.mesh}\nreport: {result.report}")
 

@@ -132,6 +132,20 @@ def concatenate(parts: list[Trajectory]) -> Trajectory:
     return Trajectory(times, q, qd, qdd, evaluate)
 
 
+def reverse(traj: Trajectory) -> Trajectory:
+    """The same motion backwards in time (goal to start): positions mirrored in time,
+    velocities negated, accelerations unchanged. Limits and the checked course are the
+    same, so a planned edge serves both directions."""
+    T = traj.duration
+
+    def evaluate(t: np.ndarray):
+        q, qd, qdd = traj.sample(T - np.asarray(t, dtype=float))
+        return q, -qd, qdd
+
+    times = traj.times[-1] - traj.times[::-1]
+    return Trajectory(times, traj.q[::-1].copy(), -traj.qd[::-1], traj.qdd[::-1].copy(), evaluate)
+
+
 def stop_and_go(path: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
                 velocity_scale: float = 1.0, acceleration_scale: float = 1.0) -> Trajectory:
     """Rest-to-rest motion along each straight segment of a path: the executed course is

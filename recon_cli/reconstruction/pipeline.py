@@ -276,7 +276,8 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
         "pose_graph": None if multiway is None else {
             "edges": [e.to_dict() for e in multiway.edges], "pruned_loop_closures": multiway.pruned,
             "odometry_edges": sum(e.kind == "odometry" for e in multiway.edges),
-            "loop_closures": sum(e.kind == "loop_closure" for e in multiway.edges)},
+            "loop_closures": sum(e.kind == "loop_closure" for e in multiway.edges),
+            "rejected_edges": sum(e.rejected for e in multiway.edges)},
         "points": {"fused": len(fused.points)},
         "options": {"use_board": options.use_board, "local": options.local, "perturb": options.perturb,
                     "multiway": options.multiway, "surface": options.surface},

@@ -30,11 +30,18 @@ class MultiwayOptions:
     min_overlap: float = 0.3  # pair overlaps: correspondences / smaller cloud above this
     loop_closure_init: str = "icp"  # "icp" or "global" (identity, the thesis' choice)
     edge_prune_threshold: float = 0.25
-    reference: int = 0  # node kept fixed during the optimization
-    # afterwards the whole set is moved to agree best with the global registration on
-    # average ("mean": independent global errors average out), or left with the reference
-    # node at its global pose ("reference")
-    anchor: str = "mean"
+    reference: int = 0  # node kept fixed during the optimization ("reference" anchor)
+    # how the graph is tied to the global registration:
+    # "prior": every scan keeps an edge to the common frame weighted by the global
+    #   registration's uncertainty (prior_sigma); directions the scans' overlaps do not fix
+    #   (a rotationally symmetric object turning about its axis) stay where the board put
+    #   them, and the set as a whole averages the global poses;
+    # "mean": no prior, afterwards the set is moved to agree best with the global poses on
+    #   average; "reference": no prior, the reference node keeps its global pose
+    anchor: str = "prior"
+    prior_sigma: tuple[float, float] = (0.002, 0.1)  # [m, deg] per global pose
+    point_sigma: float = 0.0002  # [m] floor of the ICP residual that weights ICP edges
+    max_rotation: float = 5.0  # [deg] a pairwise ICP turning more than this is rejected
     rounds: int = 1  # graph built and optimized this many times
     method: str = "point_to_plane"  # pairwise ICP: point_to_plane | point_to_point | colored
 
@@ -43,8 +50,8 @@ class MultiwayOptions:
             raise ValueError(f"loop_closure_init must be 'icp' or 'global', not {self.loop_closure_init!r}")
         if self.method not in ("point_to_plane", "point_to_point", "colored"):
             raise ValueError(f"method must be point_to_plane, point_to_point or colored, not {self.method!r}")
-        if self.anchor not in ("mean", "reference"):
-            raise ValueError(f"anchor must be 'mean' or 'reference', not {self.anchor!r}")
+        if self.anchor not in ("prior", "mean", "reference"):
+            raise ValueError(f"anchor must be 'prior', 'mean' or 'reference', not {self.anchor!r}")
 
 
 @dataclass(frozen=True)
@@ -56,9 +63,10 @@ class PairEdge:
     fitness: float  # ICP fitness (share of source points with a correspondence)
     rmse: float  # ICP inlier RMSE [m]
     transformation: np.ndarray  # source -> target
+    rejected: bool = False  # ICP turned more than max_rotation: left out of the graph
 
     def to_dict(self) -> dict:
-        return {"source": self.source, "target": self.target, "kind": self.kind,
+        return {"source": self.source, "target": self.target, "kind": self.kind, "rejected": self.rejected,
                 "correspondences": self.correspondences, "fitness": self.fitness, "rmse_m": self.rmse,
                 "transformation": self.transformation}
 
@@ -171,6 +179,14 @@ def _one_round(down: list, options: MultiwayOptions, progress, round_: int) -> M
     graph = reg.PoseGraph()
     for _ in range(n):
         graph.nodes.append(reg.PoseGraphNode(np.eye(4)))
+    reference = options.reference
+    if options.anchor == "prior":  # node n: the common (marker) frame, kept fixed
+        graph.nodes.append(reg.PoseGraphNode(np.eye(4)))
+        reference = n
+        sigma_t, sigma_r = options.prior_sigma
+        prior = np.diag([1.0 / np.radians(sigma_r) ** 2] * 3 + [1.0 / sigma_t**2] * 3)
+        for i in range(n):
+            graph.edges.append(reg.PoseGraphEdge(i, n, np.eye(4), prior, uncertain=False))
     edges = []
     label = "pairwise ICP" if options.rounds == 1 else f"pairwise ICP {round_ + 1}/{options.rounds}"
     for k, (i, j) in enumerate(pairs):
@@ -181,10 +197,16 @@ def _one_round(down: list, options: MultiwayOptions, progress, round_: int) -> M
         else:
             ev = reg.evaluate_registration(down[i], down[j], options.max_correspondence, np.eye(4))
             T, fitness, rmse = np.eye(4), ev.fitness, ev.inlier_rmse
-        info = reg.get_information_matrix_from_point_clouds(down[i], down[j], options.max_correspondence, T)
-        graph.edges.append(reg.PoseGraphEdge(i, j, T, info, uncertain=not odometry))
-        edges.append(PairEdge(i, j, "odometry" if odometry else "loop_closure", int(counts[i, j]),
-                              float(fitness), float(rmse), np.asarray(T)))
+        T = np.asarray(T)
+        turn = np.degrees(np.arccos(np.clip((np.trace(T[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
+        kind = "odometry" if odometry else "loop_closure"
+        rejected = bool(turn > options.max_rotation)  # ICP slid off (symmetric or featureless overlap)
+        if not rejected:
+            info = reg.get_information_matrix_from_point_clouds(down[i], down[j], options.max_correspondence, T)
+            if options.anchor == "prior":  # correspondences as measurements with the ICP residual
+                info = np.asarray(info) / max(rmse, options.point_sigma) ** 2
+            graph.edges.append(reg.PoseGraphEdge(i, j, T, info, uncertain=not odometry))
+        edges.append(PairEdge(i, j, kind, int(counts[i, j]), float(fitness), float(rmse), T, rejected))
         if progress:
             progress(label, k + 1, len(pairs))
     before = len(graph.edges)
@@ -194,8 +216,8 @@ def _one_round(down: list, options: MultiwayOptions, progress, round_: int) -> M
                 graph, reg.GlobalOptimizationLevenbergMarquardt(), reg.GlobalOptimizationConvergenceCriteria(),
                 reg.GlobalOptimizationOption(max_correspondence_distance=options.max_correspondence,
                                              edge_prune_threshold=options.edge_prune_threshold,
-                                             reference_node=options.reference))
-    return MultiwayResult([np.asarray(node.pose) for node in graph.nodes], edges, counts,
+                                             reference_node=reference))
+    return MultiwayResult([np.asarray(node.pose) for node in graph.nodes[:n]], edges, counts,
                           before - len(graph.edges))
 
 

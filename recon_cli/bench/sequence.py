@@ -1,0 +1,138 @@
+"""Sequence-optimization benchmark of thesis section 4.3 (``recon bench sequence``).
+
+The 24 views of eq. 4.1 from the Table 4.1 start configuration (0.3 m cube on the table),
+velocity scaling 0.15 and acceleration scaling 0.3 as the thesis benchmarked. Cases:
+
+- A: script order, every move planned to the view's pose goal (several IK solutions as goal
+  states, as ``recon run`` does without optimization);
+- B: Table 2.2 with beta = 1.5, one IK solution per view (each found from the start
+  configuration, as a planner asked for all goals at once from the robot's state);
+- C: B after the graph optimization of Table 2.3 (k_max = 120; redraws from random seeds);
+- D (ours): C's IK choice driven by the cost of a locally optimized tour, 2-opt/Or-opt on
+  the edge estimates, lazy planning of the chosen edges (``local_search_sequence``).
+
+Per run: total trajectory duration t_p (sum of the durations of the 24 moves) and planning
+requests n_req. Runs are independent and seeded.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from recon_cli.bench.scenarios import BENCH_CUBE, TABLE_4_1_START, eq_4_1_views
+from recon_cli.planning.lower_bound import duration_lower_bound
+from recon_cli.planning.planner import MotionPlanner, PlanOptions, seed_ompl
+from recon_cli.robot.cell import Cell
+from recon_cli.robot.description import CellConfig
+from recon_cli.robot.ik import IKOptions
+from recon_cli.sequence.graph import ViewGraph
+from recon_cli.sequence.optimize import local_search_sequence, optimize_graph
+from recon_cli.sequence.tsp import finish, lazy_mst_sequence
+
+CASES = ("A", "B", "C", "D")
+THESIS = {"A": (141.81, 24.00), "B": (127.37, 27.40), "C": (120.33, 26.99)}
+
+
+@dataclass(frozen=True)
+class RunRow:
+    case: str
+    run: int
+    duration: float  # t_p [s]
+    requests: int
+    seconds: float  # wall clock of the run
+    order: list[int]
+    lower_bound_ratio: float  # mean planned duration / its lower bound
+
+
+class SequenceProblem:
+    """The cell, the views and the planning functions of the benchmark."""
+
+    def __init__(self, options: PlanOptions | None = None) -> None:
+        self.cell = Cell(CellConfig(), object_box=BENCH_CUBE)
+        self.options = options or PlanOptions(velocity_scale=0.15, acceleration_scale=0.3)
+        self.planner = MotionPlanner(self.cell, self.options)
+        self.poses = [self.cell.view_pose(v) for v in eq_4_1_views()]
+        lim = self.cell.limits
+        o = self.options
+        self.lower_bound = lambda a, b: duration_lower_bound(a, b, lim.velocity, lim.acceleration,
+                                                             o.velocity_scale, o.acceleration_scale)
+        self.start = TABLE_4_1_START.copy()
+
+    def ik(self, k: int, rng: np.random.Generator, seed: np.ndarray | None = None) -> np.ndarray | None:
+        """One IK solution of view k (1-based vertex): the one found from ``seed`` when
+        given, else from random seeds; None if none was found."""
+        try:
+            r = self.cell.solve_pose(self.poses[k - 1], rng, seed=seed, options=IKOptions(max_solutions=1))
+        except Exception:  # noqa: BLE001 - unreachable views are simply not redrawn
+            return None
+        return r.solutions[0].q if r.solutions else None
+
+    def edge_planner(self, rng: np.random.Generator):
+        def plan(a: np.ndarray, b: np.ndarray):
+            r = self.planner.plan_to_joints(a, b, seed=int(rng.integers(1 << 30)))
+            return r.trajectory if r.ok else None
+        return plan
+
+    def graph(self, rng: np.random.Generator) -> ViewGraph:
+        # as a planner asked for all goals at once from the robot's state: IK seeded there
+        configs = [self.start] + [self.ik(k, rng, self.start) for k in range(1, len(self.poses) + 1)]
+        if any(c is None for c in configs):
+            raise RuntimeError("a view of eq. 4.1 has no IK solution")
+        return ViewGraph(configs, self.lower_bound)
+
+
+def run_case(problem: SequenceProblem, case: str, seed: int, beta: float = 1.5, k_max: int = 120) -> RunRow:
+    rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    if case == "A0":
+        q, total, requests, ratios = problem.start, 0.0, 0, []
+        for T in problem.poses:
+            r = problem.planner.plan_to_pose(q, T, rng)
+            requests += r.attempts
+            if not r.ok:
+                total = np.inf
+                break
+            total += r.trajectory.duration
+            ratios.append(r.trajectory.duration / max(problem.lower_bound(q, r.trajectory.goal), 1e-9))
+            q = r.trajectory.goal
+        order = list(range(len(problem.poses) + 1))
+        return RunRow(case, seed, float(total), requests, time.perf_counter() - t0, order,
+                      float(np.mean(ratios)) if ratios else float("nan"))
+    graph = problem.graph(rng)
+    redraw = lambda v: problem.ik(v, rng)  # noqa: E731
+    if case == "A":
+        planner = problem.edge_planner(rng)
+        order = list(range(graph.size))
+        result = finish(graph, order, planner)
+        ratios = [graph.cost[e] / max(problem.lower_bound(graph.configs[e[0]], graph.configs[e[1]]), 1e-9)
+                  for e in graph.planned if np.isfinite(graph.cost[e])]
+        return RunRow(case, seed, result.duration, result.requests, time.perf_counter() - t0, order,
+                      float(np.mean(ratios)) if ratios else float("nan"))
+    if case == "C":
+        graph, _ = optimize_graph(graph, redraw, k_max)
+    if case == "D":
+        graph, _ = optimize_graph(graph, redraw, k_max)
+    planner = problem.edge_planner(rng)
+    result = (local_search_sequence(graph, planner, beta) if case == "D"
+              else lazy_mst_sequence(graph, planner, beta))
+    ratios = [graph.cost[e] / max(problem.lower_bound(graph.configs[e[0]], graph.configs[e[1]]), 1e-9)
+              for e in graph.planned if np.isfinite(graph.cost[e])]
+    return RunRow(case, seed, result.duration, result.requests, time.perf_counter() - t0, result.order,
+                  float(np.mean(ratios)) if ratios else float("nan"))
+
+
+def run_sequence_bench(runs: int, seed: int, cases=CASES,
+                       progress: Callable[[str, int, int], None] | None = None) -> list[RunRow]:
+    seed_ompl(seed)
+    problem = SequenceProblem()
+    rows = []
+    for case in cases:
+        for r in range(runs):
+            rows.append(run_case(problem, case, seed * 100_003 + r))
+            if progress:
+                progress(f"case {case}", r + 1, runs)
+    return rows

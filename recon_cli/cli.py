@@ -358,6 +358,9 @@ def run_script(
     dry_run: Annotated[bool, typer.Option("--dry-run", help="Plan every move, move nothing, scan nothing.")] = False,
     object_name: Annotated[str | None, typer.Option("--object", help="Simulated object (overrides the script; "
                                                                      "default: the drill if present).")] = None,
+    optimize: Annotated[bool | None, typer.Option("--optimize/--no-optimize", help="Reorder independent moves "
+                                                  "and scans (default: as the script says).")] = None,
+    sequence_method: Annotated[str, typer.Option(help="'ours' (local search) or 'thesis' (Tables 2.2/2.3).")] = "ours",
     seed: SeedOpt = 0,
 ) -> None:
     """Run an automation script: moves, scans, registration, reconstruction, exports."""
@@ -367,10 +370,13 @@ def run_script(
 
     if backend is not None and backend not in ("sim", "hardware"):
         raise UnknownNameError("backend", backend, ("sim", "hardware"))
+    if sequence_method not in ("ours", "thesis"):
+        raise UnknownNameError("sequence method", sequence_method, ("ours", "thesis"))
     s = load_script(script)
     folder = run_folder(out, "run")
     with progress_bar() as update:
-        result = ScriptRunner(s, RunOptions(folder, backend, seed, dry_run, object_name), update).run()
+        result = ScriptRunner(s, RunOptions(folder, backend, seed, dry_run, object_name, optimize, sequence_method),
+                              update).run()
     counts: dict[str, int] = {}
     for r in result.reports:
         counts[r.status] = counts.get(r.status, 0) + 1
@@ -379,6 +385,10 @@ def run_script(
     for r in result.reports:
         if r.status in ("failed", "skipped") and r.message != "dry run":
             console.print(f"[yellow]{r.status}[/] {r.source} {r.command}: {r.message}")
+    for seq in result.sequences:
+        console.print(f"sequence of {seq['moves']} moves ({seq['method']}): planned trajectory time "
+                      f"{seq['planned_duration_s']:.1f} s with {seq['planning_requests']} planning requests "
+                      f"({seq['seconds']:.1f} s)")
     for k, v in result.outputs.items():
         console.print(f"{k}: {v}")
     console.print(f"report: {folder / 'run_report.json'}")
@@ -501,6 +511,48 @@ def bench_registration(
     console.print(table)
     console.print(f"results: {folder / 'bench_registration.json'}, histogram: {folder / 'distances.png'}, "
                   f"mesh: {data['mesh']}")
+
+
+@bench_app.command("sequence")
+def bench_sequence(
+    runs: Annotated[int, typer.Option("--runs", min=1, help="Runs per case.")] = 500,
+    quick: Annotated[bool, typer.Option("--quick", help="CI mode: 3 runs per case.")] = False,
+    cases: Annotated[str, typer.Option(help="Comma-separated cases: A, B, C, D (ours), A0 (recon run's "
+                                            "default order).")] = "A,B,C,D,A0",
+    seed: SeedOpt = 0,
+    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/bench-sequence-<time>).")] = None,
+) -> None:
+    """Thesis 4.3: total trajectory time and planning requests of the 24 views of eq. 4.1."""
+    from dataclasses import asdict
+
+    from rich.table import Table
+
+    from recon_cli.bench.sequence import CASES, ecdf_png, run_sequence_bench, summarize
+    from recon_cli.console import console, progress_bar, run_folder, write_json
+
+    chosen = [c.strip() for c in cases.split(",") if c.strip()]
+    for c in chosen:
+        if c not in CASES:
+            raise UnknownNameError("case", c, CASES)
+    folder = run_folder(out, "bench-sequence")
+    n = 3 if quick else runs
+    with progress_bar() as update:
+        rows = run_sequence_bench(n, seed, chosen, update)
+    summary = summarize(rows)
+    write_json(folder / "bench_sequence.json", {"runs_per_case": n, "seed": seed, "velocity_scale": 0.15,
+                                                "acceleration_scale": 0.3, "summary": summary,
+                                                "runs": [asdict(r) for r in rows]})
+    ecdf_png(folder / "t_p_ecdf.png", rows)
+    table = Table(title=f"eq. 4.1 from the Table 4.1 start, {n} runs per case (velocity x0.15, acceleration x0.3)")
+    for col in ("case", "mean t_p", "vs A", "mean n_req", "max n_req", "failed", "thesis t_p / n_req", "wall / run"):
+        table.add_column(col, justify="right")
+    for case, v in summary.items():
+        th = v["thesis"]
+        table.add_row(case, f"{v['t_p_mean']:.2f} s", "-" if v["vs_A"] is None else f"{v['vs_A'] * 100:+.2f} %",
+                      f"{v['n_req_mean']:.2f}", str(v["n_req_max"]), str(v["failed"]),
+                      "-" if th is None else f"{th[0]:.2f} s / {th[1]:.2f}", f"{v['wall_s_mean']:.1f} s")
+    console.print(table)
+    console.print(f"results: {folder / 'bench_sequence.json'}, plot: {folder / 't_p_ecdf.png'}")
 
 
 @bench_app.command("planners")

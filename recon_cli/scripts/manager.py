@@ -52,6 +52,34 @@ def check_order(script: C.Script) -> None:
                               hint="choose the cell and the object at the top of the script")
 
 
+def movable_groups(commands: tuple[C.Command, ...]) -> dict[int, int]:
+    """Runs of at least two camera moves, each followed only by its scans, whose order does
+    not matter (scans are independent): {first index: end index}. Anything else (set-up,
+    joint moves, waits, registration) keeps its place and splits the runs."""
+    groups, k, n = {}, 0, len(commands)
+    while k < n:
+        start, moves = k, 0
+        while k < n and isinstance(commands[k], C.Move):
+            k += 1
+            moves += 1
+            while k < n and isinstance(commands[k], C.Scan):
+                k += 1
+        if moves >= 2:
+            groups[start] = k
+        k = max(k, start + 1) if moves == 0 else k
+    return groups
+
+
+def _units(commands) -> list[tuple[C.Command, list[C.Command]]]:
+    units: list[tuple[C.Command, list[C.Command]]] = []
+    for cmd in commands:
+        if isinstance(cmd, C.Move):
+            units.append((cmd, []))
+        else:
+            units[-1][1].append(cmd)
+    return units
+
+
 def _tag(cmd: C.Command) -> str:
     return {"SetCell": "cell", "SetObject": "object"}.get(cmd.keyword, cmd.keyword)
 
@@ -63,6 +91,8 @@ class RunOptions:
     seed: int = 0
     dry_run: bool = False
     object_name: str | None = None  # simulated object (overrides the script's <object>)
+    optimize: bool | None = None  # sequence optimization (None: as the script says)
+    sequence_method: str = "ours"  # "ours" (local search) or "thesis" (Table 2.2 + 2.3)
 
 
 @dataclass
@@ -88,6 +118,7 @@ class RunResult:
     seconds: float
     outputs: dict[str, str]
     aborted: str = ""
+    sequences: list[dict] = field(default_factory=list)
 
     @property
     def failed(self) -> list[CommandReport]:
@@ -119,6 +150,9 @@ class ScriptRunner:
         self.fragments: dict[str, object] = {}
         self.outputs: dict[str, str] = {}
         self.reports: list[CommandReport] = []
+        self.sequences: list[dict] = []
+        optimize = script.optimize if options.optimize is None else options.optimize
+        self.groups = movable_groups(script.commands) if optimize else {}
 
     # ------------------------------------------------------------------ run
     def run(self) -> RunResult:
@@ -131,26 +165,17 @@ class ScriptRunner:
         aborted = ""
         n = len(self.script.commands)
         try:
-            for k, cmd in enumerate(self.script.commands):
-                report = CommandReport(str(cmd.source), cmd.describe(), "done")
-                t = time.perf_counter()
-                try:
-                    self._dispatch(cmd, report)
-                except ScriptAborted:
-                    raise
-                except ReconError as exc:
-                    report.status, report.message = "failed", exc.one_line()
-                    if isinstance(cmd, ACTIONS) and not isinstance(cmd, C.Scan):
-                        self.move_failed = True
-                    if self.script.on_failure == "abort":
-                        report.seconds = time.perf_counter() - t
-                        self.reports.append(report)
-                        raise ScriptAborted(f"{cmd.source}: {exc.one_line()}",
-                                            hint="the script says on_failure=\"abort\"; earlier scans are kept") \
-                            from None
-                report.seconds = time.perf_counter() - t
-                self.reports.append(report)
-                self.progress("script", k + 1, n)
+            k = 0
+            while k < n:
+                if k in self.groups:
+                    end = self.groups[k]
+                    self._run_group(self.script.commands[k:end])
+                    k = end
+                    self.progress("script", k, n)
+                    continue
+                self._run_command(self.script.commands[k])
+                k += 1
+                self.progress("script", k, n)
         except ScriptAborted as exc:
             aborted = str(exc)
             raise
@@ -158,7 +183,129 @@ class ScriptRunner:
             self._close()
             self._write_report(time.perf_counter() - t0, aborted)
         return RunResult(self.out, self.script, self.reports, self._scan_count(), time.perf_counter() - t0,
-                         dict(self.outputs), aborted)
+                         dict(self.outputs), aborted, list(self.sequences))
+
+    def _run_command(self, cmd: C.Command, planned=None, note: str = "") -> None:
+        report = CommandReport(str(cmd.source), cmd.describe(), "done", message=note)
+        t = time.perf_counter()
+        try:
+            if planned is not None:
+                self._execute_planned(cmd, planned, report)
+            else:
+                self._dispatch(cmd, report)
+        except ScriptAborted:
+            raise
+        except ReconError as exc:
+            report.status, report.message = "failed", exc.one_line()
+            if isinstance(cmd, ACTIONS) and not isinstance(cmd, C.Scan):
+                self.move_failed = True
+            if self.script.on_failure == "abort":
+                report.seconds = time.perf_counter() - t
+                self.reports.append(report)
+                raise ScriptAborted(f"{cmd.source}: {exc.one_line()}",
+                                    hint="the script says on_failure=\"abort\"; earlier scans are kept") from None
+        report.seconds = time.perf_counter() - t
+        self.reports.append(report)
+
+    # ------------------------------------------------------------------ sequence optimization
+    def _run_group(self, commands: tuple[C.Command, ...]) -> None:
+        """Moves with their scans, reordered by the sequence optimizer (thesis 2.3); the
+        planned paths are executed as planned (no edge is planned twice)."""
+        from recon_cli.planning.lower_bound import duration_lower_bound
+        from recon_cli.robot.ik import IKOptions
+        from recon_cli.sequence.graph import ViewGraph
+        from recon_cli.sequence.optimize import local_search_sequence, optimize_graph
+        from recon_cli.sequence.tsp import lazy_mst_sequence
+
+        units = _units(commands)
+        self._ensure_station()
+        q0 = self.q_planned if self.options.dry_run else self.station.robot.measured_joints()
+        configs, kept, poses = [np.asarray(q0, dtype=float)], [], []
+        for move, scans in units:
+            try:
+                T = self._goal_pose(move)
+                ik = self.cell.solve_pose(T, self.rng, seed=q0, options=IKOptions(max_solutions=1))
+            except ReconError as exc:  # reported in script order, like any failed move
+                self._fail_unit(move, scans, exc)
+                continue
+            configs.append(ik.solutions[0].q)
+            kept.append((move, scans))
+            poses.append(T)
+        if not kept:
+            return
+        lim, plan = self.cell.limits, self.plan
+
+        def lower(a, b):
+            return duration_lower_bound(a, b, lim.velocity, lim.acceleration, plan.velocity_scale,
+                                        plan.acceleration_scale)
+
+        def redraw(v):
+            try:
+                r = self.cell.solve_pose(poses[v - 1], self.rng, options=IKOptions(max_solutions=1))
+            except ReconError:
+                return None
+            return r.solutions[0].q
+
+        from recon_cli.planning.planner import MotionPlanner
+
+        planner = MotionPlanner(self.cell, self.plan)
+
+        def plan_edge(a, b):
+            r = planner.plan_to_joints(a, b, seed=int(self.rng.integers(1 << 30)))
+            return r.trajectory if r.ok else None
+
+        t = time.perf_counter()
+        graph, draws = optimize_graph(ViewGraph(configs, lower), redraw, k_max=120)
+        if self.options.sequence_method == "thesis":
+            result = lazy_mst_sequence(graph, plan_edge, beta=1.5)
+        else:
+            result = local_search_sequence(graph, plan_edge, beta=1.5, request_cost=10.0)
+        script_order = list(range(graph.size))
+        self.sequences.append({
+            "moves": len(kept), "method": self.options.sequence_method, "ik_draws": draws,
+            "order": [str(kept[v - 1][0].source) + f" #{v}" for v in result.order[1:]],
+            "planned_duration_s": result.duration, "planning_requests": result.requests,
+            "script_order_lower_bound_s": float(sum(graph.lower_bound(graph.configs[a], graph.configs[b])
+                                                    for a, b in zip(script_order[:-1], script_order[1:],
+                                                                    strict=True))),
+            "seconds": time.perf_counter() - t})
+        prev = 0
+        for position, v in enumerate(result.order[1:], start=1):
+            move, scans = kept[v - 1]
+            traj = graph.trajectory(prev, v)
+            note = f"sequence position {position} of {len(kept)}"
+            self._run_command(move, planned=traj if traj is not None else False, note=note)
+            for scan in scans:
+                self._run_command(scan)
+            prev = v if not self.move_failed else prev
+
+    def _execute_planned(self, cmd: C.Move, traj, report: CommandReport) -> None:
+        """A move of an optimized sequence: its planned trajectory, or (when the optimizer
+        found no path, ``traj`` False) a normal planning request from where the robot is."""
+        if traj is False:
+            self._dispatch(cmd, report)
+            return
+        self.move_failed = False
+        report.details.update(planner="sequence", trajectory_s=traj.duration)
+        if self.options.dry_run:
+            self.q_planned = traj.goal
+            report.status = "planned"
+            return
+        q = self.station.robot.measured_joints()
+        if np.max(np.abs(q - traj.start)) > 1e-3:  # not where the plan starts: plan afresh
+            self._dispatch(cmd, report)
+            return
+        self.station.robot.execute(traj)
+        self._last_view = (cmd, self._goal_pose(cmd))
+
+    def _fail_unit(self, move: C.Command, scans: list[C.Command], exc: ReconError) -> None:
+        self.reports.append(CommandReport(str(move.source), move.describe(), "failed", message=exc.one_line()))
+        for scan in scans:
+            self.reports.append(CommandReport(str(scan.source), scan.describe(), "skipped",
+                                              message="the move before it failed"))
+        if self.script.on_failure == "abort":
+            raise ScriptAborted(f"{move.source}: {exc.one_line()}",
+                                hint="the script says on_failure=\"abort\"; earlier scans are kept")
 
     def _scan_count(self) -> int:
         return 0 if self.store is None else len(self.store)
@@ -170,7 +317,8 @@ class ScriptRunner:
             "script": self.script.path, "name": self.script.name, "dialect": self.script.dialect,
             "on_failure": self.script.on_failure, "dry_run": self.options.dry_run, "backend": self.backend,
             "seed": self.options.seed, "seconds": seconds, "scans": self._scan_count(), "aborted": aborted or None,
-            "outputs": self.outputs, "commands": [r.to_dict() for r in self.reports],
+            "outputs": self.outputs, "sequence_optimization": self.sequences,
+            "commands": [r.to_dict() for r in self.reports],
         })
 
     def _close(self) -> None:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from recon_cli.cli import main
 from recon_cli.paths import SCRIPTS_DIR
 from recon_cli.reconstruction.scan_store import ScanStore
@@ -102,3 +104,28 @@ def test_thesis_dialect_runs_unchanged(tmp_path):
     assert (out / "all.ply").stat().st_size > 0 and (out / "mesh.ply").stat().st_size > 0
     scans = [c for c in report["commands"] if c["command"].startswith("scan")]
     assert [c["fragment"] for c in scans] == ["a", "b"] and all(c["fragment_points"] > 100 for c in scans)
+
+
+def test_optimize_reorders_independent_moves(tmp_path):
+    """--optimize: the moves between set-up and registration are reordered as one group,
+    every view is visited once, the planned paths are the ones executed (no second
+    planning), and the report gives the planned total time and the request count."""
+    from recon_cli.scripts.manager import movable_groups
+
+    body = "".join(GOOD.format(phi=phi) for phi in (0, 180, 60, 240)) + "<register/>\n"
+    p = _script(tmp_path, body)
+    out = tmp_path / "opt"
+    assert main(["run", str(p), "--out", str(out), "--optimize"]) == 0
+    report = json.loads((out / "run_report.json").read_text())
+    seq = report["sequence_optimization"][0]
+    assert seq["moves"] == 4 and len(seq["order"]) == 4 and len(set(seq["order"])) == 4
+    assert 4 <= seq["planning_requests"] <= 8 and seq["planned_duration_s"] > 0
+    moves = [c for c in report["commands"] if c["command"].startswith("move")]
+    assert [c["planner"] for c in moves] == ["sequence"] * 4 and all(c["status"] == "done" for c in moves)
+    assert sum(c["trajectory_s"] for c in moves) == pytest.approx(seq["planned_duration_s"])
+    assert len(ScanStore(out / "scans")) == 4
+    # what may move: runs of moves with their scans, nothing else
+    from recon_cli.scripts.loader import load_script
+
+    cmds = load_script(p).commands
+    assert movable_groups(cmds) == {3: 11}

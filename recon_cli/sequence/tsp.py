@@ -75,8 +75,10 @@ def lazy_mst_sequence(graph: ViewGraph, planner: EdgePlanner, beta: float = 1.5)
             if not pending:
                 order = preorder(tree, graph.size, graph.cost)
                 return finish(graph, order, planner, rounds)
-            # the most expensive estimate first: its real cost most likely changes the tree
-            i, j = max(pending, key=lambda e: graph.cost[e])
+            # the first non-exact tree edge in preorder (as the thesis' implementation)
+            order = preorder(tree, graph.size, graph.cost)
+            rank = {v: k for k, v in enumerate(order)}
+            i, j = min(pending, key=lambda e: max(rank[e[0]], rank[e[1]]))
             graph.plan(i, j, planner)
 
 

@@ -222,9 +222,9 @@ class ScriptRunner:
         q0 = self.q_planned if self.options.dry_run else self.station.robot.measured_joints()
         configs, kept, poses = [np.asarray(q0, dtype=float)], [], []
         for move, scans in units:
-            try:
+            try:  # each view's IK seeded with the previous view's solution (as the thesis)
                 T = self._goal_pose(move)
-                ik = self.cell.solve_pose(T, self.rng, seed=q0, options=IKOptions(max_solutions=1))
+                ik = self.cell.solve_pose(T, self.rng, seed=configs[-1], options=IKOptions(max_solutions=1))
             except ReconError as exc:  # reported in script order, like any failed move
                 self._fail_unit(move, scans, exc)
                 continue

@@ -394,6 +394,57 @@ def run_script(
     console.print(f"report: {folder / 'run_report.json'}")
 
 
+@app.command()
+def autoscan(
+    dc: Annotated[float, typer.Option("--dc", min=0.2, max=1.5, help="Camera distance to the ellipsoid [m].")] = 0.55,
+    n: Annotated[int, typer.Option("--n", min=2, max=200, help="Scans in total (the initial one included).")] = 16,
+    object_name: Annotated[str, typer.Option("--object", help="Object to scan (built-in, YCB or mesh file).")]
+    = "bottle",
+    scale: Annotated[float, typer.Option(help="Scale of a mesh file.")] = 1.0,
+    m: Annotated[int, typer.Option("--m", min=1, help="Preliminary samples per view (eq. 2.7).")] = 200,
+    sigma: Annotated[float, typer.Option(min=1e-12, help="Potential-field regularization (eq. 2.6).")] = 1e-5,
+    initial: Annotated[str | None, typer.Option(help="Initial view 'theta,phi' in degrees around the object's box "
+                                                     "centre at r = dc + 0.1 (default 45,0).")] = None,
+    cell: CellOpt = "gantry",
+    safety: SafetyOpt = 0.03,
+    resolution: Annotated[float, typer.Option(min=0.05, max=1.0, help="Image size relative to 1600 x 1200.")] = 1.0,
+    pictures: Annotated[bool, typer.Option("--pictures/--no-pictures", help="A PNG per iteration.")] = True,
+    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/autoscan-<time>).")] = None,
+    seed: SeedOpt = 0,
+) -> None:
+    """Scan an unknown object autonomously: the ellipsoid view planner of the thesis."""
+    from recon_cli.autoscan import Autoscan, AutoscanOptions
+    from recon_cli.console import console, progress_bar, run_folder
+    from recon_cli.robot.description import CellConfig, CellKind
+
+    config = CellConfig(kind=CellKind.parse(cell), safety_distance=safety)
+    folder = run_folder(out, "autoscan")
+    view = None
+    if initial is not None:
+        theta, phi = parse_vector(initial, 2, "--initial", "degrees")
+        from recon_cli.objects import load_object
+
+        center, _ = load_object(object_name, scale).crop_box(0.01)
+        view = _view(",".join(map(str, center)), dc + 0.1, theta, phi, 0.0, "world")
+    opts = AutoscanOptions(folder, object_name, scale, config, n, dc, m, sigma, view, seed=seed,
+                           resolution=resolution, pictures=pictures)
+    with progress_bar() as update:
+        result = Autoscan(opts, update).run()
+    if result.interrupted:
+        console.print(f"interrupted after {result.scans} scans; they are in {folder} "
+                      f"(recon register {folder} works on them)")
+        raise typer.Exit(130)
+    console.print(f"{result.scans} scans of the {object_name} ({result.infeasible} infeasible views sampled, "
+                  f"{result.requests} planning requests, {result.trajectory_s:.1f} s of trajectories) "
+                  f"in {result.seconds:.1f} s")
+    if result.coverage is not None:
+        console.print(f"ground truth: coverage {result.coverage * 100:.2f} % of the surface (1 mm), signed distance "
+                      f"mean {result.accuracy['mean_mm']:+.3f} mm, std {result.accuracy['std_mm']:.3f} mm")
+    console.print(f"mesh: {result.mesh}\ncloud: {result.cloud}\nreport: {result.report}")
+    if result.pictures:
+        console.print(f"pictures: {result.pictures[0].parent}")
+
+
 @bench_app.command("ik")
 def bench_ik(
     n: Annotated[int, typer.Option("--n", min=1, help="Number of camera poses.")] = 500,
@@ -553,6 +604,51 @@ def bench_sequence(
                       "-" if th is None else f"{th[0]:.2f} s / {th[1]:.2f}", f"{v['wall_s_mean']:.1f} s")
     console.print(table)
     console.print(f"results: {folder / 'bench_sequence.json'}, plot: {folder / 't_p_ecdf.png'}")
+
+
+@bench_app.command("viewplan")
+def bench_viewplan(
+    objects: Annotated[str, typer.Option(help="Comma-separated objects (default: the built-ins).")]
+    = "wood_block,toy_blocks,bottle,mug",
+    methods: Annotated[str, typer.Option(help="Comma-separated: ellipsoid, sphere, random.")] \
+        = "ellipsoid,sphere,random",
+    n: Annotated[int, typer.Option("--n", min=2, help="Scans per run.")] = 16,
+    dc: Annotated[float, typer.Option("--dc", help="Camera distance to the ellipsoid [m].")] = 0.55,
+    cell: CellOpt = "gantry",
+    resolution: Annotated[float, typer.Option(min=0.05, max=1.0, help="Image size relative to 1600 x 1200.")] = 1.0,
+    seed: SeedOpt = 0,
+    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/bench-viewplan-<time>).")] = None,
+) -> None:
+    """Thesis 4.4: ellipsoid view planner vs evenly spread and random views, every object."""
+    from dataclasses import asdict
+
+    from rich.table import Table
+
+    from recon_cli.autoscan import METHODS
+    from recon_cli.bench.viewplan import coverage_png, run_viewplan_bench
+    from recon_cli.console import console, progress_bar, run_folder, write_json
+    from recon_cli.robot.description import CellConfig, CellKind
+
+    chosen = [x.strip() for x in methods.split(",") if x.strip()]
+    for x in chosen:
+        if x not in METHODS:
+            raise UnknownNameError("method", x, METHODS)
+    folder = run_folder(out, "bench-viewplan")
+    with progress_bar() as update:
+        rows = run_viewplan_bench(folder, [o.strip() for o in objects.split(",") if o.strip()], chosen, n, dc, seed,
+                                  resolution, CellConfig(kind=CellKind.parse(cell)), update)
+    write_json(folder / "bench_viewplan.json", {"n": n, "d_c": dc, "cell": cell, "rows": [asdict(r) for r in rows]})
+    coverage_png(folder / "coverage.png", rows)
+    table = Table(title=f"N = {n}, d_c = {dc} m, {cell} cell")
+    for col in ("object", "method", "initial", "scans", "coverage", "mean", "std", "infeasible", "requests",
+                "trajectories", "wall clock"):
+        table.add_column(col, justify="right")
+    for r in rows:
+        table.add_row(r.object_name, r.method, r.initial, str(r.scans), f"{r.coverage * 100:.2f} %",
+                      f"{r.mean_mm:+.3f} mm", f"{r.std_mm:.3f} mm", str(r.infeasible), str(r.requests),
+                      f"{r.trajectory_s:.1f} s", f"{r.seconds:.1f} s")
+    console.print(table)
+    console.print(f"results: {folder / 'bench_viewplan.json'}, plot: {folder / 'coverage.png'}")
 
 
 @bench_app.command("planners")

@@ -167,6 +167,19 @@ class Autoscan:
     def _partial_points(self) -> np.ndarray:
         return np.vstack(self.partial) if self.partial else self.center[None, :]
 
+    def _default_initial(self) -> np.ndarray:
+        """The first reachable of a few views around the box centre at r = d_c + 0.1
+        (45 deg above it first, from +x; then other angles: the 7-DoF cell reaches less)."""
+        q = self.station.robot.measured_joints()
+        for theta in (45.0, 30.0, 60.0, 20.0):
+            for phi in (0.0, 90.0, 180.0, 270.0):
+                T = self.cell.view_pose(View(tuple(self.center), self.opt.d_c + 0.1, np.radians(theta),
+                                             np.radians(phi)))
+                if self._feasible(T, q) is not None:
+                    return T
+        raise ReconError("no initial view around the object is reachable",
+                         hint="give one with --initial theta,phi or a smaller --dc")
+
     # ------------------------------------------------------------------ candidates
     def _ellipsoid_candidates(self, ell, views: list[ViewRecord], needed: int, q: np.ndarray, it: int):
         from recon_cli.viewplan.views import camera_pose, next_sample
@@ -234,8 +247,7 @@ class Autoscan:
         interrupted = False
         queue: list = []
         try:
-            initial = opt.initial or View(tuple(self.center), opt.d_c + 0.1, np.radians(45.0), 0.0)
-            T0 = self.cell.view_pose(initial)
+            T0 = self.cell.view_pose(opt.initial) if opt.initial is not None else self._default_initial()
             move = self.acq.move_to_pose(T0, what="initial view")
             self.requests += move.plan.attempts
             self.trajectory_s += move.execution.duration

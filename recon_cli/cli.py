@@ -224,6 +224,15 @@ def capture(
         raise typer.Exit(1)
 
 
+def _choices(text: str, allowed, what: str) -> list[str]:
+    """Parse 'a,b' into names, each one of ``allowed`` (else a one-line error)."""
+    chosen = [x.strip() for x in text.split(",") if x.strip()]
+    for x in chosen:
+        if x not in allowed:
+            raise UnknownNameError(what, x, allowed)
+    return chosen
+
+
 def _index_list(text: str, option: str, n: int) -> list[int]:
     """Parse '3,7' into [3, 7] (1-based indices up to n)."""
     out = []
@@ -581,10 +590,7 @@ def bench_sequence(
     from recon_cli.bench.sequence import CASES, ecdf_png, run_sequence_bench, summarize
     from recon_cli.console import console, progress_bar, run_folder, write_json
 
-    chosen = [c.strip() for c in cases.split(",") if c.strip()]
-    for c in chosen:
-        if c not in CASES:
-            raise UnknownNameError("case", c, CASES)
+    chosen = _choices(cases, CASES, "case")
     folder = run_folder(out, "bench-sequence")
     n = 3 if quick else runs
     with progress_bar() as update:
@@ -629,10 +635,7 @@ def bench_viewplan(
     from recon_cli.console import console, progress_bar, run_folder, write_json
     from recon_cli.robot.description import CellConfig, CellKind
 
-    chosen = [x.strip() for x in methods.split(",") if x.strip()]
-    for x in chosen:
-        if x not in METHODS:
-            raise UnknownNameError("method", x, METHODS)
+    chosen = _choices(methods, METHODS, "method")
     folder = run_folder(out, "bench-viewplan")
     with progress_bar() as update:
         rows = run_viewplan_bench(folder, [o.strip() for o in objects.split(",") if o.strip()], chosen, n, dc, seed,

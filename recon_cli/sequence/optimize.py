@@ -105,22 +105,9 @@ def local_search_sequence(graph: ViewGraph, planner: EdgePlanner, beta: float = 
     exact costs and calibrated estimates (lower bound x the mean real/lower-bound ratio of
     the edges planned so far), lazy planning of the chosen edges, search again when an edge
     costs more than ``beta`` times its estimate."""
-    from recon_cli.sequence.tsp import minimum_spanning_tree, tree_cost
+    from recon_cli.sequence.tsp import exact_tree
 
-    # Table 2.2 until every tree edge is exact
-    rounds = 0
-    while tree_first:
-        tree = minimum_spanning_tree(graph.cost)
-        rounds += 1
-        kappa = tree_cost(graph.cost, tree)
-        while tree_cost(graph.cost, tree) <= beta * kappa:
-            pending = [e for e in tree if not graph.exact[e]]
-            if not pending:
-                break
-            graph.plan(*max(pending, key=lambda e: graph.cost[e]), planner)
-        else:
-            continue
-        break
+    rounds = exact_tree(graph, planner, beta, pick="largest")[1] if tree_first else 0
     lower = graph.cost.copy()  # lower bounds where not exact
     order = preorder(minimum_spanning_tree(graph.cost), graph.size, graph.cost)
     while True:

@@ -60,9 +60,12 @@ class SequenceResult:
     tree_rounds: int  # minimum spanning trees computed
 
 
-def lazy_mst_sequence(graph: ViewGraph, planner: EdgePlanner, beta: float = 1.5) -> SequenceResult:
-    """Table 2.2 on a graph whose edges are lower bounds (or already exact); then the
-    traversal's remaining edges are planned (each edge at most once) and summed."""
+def exact_tree(graph: ViewGraph, planner: EdgePlanner, beta: float = 1.5,
+               pick: str = "preorder") -> tuple[list[tuple[int, int]], int]:
+    """The loop of Table 2.2: minimum spanning trees on the current costs, non-exact tree
+    edges planned while c(T) <= beta kappa, until a tree has only exact edges. ``pick``: the
+    first non-exact edge in preorder (the thesis' implementation) or the "largest"
+    estimate. Returns (tree, trees computed)."""
     if beta < 1.0:
         raise ValueError("beta must be at least 1")
     rounds = 0
@@ -73,13 +76,20 @@ def lazy_mst_sequence(graph: ViewGraph, planner: EdgePlanner, beta: float = 1.5)
         while tree_cost(graph.cost, tree) <= beta * kappa:
             pending = [e for e in tree if not graph.exact[e]]
             if not pending:
-                order = preorder(tree, graph.size, graph.cost)
-                return finish(graph, order, planner, rounds)
-            # the first non-exact tree edge in preorder (as the thesis' implementation)
-            order = preorder(tree, graph.size, graph.cost)
-            rank = {v: k for k, v in enumerate(order)}
-            i, j = min(pending, key=lambda e: max(rank[e[0]], rank[e[1]]))
-            graph.plan(i, j, planner)
+                return tree, rounds
+            if pick == "largest":
+                edge = max(pending, key=lambda e: graph.cost[e])
+            else:
+                rank = {v: k for k, v in enumerate(preorder(tree, graph.size, graph.cost))}
+                edge = min(pending, key=lambda e: max(rank[e[0]], rank[e[1]]))
+            graph.plan(*edge, planner)
+
+
+def lazy_mst_sequence(graph: ViewGraph, planner: EdgePlanner, beta: float = 1.5) -> SequenceResult:
+    """Table 2.2 on a graph whose edges are lower bounds (or already exact); then the
+    traversal's remaining edges are planned (each edge at most once) and summed."""
+    tree, rounds = exact_tree(graph, planner, beta)
+    return finish(graph, preorder(tree, graph.size, graph.cost), planner, rounds)
 
 
 def finish(graph: ViewGraph, order: list[int], planner: EdgePlanner, rounds: int = 0) -> SequenceResult:

@@ -41,7 +41,12 @@ class MultiwayOptions:
     anchor: str = "prior"
     prior_sigma: tuple[float, float] = (0.002, 0.1)  # [m, deg] per global pose
     point_sigma: float = 0.0002  # [m] floor of the ICP residual that weights ICP edges
-    max_rotation: float = 5.0  # [deg] a pairwise ICP turning more than this is rejected
+    # a pairwise ICP result that moves the source farther from the global alignment than the
+    # global registration's own uncertainty allows (3 sigma of the relative pose of two
+    # scans, prior_sigma x sqrt(2)) slid along a symmetry of the overlap and is rejected
+    gate: float = 3.0
+    normal_agreement: float = 0.9  # cosine: correspondences with normals further apart are dropped
+    effective_samples: int = 200  # independent measurements a pairwise overlap is worth
     rounds: int = 1  # graph built and optimized this many times
     method: str = "point_to_plane"  # pairwise ICP: point_to_plane | point_to_point | colored
 
@@ -63,7 +68,7 @@ class PairEdge:
     fitness: float  # ICP fitness (share of source points with a correspondence)
     rmse: float  # ICP inlier RMSE [m]
     transformation: np.ndarray  # source -> target
-    rejected: bool = False  # ICP turned more than max_rotation: left out of the graph
+    rejected: bool = False  # ICP moved farther than the global uncertainty allows: left out
 
     def to_dict(self) -> dict:
         return {"source": self.source, "target": self.target, "kind": self.kind, "rejected": self.rejected,
@@ -110,6 +115,64 @@ def pairwise_icp(source, target, init: np.ndarray, options: MultiwayOptions):
             result = reg.registration_icp(source, target, distance, T, estimation, criteria)
         T = result.transformation
     return result
+
+
+@dataclass(frozen=True)
+class IcpResult:
+    transformation: np.ndarray
+    fitness: float
+    inlier_rmse: float
+    information: np.ndarray  # point-to-plane information of the data alone (rotation, translation)
+
+
+def regularized_icp(source, target, options: MultiwayOptions) -> IcpResult:
+    """Point-to-plane ICP from the global alignment (identity), Gauss-Newton steps with a
+    prior that keeps the correction within the global registration's uncertainty (relative
+    pose of two scans: prior_sigma x sqrt(2)). Where the overlap fixes the pose the data
+    dominate; where it does not (a plane slides in itself, a body of revolution turns about
+    its axis), the correction stays near zero instead of drifting on noise."""
+    import cv2
+    import open3d as o3d
+
+    from recon_cli.geometry.transforms import pose
+
+    reg = o3d.pipelines.registration
+    sigma_t, sigma_r = options.prior_sigma
+    prior = np.diag([1.0 / (2.0 * np.radians(sigma_r) ** 2)] * 3 + [1.0 / (2.0 * sigma_t**2)] * 3)
+    src_pts, src_n = np.asarray(source.points), np.asarray(source.normals)
+    tgt_pts, tgt_n = np.asarray(target.points), np.asarray(target.normals)
+    T = np.eye(4)
+    x = np.zeros(6)  # accumulated correction (rotation vector, translation), small angles
+    rmse, fitness, H_data = options.point_sigma, 0.0, np.zeros((6, 6))
+    for scale in options.scales:
+        distance = options.max_correspondence * scale
+        for _ in range(options.icp_iterations):
+            ev = reg.evaluate_registration(source, target, distance, T)
+            corr = np.asarray(ev.correspondence_set)
+            if len(corr) < 6:
+                break
+            # pairs whose normals disagree are not the same surface (an edge of the object,
+            # the rim of what the other scan saw): they would pull the scans along the surface
+            same = np.einsum("ij,ij->i", src_n[corr[:, 0]] @ T[:3, :3].T, tgt_n[corr[:, 1]]) > options.normal_agreement
+            corr = corr[same]
+            if len(corr) < 6:
+                break
+            p = src_pts[corr[:, 0]] @ T[:3, :3].T + T[:3, 3]
+            n = tgt_n[corr[:, 1]]
+            r = np.einsum("ij,ij->i", p - tgt_pts[corr[:, 1]], n)
+            J = np.hstack([np.cross(p, n), n])
+            # neighbouring residuals are not independent (normals, resampling, noise of one
+            # surface): the data count as ``effective_samples`` measurements, not one per point
+            w = min(1.0, options.effective_samples / len(r)) / max(float(np.sqrt(np.mean(r * r))),
+                                                                    options.point_sigma) ** 2
+            H_data = w * (J.T @ J)
+            step = np.linalg.solve(H_data + prior, -(w * (J.T @ r) + prior @ x))
+            x = x + step
+            T = pose(cv2.Rodrigues(x[:3])[0], x[3:])
+            rmse, fitness = float(np.sqrt(np.mean(r * r))), float(ev.fitness)
+            if np.linalg.norm(step[:3]) < 1e-7 and np.linalg.norm(step[3:]) < 1e-8:
+                break
+    return IcpResult(T, fitness, rmse, H_data)
 
 
 def correspondence_counts(clouds: list, distance: float) -> np.ndarray:
@@ -191,20 +254,28 @@ def _one_round(down: list, options: MultiwayOptions, progress, round_: int) -> M
     label = "pairwise ICP" if options.rounds == 1 else f"pairwise ICP {round_ + 1}/{options.rounds}"
     for k, (i, j) in enumerate(pairs):
         odometry = (i, j) in tree
-        if odometry or options.loop_closure_init == "icp":
+        info = None
+        if options.anchor == "prior" and options.method == "point_to_plane" and (
+                odometry or options.loop_closure_init == "icp"):
+            result = regularized_icp(down[i], down[j], options)
+            T, fitness, rmse, info = result.transformation, result.fitness, result.inlier_rmse, result.information
+        elif odometry or options.loop_closure_init == "icp":
             result = pairwise_icp(down[i], down[j], np.eye(4), options)
             T, fitness, rmse = result.transformation, result.fitness, result.inlier_rmse
         else:
             ev = reg.evaluate_registration(down[i], down[j], options.max_correspondence, np.eye(4))
             T, fitness, rmse = np.eye(4), ev.fitness, ev.inlier_rmse
         T = np.asarray(T)
-        turn = np.degrees(np.arccos(np.clip((np.trace(T[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
         kind = "odometry" if odometry else "loop_closure"
-        rejected = bool(turn > options.max_rotation)  # ICP slid off (symmetric or featureless overlap)
+        rejected = not _plausible(T, np.asarray(down[i].get_center()), options)
         if not rejected:
-            info = reg.get_information_matrix_from_point_clouds(down[i], down[j], options.max_correspondence, T)
-            if options.anchor == "prior":  # correspondences as measurements with the ICP residual
-                info = np.asarray(info) / max(rmse, options.point_sigma) ** 2
+            if info is not None:
+                pass  # the data's own information from the regularized ICP
+            elif options.anchor == "prior":  # point-to-plane information, in units of the ICP residual
+                info = plane_information(down[i], down[j], T, options.max_correspondence)
+                info = info / max(rmse, options.point_sigma) ** 2
+            else:
+                info = reg.get_information_matrix_from_point_clouds(down[i], down[j], options.max_correspondence, T)
             graph.edges.append(reg.PoseGraphEdge(i, j, T, info, uncertain=not odometry))
         edges.append(PairEdge(i, j, kind, int(counts[i, j]), float(fitness), float(rmse), T, rejected))
         if progress:
@@ -219,6 +290,36 @@ def _one_round(down: list, options: MultiwayOptions, progress, round_: int) -> M
                                              reference_node=reference))
     return MultiwayResult([np.asarray(node.pose) for node in graph.nodes[:n]], edges, counts,
                           before - len(graph.edges))
+
+
+def _plausible(T: np.ndarray, centre: np.ndarray, options: MultiwayOptions) -> bool:
+    """Is an ICP correction T (from the global alignment) within the global registration's
+    uncertainty? Translation measured at the source cloud's centre."""
+    if options.anchor != "prior":
+        limit_t, limit_r = 0.05, 5.0  # without a prior: only gross slides [m, deg]
+    else:
+        sigma_t, sigma_r = options.prior_sigma
+        limit_t, limit_r = (options.gate * np.sqrt(2.0) * v for v in (sigma_t, sigma_r))
+    turn = np.degrees(np.arccos(np.clip((np.trace(T[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
+    shift = np.linalg.norm(T[:3, :3] @ centre + T[:3, 3] - centre)
+    return bool(turn <= limit_r and shift <= limit_t)
+
+
+def plane_information(source, target, T: np.ndarray, distance: float) -> np.ndarray:
+    """Information matrix (rotation, translation) of point-to-plane residuals between the
+    clouds at T: sum of J^T J with J = [p x n, n] over the correspondences. Unlike Open3D's
+    point-to-point information it is (nearly) singular along directions the overlap does not
+    fix (sliding along a plane, turning about an axis of symmetry), where the prior holds."""
+    import open3d as o3d
+
+    corr = np.asarray(o3d.pipelines.registration.evaluate_registration(
+        source, target, distance, T).correspondence_set)
+    if len(corr) == 0:
+        return np.zeros((6, 6))
+    p = np.asarray(source.points)[corr[:, 0]] @ T[:3, :3].T + T[:3, 3]
+    n = np.asarray(target.normals)[corr[:, 1]]
+    J = np.hstack([np.cross(p, n), n])
+    return J.T @ J
 
 
 def mean_anchor(clouds: list, poses: list[np.ndarray]) -> np.ndarray:

@@ -45,8 +45,9 @@ class MultiwayOptions:
     # global registration's own uncertainty allows (3 sigma of the relative pose of two
     # scans, prior_sigma x sqrt(2)) slid along a symmetry of the overlap and is rejected
     gate: float = 3.0
-    normal_agreement: float = 0.9  # cosine: correspondences with normals further apart are dropped
+    normal_agreement: float = 0.99  # cosine: correspondences with normals further apart are dropped
     effective_samples: int = 200  # independent measurements a pairwise overlap is worth
+    normal_radius: float = 2.5  # [voxels] neighbourhood of the normals
     rounds: int = 1  # graph built and optimized this many times
     method: str = "point_to_plane"  # pairwise ICP: point_to_plane | point_to_point | colored
 
@@ -84,12 +85,13 @@ class MultiwayResult:
     pruned: int  # loop closures the optimization dropped
 
 
-def prepare(cloud, voxel: float):
-    """Down-sampled copy with normals (for point-to-plane ICP)."""
+def prepare(cloud, voxel: float, normal_radius: float = 2.5):
+    """Down-sampled copy with normals (for point-to-plane ICP) estimated within
+    ``normal_radius`` voxels (small: normals near an object's edges stay those of their face)."""
     import open3d as o3d
 
     down = cloud.voxel_down_sample(voxel)
-    down.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=voxel * 4.0, max_nn=30))
+    down.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=voxel * normal_radius, max_nn=30))
     return down
 
 
@@ -206,7 +208,7 @@ def register_multiway(clouds: list, options: MultiwayOptions = MultiwayOptions()
     """Pose-graph registration of globally registered clouds (Open3D point clouds). With
     ``rounds`` > 1 the graph is built again from the optimized poses (every pairwise ICP then
     starts closer to its answer, and pruned loop closures get a second chance)."""
-    down = [prepare(c, options.voxel) for c in clouds]
+    down = [prepare(c, options.voxel, options.normal_radius) for c in clouds]
     poses = [np.eye(4) for _ in clouds]
     result = None
     for r in range(options.rounds):

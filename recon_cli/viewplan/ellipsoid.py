@@ -37,13 +37,31 @@ class Ellipsoid:
         ``minimal=False``: the PCA box the thesis used)."""
         import open3d as o3d
 
-        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, float)))
+        pts = np.asarray(points, float)
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
         box = cloud.get_minimal_oriented_bounding_box() if minimal else cloud.get_oriented_bounding_box()
+        span = float(np.max(np.ptp(pts, axis=0))) if len(pts) else 0.0
+        if minimal and (np.max(box.extent) < 0.5 * span or
+                        np.linalg.norm(np.asarray(box.center) - pts.mean(axis=0)) > span):
+            return cls.upright_from_cloud(pts)  # Open3D's minimal box degenerates on some clouds
         R = np.asarray(box.R)
         if np.linalg.det(R) < 0:
             R = R.copy()
             R[:, 2] *= -1
         return cls.from_box(box.center, R, box.extent)
+
+    @classmethod
+    def upright_from_cloud(cls, points: np.ndarray) -> Ellipsoid:
+        """From the smallest box with a vertical axis (an object standing on the table):
+        OpenCV's minimum-area rectangle of the points seen from above, their height range."""
+        import cv2
+
+        pts = np.asarray(points, float)
+        (cx, cy), (w, h), angle = cv2.minAreaRect(pts[:, :2].astype(np.float32))
+        a = np.radians(angle)
+        R = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+        lo, hi = pts[:, 2].min(), pts[:, 2].max()
+        return cls.from_box([cx, cy, (lo + hi) / 2.0], R, [w, h, hi - lo])
 
     # ------------------------------------------------------------------ frames
     def to_local(self, p: np.ndarray) -> np.ndarray:

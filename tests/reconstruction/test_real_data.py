@@ -75,7 +75,7 @@ def test_bunny_multiway_registration_recovers_true_poses():
         clouds.append(placed)
         start.append(T0)
     options = MultiwayOptions(voxel=0.001, max_correspondence=0.001, scales=(8.0, 4.0, 2.0, 1.0),
-                              min_overlap=0.1, anchor="reference")
+                              min_overlap=0.1, anchor="reference", normal_radius=4.0)
     result = register_multiway(clouds, options)
     final = [T @ T0 for T, T0 in zip(result.poses, start, strict=True)]
     rows = {n: (pose_error(T0, truth[n]), pose_error(T, truth[n]))

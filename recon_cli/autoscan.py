@@ -46,6 +46,8 @@ class AutoscanOptions:
     plan: PlanOptions = field(default_factory=PlanOptions)
     pictures: bool = True
     mesh: bool = True
+    lift: bool = True  # raise infeasible views toward the vertical (ours; False: as the thesis)
+    min_height: float = 0.05  # [m] lowest camera height above the board plane (thesis: above it)
 
 
 @dataclass
@@ -142,6 +144,9 @@ class Autoscan:
         """An IK solution of the camera pose (collision-free, soft limits), or None."""
         from recon_cli.robot.ik import IKOptions
 
+        marker_z = (np.linalg.inv(self.cell.world_T_marker) @ T)[2, 3]
+        if marker_z < self.opt.min_height:  # the thesis' rule: the camera stays above the board
+            return None
         try:
             r = self.cell.solve_pose(T, self.rng, seed=seed, options=IKOptions(max_solutions=1, max_attempts=20))
         except ReconError:
@@ -194,11 +199,38 @@ class Autoscan:
             A.append(p)
             T = camera_pose(ell, p, self.opt.d_c)
             config = self._feasible(T, q)
+            if config is None and self.opt.lift:
+                T, config = self._lifted(T, ell.to_world(p), q)
+                if config is not None:  # the view is where the lifted camera is
+                    A.append(ell.nearest_point(ell.to_local(T[:3, 3])))
             if config is None:
                 views.append(ViewRecord(T, "infeasible", it))
             else:
                 planned.append((T, config))
         return planned
+
+    def _lifted(self, T: np.ndarray, target: np.ndarray, q: np.ndarray):
+        """Ours, beyond the thesis: a view that is infeasible (under or against the table,
+        out of reach) is raised in steps of 15 deg toward the vertical, still looking at the
+        same surface point from the same distance; the first feasible one replaces it. A
+        region next to the table is then seen from above instead of being left out (the
+        thesis marks such samples infeasible, and they repel later samples)."""
+        from recon_cli.geometry.view import look_at_pose
+
+        d = T[:3, 3] - target
+        dist = float(np.linalg.norm(d))
+        d /= dist
+        horizontal = np.hypot(d[0], d[1])
+        elevation = np.arctan2(d[2], horizontal)
+        azimuth = np.arctan2(d[1], d[0])
+        for step in (15.0, 30.0, 45.0, 60.0):
+            e = min(elevation + np.radians(step), np.radians(85.0))
+            direction = np.array([np.cos(e) * np.cos(azimuth), np.cos(e) * np.sin(azimuth), np.sin(e)])
+            lifted = look_at_pose(target + dist * direction, target)
+            config = self._feasible(lifted, q)
+            if config is not None:
+                return lifted, config
+        return T, None
 
     def _fixed_candidates(self, ell, views: list[ViewRecord], q: np.ndarray) -> list:
         """Baselines: all views at once, at the ellipsoid planner's typical distance from the
@@ -254,8 +286,8 @@ class Autoscan:
             self._scan(T0)
             views.append(ViewRecord(T0, "completed", 0))
             self.progress("scans", 1, opt.n)
-            it = 0
-            while len(self.store) < opt.n:
+            it, stuck = 0, 0
+            while len(self.store) < opt.n and stuck < 3:
                 it += 1
                 ell = Ellipsoid.from_cloud(self._partial_points())
                 q = self.station.robot.measured_joints()
@@ -271,9 +303,11 @@ class Autoscan:
                 if sel.index is None:  # nothing reachable: those views are infeasible
                     for T, _ in planned:
                         views.append(ViewRecord(T, "infeasible", it))
+                    stuck += 1
                     if opt.method != "ellipsoid":
                         break
                     continue
+                stuck = 0
                 T, _ = planned[sel.index]
                 if opt.pictures and opt.method == "ellipsoid":
                     pictures.append(self._picture(it, ell, views, [p for k, (p, _) in enumerate(planned)

@@ -32,6 +32,10 @@ PLANNERS = ("RRTConnect", "RRT", "RRTstar", "PRM", "PRMstar", "KPIECE1", "BKPIEC
             "FMT", "BFMT", "BITstar", "AORRTC", "InformedRRTstar", "SORRTstar")
 
 
+#: [rad or m] a start this close outside the soft limits is clipped onto them
+START_TOLERANCE = 1e-3
+
+
 class PlanStatus(StrEnum):
     SOLVED = "solved"
     TIMEOUT = "timeout"  # no exact solution within the time limit
@@ -201,7 +205,13 @@ class MotionPlanner:
         t0 = time.perf_counter()
         opt = self.options
         goals = [np.asarray(q_goal, float)] if np.ndim(q_goal) == 1 else [np.asarray(g, float) for g in q_goal]
-        problem = self._config_problem(np.asarray(q_start, float))
+        q_start = np.asarray(q_start, float)
+        lim = self.cell.limits
+        if lim.within_soft(q_start, tol=START_TOLERANCE):
+            # a robot that stopped at a soft limit measures a hair beyond it (tracking error):
+            # start from the limit itself, which the executed trajectory then begins at
+            q_start = lim.clip_soft(q_start)
+        problem = self._config_problem(q_start)
         if problem:
             return PlanResult(PlanStatus.INVALID_START, opt.planner, 0.0, 0.0,
                               time.perf_counter() - t0, message=f"start configuration {problem}")

@@ -48,6 +48,7 @@ class AutoscanOptions:
     mesh: bool = True
     lift: bool = True  # raise infeasible views toward the vertical (ours; False: as the thesis)
     min_height: float = 0.05  # [m] lowest camera height above the board plane (thesis: above it)
+    min_axis_ratio: float = 0.3  # ours: no semi-axis below this share of the largest (0: the thesis)
 
 
 @dataclass
@@ -289,7 +290,7 @@ class Autoscan:
             it, stuck = 0, 0
             while len(self.store) < opt.n and stuck < 3:
                 it += 1
-                ell = Ellipsoid.from_cloud(self._partial_points())
+                ell = Ellipsoid.from_cloud(self._partial_points()).with_min_ratio(opt.min_axis_ratio)
                 q = self.station.robot.measured_joints()
                 if opt.method == "ellipsoid":
                     planned = self._ellipsoid_candidates(ell, views, opt.n - len(self.store), q, it)

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from recon_cli.autoscan import METHODS, Autoscan, AutoscanOptions
+from recon_cli.errors import ReconError
 from recon_cli.geometry.view import View
 from recon_cli.objects import load_object
 from recon_cli.robot.description import CellConfig
@@ -31,14 +32,16 @@ class ViewplanRow:
     requests: int
     trajectory_s: float
     seconds: float
+    error: str = ""
 
 
 def face_on_view(name: str, d_c: float) -> View:
-    """The initial view straight at the largest vertical face (thesis 5.3.3)."""
+    """The initial view straight at the largest vertical face (thesis 5.3.3), as low as the
+    cell allows: 80 deg from the vertical (at 90 deg the camera bracket meets the table)."""
     obj = load_object(name)
     center, size = obj.crop_box(0.01)
     phi = 90.0 if size[0] >= size[1] else 0.0  # look along the shorter horizontal axis
-    return View.from_degrees(center, d_c + 0.1, 90.0, phi)
+    return View.from_degrees(center, d_c + 0.1, 80.0, phi)
 
 
 def run_viewplan_bench(out: Path, objects=BUILT_IN, methods=METHODS, n: int = 16, d_c: float = 0.55,
@@ -53,7 +56,12 @@ def run_viewplan_bench(out: Path, objects=BUILT_IN, methods=METHODS, n: int = 16
         opts = AutoscanOptions(folder, name, n=n, d_c=d_c, method=method, seed=seed,
                                resolution=resolution, cell=cell or CellConfig(), pictures=method == "ellipsoid",
                                initial=face_on_view(name, d_c) if initial == "face-on" else None)
-        r = Autoscan(opts).run()
+        try:
+            r = Autoscan(opts).run()
+        except ReconError as exc:  # reported as a failed run, the others go on
+            rows.append(ViewplanRow(name, method, initial, 0, 0.0, float("nan"), float("nan"), 0, 0, 0.0, 0.0,
+                                    exc.one_line()))
+            continue
         rows.append(ViewplanRow(name, method, initial, r.scans, r.coverage or 0.0,
                                 (r.accuracy or {}).get("mean_mm", float("nan")),
                                 (r.accuracy or {}).get("std_mm", float("nan")), r.infeasible, r.requests,

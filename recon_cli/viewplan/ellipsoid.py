@@ -63,6 +63,12 @@ class Ellipsoid:
         lo, hi = pts[:, 2].min(), pts[:, 2].max()
         return cls.from_box([cx, cy, (lo + hi) / 2.0], R, [w, h, hi - lo])
 
+    def with_min_ratio(self, ratio: float) -> Ellipsoid:
+        """The same ellipsoid with every semi-axis at least ``ratio`` times the largest: a
+        partial object seen from one side only (a flat face) would otherwise give a flat
+        disc, whose views crowd in front of and behind the face."""
+        return Ellipsoid(self.world_T_E, np.maximum(self.axes, ratio * float(np.max(self.axes))))
+
     # ------------------------------------------------------------------ frames
     def to_local(self, p: np.ndarray) -> np.ndarray:
         T = self.world_T_E

@@ -121,7 +121,8 @@ class Autoscan:
         write_ground_truth_mesh(opt.out, self.obj)
         T = np.eye(4)
         T[:3, 3] = center
-        self.crop_marker = CropBox(np.linalg.inv(self.cell.world_T_marker) @ T, tuple(size))
+        self.marker_T_world = np.linalg.inv(self.cell.world_T_marker)
+        self.crop_marker = CropBox(self.marker_T_world @ T, tuple(size))
         start = named_configuration(opt.cell.kind, "home", self.cell.joint_names)
         self.station = SimStation(self.cell, self.obj, start, self.rng, noise=opt.noise, resolution=opt.resolution)
         self.acq = Acquisition(self.cell, self.station.robot, self.station.camera, self.store, self.rng, opt.plan,
@@ -145,7 +146,7 @@ class Autoscan:
         """An IK solution of the camera pose (collision-free, soft limits), or None."""
         from recon_cli.robot.ik import IKOptions
 
-        marker_z = (np.linalg.inv(self.cell.world_T_marker) @ T)[2, 3]
+        marker_z = (self.marker_T_world @ T)[2, 3]
         if marker_z < self.opt.min_height:  # the thesis' rule: the camera stays above the board
             return None
         try:

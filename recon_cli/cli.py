@@ -283,9 +283,7 @@ def register(
                       surface=replace(options.surface, voxel=voxel, poisson_depth=depth, density_quantile=trim))
     with progress_bar() as update:
         result = run_register(folder, out or Path(folder) / "reconstruction", options, update)
-    sources = {}
-    for r in result.used:
-        sources[r.pose.source.value] = sources.get(r.pose.source.value, 0) + 1
+    sources = {k: v for k, v in result.pose_sources.items() if v}
     console.print(f"{len(result.used)} of {len(result.scans)} scans registered (pose sources: "
                   + ", ".join(f"{k} {v}" for k, v in sources.items()) + ")")
     for r in result.scans:

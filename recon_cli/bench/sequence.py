@@ -117,10 +117,8 @@ def run_case(problem: SequenceProblem, case: str, seed: int, beta: float = 1.5, 
         planner = problem.edge_planner(rng)
         order = list(range(graph.size))
         result = finish(graph, order, planner)
-        ratios = [graph.cost[e] / max(problem.lower_bound(graph.configs[e[0]], graph.configs[e[1]]), 1e-9)
-                  for e in graph.planned if np.isfinite(graph.cost[e])]
         return RunRow(case, seed, result.duration, result.requests, time.perf_counter() - t0, order,
-                      float(np.mean(ratios)) if ratios else float("nan"))
+                      _bound_ratio(graph, problem))
     if case == "C":
         graph, _ = optimize_graph(graph, redraw, k_max)
     if case == "D":
@@ -128,10 +126,15 @@ def run_case(problem: SequenceProblem, case: str, seed: int, beta: float = 1.5, 
     planner = problem.edge_planner(rng)
     result = (local_search_sequence(graph, planner, beta, tree_first=True, request_cost=REQUEST_COST)
               if case == "D" else lazy_mst_sequence(graph, planner, beta))
+    return RunRow(case, seed, result.duration, result.requests, time.perf_counter() - t0, result.order,
+                  _bound_ratio(graph, problem))
+
+
+def _bound_ratio(graph: ViewGraph, problem: SequenceProblem) -> float:
+    """Mean planned duration over its lower bound, for the edges planned in a run."""
     ratios = [graph.cost[e] / max(problem.lower_bound(graph.configs[e[0]], graph.configs[e[1]]), 1e-9)
               for e in graph.planned if np.isfinite(graph.cost[e])]
-    return RunRow(case, seed, result.duration, result.requests, time.perf_counter() - t0, result.order,
-                  float(np.mean(ratios)) if ratios else float("nan"))
+    return float(np.mean(ratios)) if ratios else float("nan")
 
 
 def run_sequence_bench(runs: int, seed: int, cases=CASES,

@@ -124,6 +124,15 @@ class RegisterResult:
     def used(self) -> list[ScanRecord]:
         return [s for s in self.scans if not s.skipped]
 
+    @property
+    def pose_sources(self) -> dict[str, int]:
+        """How many of the registered scans took their pose from each source."""
+        return pose_source_counts(self.used)
+
+
+def pose_source_counts(records: list[ScanRecord]) -> dict[str, int]:
+    return {s.value: sum(1 for r in records if r.pose.source is s) for s in PoseSource}
+
 
 def perturbed(T: np.ndarray, translation: float, rotation: float, rng: np.random.Generator) -> np.ndarray:
     """T moved by ``translation`` [m] and turned by ``rotation`` [rad] about its origin, both
@@ -265,7 +274,7 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
         "crop_box_marker": {"marker_T_box": box.frame_T_box, "size": box.size,
                             "support_margin": box.support_margin},
         "scans": [r.to_dict() for r in records],
-        "pose_sources": {s.value: sum(1 for r in used if r.pose.source is s) for s in PoseSource},
+        "pose_sources": pose_source_counts(used),
         "charuco_error_mean": None if not errors else {
             "translation_mm": float(np.mean([e[0] for e in errors]) * 1e3),
             "rotation_deg": float(np.degrees(np.mean([e[1] for e in errors])))},

@@ -148,6 +148,7 @@ class ScriptRunner:
         self.registered = None
         self.reconstruction: dict[str, Path] = {}
         self.fragments: dict[str, object] = {}
+        self._fragment_box = None  # crop box of fragments (marker frame), from the session
         self.outputs: dict[str, str] = {}
         self.reports: list[CommandReport] = []
         self.sequences: list[dict] = []
@@ -510,8 +511,7 @@ class ScriptRunner:
         if self.move_failed:
             report.status, report.message = "skipped", "the move before it failed"
             return
-        if self.options.dry_run:
-            report.status, report.message = "skipped", "dry run"
+        if self._skipped_in_dry_run(report):
             return
         self._ensure_station()
         last = getattr(self, "_last_view", None)
@@ -536,12 +536,10 @@ class ScriptRunner:
 
     # reconstruction (all scans) -----------------------------------------
     def _need_scans(self, cmd: C.Command) -> None:
-        if self.options.dry_run:
-            raise _DrySkip()
         if self.store is None or len(self.store) == 0:
             raise ReconError(f"{cmd.source}: no scans to work on yet", hint="scan before registering")
 
-    def _register(self, cmd: C.Command, local=True, board=True, loop_closures="icp", mesh=False, surface=None):
+    def _register(self, local=True, board=True, loop_closures="icp", mesh=False, surface=None):
         from recon_cli.reconstruction.pipeline import RegisterOptions, run_register
 
         opts = RegisterOptions(local=local, use_board=board, mesh=mesh, seed=self.options.seed)
@@ -553,15 +551,11 @@ class ScriptRunner:
         return self.registered
 
     def _do_Register(self, cmd: C.Register, report) -> None:  # noqa: N802
-        try:
-            self._need_scans(cmd)
-        except _DrySkip:
-            report.status, report.message = "skipped", "dry run"
+        if self._skipped_in_dry_run(report):
             return
-        r = self._register(cmd, cmd.local, cmd.board, cmd.loop_closures)
-        sources = {}
-        for rec in r.used:
-            sources[rec.pose.source.value] = sources.get(rec.pose.source.value, 0) + 1
+        self._need_scans(cmd)
+        r = self._register(cmd.local, cmd.board, cmd.loop_closures)
+        sources = {k: v for k, v in r.pose_sources.items() if v}
         report.details.update(pose_sources=sources, registered=len(r.used), scans=len(r.scans),
                               seconds_register=r.timings["total_s"])
         self.outputs.update(cloud=str(r.cloud), registration_report=str(r.report))
@@ -569,13 +563,11 @@ class ScriptRunner:
     def _do_Reconstruct(self, cmd: C.Reconstruct, report) -> None:  # noqa: N802
         from recon_cli.reconstruction.surface import SurfaceOptions, fuse, poisson_mesh, write_cloud, write_mesh
 
-        try:
-            self._need_scans(cmd)
-        except _DrySkip:
-            report.status, report.message = "skipped", "dry run"
+        if self._skipped_in_dry_run(report):
             return
+        self._need_scans(cmd)
         surface = SurfaceOptions(voxel=cmd.voxel, poisson_depth=cmd.depth, density_quantile=cmd.trim)
-        r = self.registered or self._register(cmd, surface=surface)
+        r = self.registered or self._register(surface=surface)
         fused = fuse(r.clouds, surface)
         folder = self.out / "reconstruction"
         cloud = write_cloud(folder / "cloud.ply", fused, r.out_T_marker)
@@ -597,8 +589,7 @@ class ScriptRunner:
         return resolved
 
     def _do_Export(self, cmd: C.Export, report) -> None:  # noqa: N802
-        if self.options.dry_run:
-            report.status, report.message = "skipped", "dry run"
+        if self._skipped_in_dry_run(report):
             return
         for kind, name in (("cloud", cmd.cloud), ("mesh", cmd.mesh)):
             if not name:
@@ -614,8 +605,7 @@ class ScriptRunner:
     def _do_Evaluate(self, cmd: C.Evaluate, report) -> None:  # noqa: N802
         from recon_cli.reconstruction.assessment import run_evaluate
 
-        if self.options.dry_run:
-            report.status, report.message = "skipped", "dry run"
+        if self._skipped_in_dry_run(report):
             return
         if "cloud" not in self.reconstruction:
             raise ReconError(f"{cmd.source}: nothing reconstructed to evaluate yet",
@@ -641,11 +631,10 @@ class ScriptRunner:
         from recon_cli.reconstruction.global_registration import global_pose
         from recon_cli.reconstruction.pipeline import RegisterOptions, crop_box_marker, scan_cloud
 
-        session = self.store.session()
-        wtm = np.asarray(session["world_T_marker"], dtype=float)
-        pose = global_pose(scan, thesis_board(), wtm)
-        box = crop_box_marker(RegisterOptions(), session)
-        self.fragments[name] = scan_cloud(scan, pose, box, RegisterOptions().surface)
+        if self._fragment_box is None:
+            self._fragment_box = crop_box_marker(RegisterOptions(), self.store.session())
+        pose = global_pose(scan, thesis_board(), self.cell.world_T_marker)
+        self.fragments[name] = scan_cloud(scan, pose, self._fragment_box, RegisterOptions().surface)
         report.details.update(fragment=name, pose_source=pose.source.value,
                               fragment_points=len(self.fragments[name].points))
 
@@ -656,11 +645,11 @@ class ScriptRunner:
                              hint="scan or load it first")
         return self.fragments[name]
 
-    def _fragment_command(self, report: CommandReport) -> bool:
+    def _skipped_in_dry_run(self, report: CommandReport) -> bool:
+        """A dry run plans moves only: every other command is reported as skipped."""
         if self.options.dry_run:
             report.status, report.message = "skipped", "dry run"
-            return False
-        return True
+        return self.options.dry_run
 
     def _icp_options(self, method: str, threshold: float):
         from recon_cli.reconstruction.pose_graph import MultiwayOptions
@@ -672,7 +661,7 @@ class ScriptRunner:
     def _do_PairRegister(self, cmd: C.PairRegister, report) -> None:  # noqa: N802
         from recon_cli.reconstruction.pose_graph import pairwise_icp, prepare
 
-        if not self._fragment_command(report):
+        if self._skipped_in_dry_run(report):
             return
         src, tgt = self._fragment(cmd.source_fragment, cmd), self._fragment(cmd.target, cmd)
         opts = self._icp_options(cmd.method, cmd.threshold)
@@ -683,7 +672,7 @@ class ScriptRunner:
     def _do_Multiway(self, cmd: C.Multiway, report) -> None:  # noqa: N802
         from recon_cli.reconstruction.pose_graph import register_multiway
 
-        if not self._fragment_command(report):
+        if self._skipped_in_dry_run(report):
             return
         names = list(self.fragments)
         if len(names) < 2:
@@ -698,14 +687,14 @@ class ScriptRunner:
     def _do_AddFragment(self, cmd: C.AddFragment, report) -> None:  # noqa: N802
         import open3d as o3d
 
-        if not self._fragment_command(report):
+        if self._skipped_in_dry_run(report):
             return
         src = self._fragment(cmd.fragment, cmd)
         target = self.fragments.setdefault(cmd.target, o3d.geometry.PointCloud())
         target += src
 
     def _do_Downsample(self, cmd: C.Downsample, report) -> None:  # noqa: N802
-        if not self._fragment_command(report):
+        if self._skipped_in_dry_run(report):
             return
         frag = self._fragment(cmd.fragment, cmd)
         if cmd.voxel > 0:
@@ -713,12 +702,12 @@ class ScriptRunner:
         report.details.update(points=len(self.fragments[cmd.fragment].points))
 
     def _do_TransformFragment(self, cmd: C.TransformFragment, report) -> None:  # noqa: N802
-        if not self._fragment_command(report):
+        if self._skipped_in_dry_run(report):
             return
         self._fragment(cmd.fragment, cmd).transform(np.asarray(cmd.matrix, dtype=float))
 
     def _do_DeleteFragment(self, cmd: C.DeleteFragment, report) -> None:  # noqa: N802
-        if not self._fragment_command(report):
+        if self._skipped_in_dry_run(report):
             return
         self._fragment(cmd.fragment, cmd)
         del self.fragments[cmd.fragment]
@@ -734,7 +723,7 @@ class ScriptRunner:
         from recon_cli.errors import FileError
         from recon_cli.perception.sensor import motioncam_3d_m
 
-        if not self._fragment_command(report):
+        if self._skipped_in_dry_run(report):
             return
         if cmd.kind == "point_cloud":
             path = self._script_path(cmd.path_point_cloud)
@@ -764,11 +753,10 @@ class ScriptRunner:
 
         from recon_cli.reconstruction.surface import SurfaceOptions, poisson_mesh, write_cloud, write_mesh
 
-        if not self._fragment_command(report):
+        if self._skipped_in_dry_run(report):
             return
         frag = self._fragment(cmd.fragment, cmd)
-        session = self.store.session() if self.store is not None else {}
-        T = np.asarray(session["world_T_marker"], float) if session.get("world_T_marker") else None
+        T = self.cell.world_T_marker if self.store is not None else None  # scans are in the marker frame
         target = self._out_path(cmd.path, report)
         if cmd.kind == "point_cloud":
             write_cloud(target, frag, T)
@@ -783,7 +771,3 @@ class ScriptRunner:
 
     def _do_Display(self, cmd: C.Display, report) -> None:  # noqa: N802
         report.status = "recorded"
-
-
-class _DrySkip(Exception):
-    pass

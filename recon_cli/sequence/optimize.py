@@ -21,7 +21,7 @@ from collections.abc import Callable
 import numpy as np
 
 from recon_cli.sequence.graph import EdgePlanner, ViewGraph
-from recon_cli.sequence.tsp import SequenceResult, finish, minimum_spanning_tree, preorder
+from recon_cli.sequence.tsp import SequenceResult, exact_tree, finish, minimum_spanning_tree, preorder
 
 #: draws a new IK solution for vertex k (a view), or None when none was found
 Redraw = Callable[[int], np.ndarray | None]
@@ -105,8 +105,6 @@ def local_search_sequence(graph: ViewGraph, planner: EdgePlanner, beta: float = 
     exact costs and calibrated estimates (lower bound x the mean real/lower-bound ratio of
     the edges planned so far), lazy planning of the chosen edges, search again when an edge
     costs more than ``beta`` times its estimate."""
-    from recon_cli.sequence.tsp import exact_tree
-
     rounds = exact_tree(graph, planner, beta, pick="largest")[1] if tree_first else 0
     lower = graph.cost.copy()  # lower bounds where not exact
     order = preorder(minimum_spanning_tree(graph.cost), graph.size, graph.cost)

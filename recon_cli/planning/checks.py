@@ -54,7 +54,7 @@ def check_trajectory(traj: Trajectory, cell: Cell, velocity_scale: float = 1.0,
                   and vr <= 1 + tol and ar <= 1 + tol)
     collision: tuple[tuple[str, str], ...] = ()
     when = None
-    k = cell.collision.first_collision_sampled(q)
+    k = cell.collision.first_collision(q)
     if k >= 0:
         collision, when = cell.collision.check(q[k]).pairs, float(t[k])
     return TrajectoryCheck(len(t), step, vr, ar, within, collision, when)

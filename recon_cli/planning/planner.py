@@ -3,9 +3,10 @@
 A request goes from a start configuration to a joint goal or to a camera pose (any of
 several IK solutions, OMPL goal states). The state space is the cell's joint space within
 the soft limits; a state is valid when the collision model says it is free; a motion is
-valid when every configuration on the straight segment, sampled so that no robot point
-moves more than ``max_step`` between samples, is free (``CollisionModel.segment_free``: a
-vectorized swept check at coarse samples, exact checks only where something is near).
+valid when every configuration on the straight segment is free at a resolution where no
+robot point moves more than ``max_step`` between samples (``CollisionModel.segment_free``:
+inflated copies of the robot prove stretches free, exact checks only where something is
+near; batched in C++).
 After the search the path is simplified (shortcutting, smoothing), time-
 parameterized with toppra and checked once more along its dense course. Failures are
 results (``PlanStatus``), never exceptions.
@@ -193,11 +194,10 @@ class MotionPlanner:
         lim = self.cell.limits
         if not lim.within_soft(q, tol=1e-9):
             return "outside the soft joint limits"
-        report = self.cell.collision.check(q)
-        if report.colliding:
-            a, b = report.pairs[0]
-            return f"in collision ({a} with {b})"
-        return None
+        if not self.cell.collision.in_collision(q):
+            return None
+        a, b = self.cell.collision.check(q).pairs[0]
+        return f"in collision ({a} with {b})"
 
     def plan_to_joints(self, q_start: np.ndarray, q_goal: np.ndarray | list[np.ndarray],
                        seed: int = 0) -> PlanResult:

@@ -27,14 +27,8 @@ from lxml import etree
 from recon_cli.geometry.transforms import pose_from_xyz_rpy
 from recon_cli.paths import ROBOT_DIR
 from recon_cli.robot.batch_fk import BatchFK
-from recon_cli.robot.broadphase import (
-    bounding_box,
-    bounding_capsule,
-    segment_distance,
-    segments_hit_boxes,
-    world_aabbs,
-)
 from recon_cli.robot.kinematics import Kinematics
+from recon_cli.robot.motion_check import BatchChecker
 from recon_cli.robot.pair_field import PairField
 
 OBJECT_LINK = "object"
@@ -196,9 +190,10 @@ def allowed_link_pairs(urdf: str, kin: Kinematics) -> set[frozenset[str]]:
 class CollisionModel:
     """Yes/no collision checks and distance queries for configurations of one cell.
 
-    Broad phase in numpy (bounding capsules of the robot shapes against bounding boxes of
-    the environment shapes and against each other, for many configurations at once,
-    ``recon_cli.robot.broadphase``); narrow phase with FCL on the candidate pairs only.
+    This class decides what is checked (shapes from the URDF, allowed pairs, pairs certified
+    separated over the whole joint range, distance tables). Yes/no queries of configurations
+    and motions run batched in C++ (pinocchio + coal, ``recon_cli.robot.motion_check``);
+    distances, certificates and collision reports use python-fcl on the same shapes.
     """
 
     def __init__(self, urdf: str, kin: Kinematics, object_box: ObjectBox | None = None,
@@ -214,10 +209,6 @@ class CollisionModel:
         self._robot_objs = [fcl.CollisionObject(g, fcl.Transform()) for g in self._robot_geoms]
         self._robot_joints = np.array([s.joint for s in self.robot_shapes])
         self._robot_local = np.stack([s.joint_T_shape for s in self.robot_shapes])  # (R, 4, 4)
-        caps = [bounding_capsule(s.kind, s.dims) for s in self.robot_shapes]
-        self._cap_a = np.stack([c[0] for c in caps])  # (R, 3) in the shape frame
-        self._cap_b = np.stack([c[1] for c in caps])
-        self._cap_r = np.array([c[2] for c in caps])  # (R,)
         # robot shape pairs to check against each other
         shape_allowed = allowed_shape_pairs()
         self._self_pairs = np.array([
@@ -225,7 +216,6 @@ class CollisionModel:
             if frozenset((self.robot_shapes[i].link, self.robot_shapes[j].link)) not in self._allowed
             and frozenset((self.robot_shapes[i].label, self.robot_shapes[j].label)) not in shape_allowed
         ], dtype=int).reshape(-1, 2)
-        self._self_r = self._cap_r[self._self_pairs[:, 0]] + self._cap_r[self._self_pairs[:, 1]]
         self._request = fcl.CollisionRequest()
         self._batch_fk = BatchFK(kin.model)
         self.lever = self._shape_lever_arms()  # (n, R)
@@ -291,7 +281,6 @@ class CollisionModel:
                 keep[p] = False
                 certified.append((self.robot_shapes[i].label, self.robot_shapes[j].label, bound))
         self._self_pairs = self._self_pairs[keep]
-        self._self_r = self._self_r[keep]
         self._pair_lever = self._pair_lever[keep]
         return certified
 
@@ -324,10 +313,6 @@ class CollisionModel:
             return out
 
         return PairField.build(distances, joints, levers, lim.lower[list(joints)], lim.upper[list(joints)])
-
-    def _field_cleared(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Indices of the self pairs whose distance tables clear the whole motion a -> b."""
-        return np.array([p for p, field in self._fields if field.along(a, b) > 0.0], dtype=int)
 
     def _separated_env_pairs(self, env: list[CollisionShape], objs: list[fcl.CollisionObject],
                              skip: np.ndarray) -> list[tuple[int, int, float]]:
@@ -407,11 +392,6 @@ class CollisionModel:
                                 fcl.Transform(s.joint_T_shape[:3, :3], s.joint_T_shape[:3, 3]))
             for s in env
         ]
-        # broad phase: world-aligned boxes around the (static) environment shapes
-        self._env_c, self._env_h = world_aabbs(
-            np.stack([s.joint_T_shape[:3, :3] for s in env]),
-            np.stack([s.joint_T_shape[:3, 3] for s in env]),
-            np.stack([bounding_box(s.kind, s.dims) for s in env]))  # (E, 3) each
         shape_allowed = allowed_shape_pairs()
         skip = np.array([
             [frozenset((r.link, e.link)) in self._allowed or frozenset((r.label, e.label)) in shape_allowed
@@ -431,6 +411,18 @@ class CollisionModel:
             skip[r, e] = True
         self.certified_env_pairs = [(self.robot_shapes[r].label, env[e].label, b) for r, e, b in separated]
         self._env_allowed = skip
+        self._batch = self._batch_checker()
+
+    def _batch_checker(self) -> BatchChecker:
+        """The checked pairs, handed to pinocchio/coal for batched checks; the pairs with
+        distance tables stay out of its inflated copies."""
+        n_robot = len(self.robot_shapes)
+        env_pairs = [(int(r), n_robot + int(e)) for r, e in zip(*np.nonzero(~self._env_allowed), strict=True)]
+        self_pairs = [(int(i), int(j)) for i, j in self._self_pairs]
+        tabled = {p for p, _ in self._fields}
+        swept = env_pairs + [pair for p, pair in enumerate(self_pairs) if p not in tabled]
+        return BatchChecker(self.kin.model, self.robot_shapes + self.env_shapes, n_robot,
+                            env_pairs + self_pairs, swept, self.lever, [f for _, f in self._fields])
 
     # ------------------------------------------------------------------ placement
     def shape_poses(self, q: np.ndarray) -> np.ndarray:
@@ -439,67 +431,25 @@ class CollisionModel:
         oMi = np.stack([self._data.oMi[j].homogeneous for j in range(self.kin.model.njoints)])
         return oMi[self._robot_joints] @ self._robot_local
 
-    def _candidates(self, poses: np.ndarray, grow: np.ndarray | None = None
-                    ) -> tuple[np.ndarray, np.ndarray]:
-        """Broad phase for poses (..., R, 4, 4): env candidates (..., R, E) and self
-        candidates (..., P) (indices into the checked self pairs). ``grow`` (R,) enlarges
-        each robot shape's bounding capsule [m] (swept-motion checks)."""
-        R, t = poses[..., :3, :3], poses[..., :3, 3]
-        a = (R @ self._cap_a[:, :, None])[..., 0] + t
-        b = (R @ self._cap_b[:, :, None])[..., 0] + t
-        radius = self._cap_r if grow is None else self._cap_r + grow
-        env = segments_hit_boxes(a, b, radius, self._env_c, self._env_h)
-        env &= ~self._env_allowed
-        # self pairs: capsule boxes first, exact segment distances for the overlapping ones
-        i, j = self._self_pairs[:, 0], self._self_pairs[:, 1]
-        r = radius[..., :, None]
-        lo, hi = np.minimum(a, b) - r, np.maximum(a, b) + r  # (..., R, 3)
-        near = np.all((lo[..., i, :] <= hi[..., j, :]) & (hi[..., i, :] >= lo[..., j, :]), axis=-1)
-        idx = np.nonzero(near)
-        if len(idx[0]):
-            pi, pj = i[idx[-1]], j[idx[-1]]
-            rows = idx[:-1]
-            dist = segment_distance(a[rows + (pi,)], b[rows + (pi,)], a[rows + (pj,)], b[rows + (pj,)])
-            reach = self._self_r[idx[-1]]
-            if grow is not None:
-                g = np.broadcast_to(grow, a.shape[:-1])  # (..., R)
-                reach = reach + g[rows + (pi,)] + g[rows + (pj,)]
-            near[idx] = dist <= reach
-        return env, near
-
-    def _exact(self, poses: np.ndarray, env_c: np.ndarray, self_c: np.ndarray,
-               first_only: bool) -> list[tuple[str, str]]:
-        """Narrow phase with FCL on the candidate pairs of one configuration."""
-        pairs: list[tuple[str, str]] = []
-        placed: set[int] = set()
-        for r, e in zip(*np.nonzero(env_c), strict=True):
-            if fcl.collide(self._place(r, poses, placed), self._env_objs[e], self._request,
-                           fcl.CollisionResult()):
-                pairs.append((self.robot_shapes[r].label, self.env_shapes[e].label))
-                if first_only:
-                    return pairs
-        for p in np.nonzero(self_c)[0]:
-            i, j = self._self_pairs[p]
-            if fcl.collide(self._place(i, poses, placed), self._place(j, poses, placed), self._request,
-                           fcl.CollisionResult()):
-                pairs.append((self.robot_shapes[i].label, self.robot_shapes[j].label))
-                if first_only:
-                    return pairs
-        return pairs
+    def _collide(self, i: int, obj: fcl.CollisionObject, poses: np.ndarray, placed: set[int]) -> bool:
+        return bool(fcl.collide(self._place(i, poses, placed), obj, self._request, fcl.CollisionResult()))
 
     # ------------------------------------------------------------------ queries
     def check(self, q: np.ndarray) -> CollisionReport:
-        """All colliding shape pairs at q (robot-environment and self)."""
+        """All colliding shape pairs at q (robot-environment and self), every checked pair
+        tested with python-fcl: the reference the batch checker is tested against, and the
+        report behind every collision message."""
         poses = self.shape_poses(np.asarray(q, dtype=float))
-        env_c, self_c = self._candidates(poses)
-        return CollisionReport(tuple(self._exact(poses, env_c, self_c, first_only=False)))
+        placed: set[int] = set()
+        pairs = [(self.robot_shapes[r].label, self.env_shapes[e].label)
+                 for r, e in zip(*np.nonzero(~self._env_allowed), strict=True)
+                 if self._collide(int(r), self._env_objs[e], poses, placed)]
+        pairs += [(self.robot_shapes[i].label, self.robot_shapes[j].label) for i, j in self._self_pairs
+                  if self._collide(int(i), self._place(int(j), poses, placed), poses, placed)]
+        return CollisionReport(tuple(pairs))
 
     def in_collision(self, q: np.ndarray) -> bool:
-        poses = self.shape_poses(np.asarray(q, dtype=float))
-        env_c, self_c = self._candidates(poses)
-        if not env_c.any() and not self_c.any():
-            return False
-        return bool(self._exact(poses, env_c, self_c, first_only=True))
+        return self._batch.in_collision(np.asarray(q, dtype=float))
 
     def shape_poses_batch(self, qs: np.ndarray) -> np.ndarray:
         """World poses of the robot shapes at many configurations, (K, R, 4, 4)."""
@@ -511,98 +461,18 @@ class CollisionModel:
         return np.max(np.abs(dq) @ self.lever, axis=-1)
 
     def segment_free(self, a: np.ndarray, b: np.ndarray, max_step: float = 0.005,
-                     sweep: float = 0.05, end_known_free: bool = False) -> bool:
-        """Is the straight joint-space motion a -> b collision-free?
+                     end_known_free: bool = False) -> bool:
+        """Is the straight joint-space motion a -> b collision-free? Every instant is proved
+        free or lies within ``max_step`` / 2 of robot-point motion of an exactly checked
+        sample (``recon_cli.robot.motion_check``). A planner's tree extends toward random
+        states and most blocked extensions end in collision, so the end configuration is
+        checked first, unless the caller knows it is free (``end_known_free``)."""
+        return self._batch.segment_free(a, b, max_step, check_end=not end_known_free)
 
-        1. Coarse samples, at which every shape's bounding capsule is grown by half the
-           largest motion of that shape between samples (at most ``sweep`` [m]), cover the
-           swept volume in one vectorized broad phase; a pair that never meets there cannot
-           collide anywhere on the segment.
-        2. Around coarse samples where a grown capsule meets something, the flagged shape
-           pairs are followed by conservative advancement with FCL distances: at distance d
-           a pair cannot touch before its shapes have moved d, so the next check is that far
-           along - but never further than ``max_step`` [m] of robot-point motion, the
-           resolution every executed trajectory is checked at.
-
-        A planner's tree extends toward random states and most blocked extensions end in
-        collision: the end configuration is checked alone first (one configuration is far
-        cheaper than the segment), unless the caller knows it is free (``end_known_free``).
-        """
-        a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-        if not end_known_free and self.in_collision(b):
-            return False
-        per_shape = np.abs(b - a) @ self.lever  # (R,) motion bound of each shape over a -> b
-        longest = float(per_shape.max())
-        m = max(1, int(np.ceil(longest / (2.0 * sweep))))
-        t = np.linspace(0.0, 1.0, m + 1)
-        poses = self.shape_poses_batch(a + t[:, None] * (b - a))
-        env_c, self_c = self._candidates(poses, per_shape / (2.0 * m))
-        cleared = self._field_cleared(a, b) if self_c.any() else np.zeros(0, dtype=int)
-        self_c[:, cleared] = False
-        flagged = env_c.any(axis=(1, 2)) | self_c.any(axis=1)
-        if not flagged.any():
-            return True
-        # a blocked motion usually collides where the most pairs are near: check the
-        # coarse sample with the most candidates exactly before following pairs along it
-        k = int(np.argmax(env_c.sum(axis=(1, 2)) + self_c.sum(axis=1)))
-        if self._exact(poses[k], *self._candidates(poses[k]), first_only=True):
-            return False
-        min_dt = max_step / longest if longest > 0 else 1.0
-        k = 0
-        while k <= m:
-            if not flagged[k]:
-                k += 1
-                continue
-            first = k
-            while k + 1 <= m and flagged[k + 1]:
-                k += 1
-            lo, hi = max(first - 1, 0), min(k + 1, m)
-            env_pairs = np.argwhere(env_c[lo:hi + 1].any(axis=0))
-            chosen = np.nonzero(self_c[lo:hi + 1].any(axis=0))[0]
-            pair_speed = self._pair_lever[chosen] @ np.abs(b - a)
-            if not self._advance(a, b, t[lo], t[hi], env_pairs, self._self_pairs[chosen], pair_speed,
-                                 per_shape, min_dt):
-                return False
-            k += 1
-        return True
-
-    def _advance(self, a, b, t0: float, t1: float, env_pairs: np.ndarray, self_pairs: np.ndarray,
-                 pair_speed: np.ndarray, per_shape: np.ndarray, min_dt: float) -> bool:
-        """Conservative advancement of a few shape pairs over a -> b for t in [t0, t1].
-
-        A pair whose distance exceeds the motion it can still make before t1 is dropped."""
-        req = fcl.DistanceRequest()
-        env = [(int(s_idx), int(e_idx), float(per_shape[s_idx])) for s_idx, e_idx in env_pairs]
-        slf = [(int(i), int(j), float(v)) for (i, j), v in zip(self_pairs, pair_speed, strict=True)]
-        t = t0
-        while env or slf:
-            poses = self.shape_poses(a + t * (b - a))
-            placed: set[int] = set()
-            dt = np.inf
-            remaining = t1 - t
-            keep_env = []
-            for s_idx, e_idx, speed in env:
-                d = fcl.distance(self._place(s_idx, poses, placed), self._env_objs[e_idx], req,
-                                 fcl.DistanceResult())
-                if d <= 0.0:
-                    return False
-                if speed * remaining >= d:
-                    keep_env.append((s_idx, e_idx, speed))
-                    dt = min(dt, d / speed)
-            keep_self = []
-            for i, j, speed in slf:
-                d = fcl.distance(self._place(i, poses, placed), self._place(j, poses, placed), req,
-                                 fcl.DistanceResult())
-                if d <= 0.0:
-                    return False
-                if speed * remaining >= d:
-                    keep_self.append((i, j, speed))
-                    dt = min(dt, d / speed)
-            env, slf = keep_env, keep_self
-            if t >= t1:
-                return True
-            t = min(t + max(dt, min_dt), t1) if np.isfinite(dt) else t1
-        return True
+    def first_collision(self, qs: np.ndarray) -> int:
+        """Index of the first colliding configuration of qs (K, n), or -1 if all are free
+        (one batched call for all samples)."""
+        return self._batch.first_collision(np.atleast_2d(np.asarray(qs, dtype=float)))
 
     def _place(self, k: int, poses: np.ndarray, placed: set[int]) -> fcl.CollisionObject:
         obj = self._robot_objs[k]
@@ -611,90 +481,6 @@ class CollisionModel:
             obj.setTransform(fcl.Transform(T[:3, :3], T[:3, 3]))
             placed.add(k)
         return obj
-
-    def first_collision_sampled(self, qs: np.ndarray, block: int = 16) -> int:
-        """Like ``first_collision`` for a densely sampled motion (K, n): samples are grouped
-        in blocks; each shape's capsule at a block's middle sample is grown by how far that
-        shape can be from there at any sample of the block (summed per-sample motion bounds),
-        so a clean block needs no further checks. Only blocks where something is near are
-        checked sample by sample. Same answer as checking every sample."""
-        qs = np.atleast_2d(np.asarray(qs, dtype=float))
-        K = len(qs)
-        if K <= block:
-            return self.first_collision(qs)
-        step = np.abs(np.diff(qs, axis=0)) @ self.lever  # (K-1, R) per-shape motion bounds
-        cum = np.vstack([np.zeros((1, step.shape[1])), np.cumsum(step, axis=0)])  # (K, R)
-        starts = np.arange(0, K, block)
-        mids = np.minimum(starts + block // 2, K - 1)
-        ends = np.minimum(starts + block - 1, K - 1)
-        grow = np.maximum(cum[mids] - cum[starts], cum[ends] - cum[mids])  # (B, R)
-        poses = self.shape_poses_batch(qs[mids])
-        R, t = poses[..., :3, :3], poses[..., :3, 3]
-        a = (R @ self._cap_a[:, :, None])[..., 0] + t
-        b = (R @ self._cap_b[:, :, None])[..., 0] + t
-        env = segments_hit_boxes(a, b, self._cap_r + grow, self._env_c, self._env_h) & ~self._env_allowed
-        i, j = self._self_pairs[:, 0], self._self_pairs[:, 1]
-        dist = segment_distance(a[:, i, :], b[:, i, :], a[:, j, :], b[:, j, :])
-        self_near = dist <= self._self_r + grow[:, i] + grow[:, j]  # (B, P)
-        if self._fields:  # pairs whose distance tables are positive at every sample of a block
-            block_of = np.arange(K) // block
-            for p, field in self._fields:
-                low = np.full(len(starts), np.inf)
-                np.minimum.at(low, block_of, field.at(qs))
-                self_near[low > 0.0, p] = False
-        for k in np.nonzero(env.any(axis=(1, 2)) | self_near.any(axis=1))[0]:
-            hit = self._advance_samples(qs, cum, int(starts[k]), int(ends[k]),
-                                        np.argwhere(env[k]), self._self_pairs[self_near[k]])
-            if hit >= 0:
-                return hit
-        return -1
-
-    def _advance_samples(self, qs: np.ndarray, cum: np.ndarray, start: int, end: int,
-                         env_pairs: np.ndarray, self_pairs: np.ndarray) -> int:
-        """Conservative advancement over samples start..end of a dense motion for a few
-        candidate pairs: after measuring distance d, samples whose accumulated motion bound
-        (``cum``, per shape) stays below d are skipped. Returns the first colliding sample."""
-        req = fcl.DistanceRequest()
-        k = start
-        while k <= end:
-            poses = self.shape_poses(qs[k])
-            placed: set[int] = set()
-            nxt = end + 1
-            for s_idx, e_idx in env_pairs:
-                d = fcl.distance(self._place(s_idx, poses, placed), self._env_objs[e_idx], req,
-                                 fcl.DistanceResult())
-                if d <= 0.0:
-                    return k
-                moved = cum[k + 1:end + 1, s_idx] - cum[k, s_idx]
-                nxt = min(nxt, k + 1 + int(np.searchsorted(moved, d)))
-            for i, j in self_pairs:
-                d = fcl.distance(self._place(i, poses, placed), self._place(j, poses, placed), req,
-                                 fcl.DistanceResult())
-                if d <= 0.0:
-                    return k
-                moved = (cum[k + 1:end + 1, i] - cum[k, i]) + (cum[k + 1:end + 1, j] - cum[k, j])
-                nxt = min(nxt, k + 1 + int(np.searchsorted(moved, d)))
-            k = max(nxt, k + 1)
-        return -1
-
-    def first_collision(self, qs: np.ndarray) -> int:
-        """Index of the first colliding configuration of qs (K, n), or -1 if all are free.
-
-        The broad phase runs for all K configurations in one vectorized call."""
-        qs = np.atleast_2d(np.asarray(qs, dtype=float))
-        hit = -1
-        for start in range(0, len(qs), 256):
-            chunk = qs[start:start + 256]
-            poses = self.shape_poses_batch(chunk)  # (K, R, 4, 4)
-            env_c, self_c = self._candidates(poses)
-            suspect = np.nonzero(env_c.any(axis=(1, 2)) | self_c.any(axis=1))[0]
-            for k in suspect:
-                if self._exact(poses[k], env_c[k], self_c[k], first_only=True):
-                    hit = start + int(k)
-                    break
-            if hit >= 0:
-                return hit
-        return -1
 
     def distance(self, q: np.ndarray) -> DistanceReport:
         """Smallest robot-environment and robot-self distances at q [m] (exact, all pairs)."""

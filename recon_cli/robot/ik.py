@@ -170,10 +170,9 @@ class IKSolver:
             if any(np.max(np.abs(q - s.q)) < options.min_separation for s in solutions):
                 continue
             if options.check_collision and self.collision is not None:
-                report = self.collision.check(q)
-                if report.colliding:
+                if self.collision.in_collision(q):
                     rejected += 1
-                    pairs = pairs or report.pairs
+                    pairs = pairs or self.collision.check(q).pairs
                     continue
             margin = float(np.min(self.kin.limits.margin_to_soft(q)))
             solutions.append(IKSolution(q, margin, ep, er))

@@ -471,8 +471,8 @@ class CollisionModel:
 
     def first_collision(self, qs: np.ndarray) -> int:
         """Index of the first colliding configuration of qs (K, n), or -1 if all are free
-        (one batched call for all samples)."""
-        return self._batch.first_collision(np.atleast_2d(np.asarray(qs, dtype=float)))
+        (batched: inflated copies clear runs of nearby samples, exact checks for the rest)."""
+        return self._batch.first_collision(qs)
 
     def _place(self, k: int, poses: np.ndarray, placed: set[int]) -> fcl.CollisionObject:
         obj = self._robot_objs[k]

@@ -112,10 +112,34 @@ class BatchChecker:
     def in_collision(self, q: np.ndarray) -> bool:
         return self.exact.one(np.asarray(q, dtype=float))
 
-    def first_collision(self, qs: np.ndarray) -> int:
-        """Index of the first colliding configuration of qs (K, n), -1 when all are free."""
-        hit = np.nonzero(self.exact.batch(np.atleast_2d(qs), stop_at_first=True))[0]
-        return int(hit[0]) if len(hit) else -1
+    def first_collision(self, qs: np.ndarray, max_step: float = 0.005) -> int:
+        """Index of the first colliding configuration of qs (K, n), -1 when all are free.
+
+        A densely sampled course (a timed trajectory) is grouped like a motion: samples whose
+        accumulated robot-point motion lies in one bin of width G are all within G of the
+        bin's first sample, so the copy inflated by G clears the whole bin at once (levels
+        coarser than ``max_step`` only). The samples left, and those where a distance table
+        does not clear its pair, get the exact check, in order."""
+        qs = np.atleast_2d(np.asarray(qs, dtype=float))
+        cand = np.arange(len(qs))
+        if len(qs) > 16:
+            step = np.max(np.abs(np.diff(qs, axis=0)) @ self.lever, axis=1)
+            cum = np.concatenate([[0.0], np.cumsum(step)])
+            tabled = np.zeros(len(qs), dtype=bool)
+            for field in self.fields:
+                tabled |= field.at(qs) <= 0.0
+            for level in self.levels(max_step):
+                if level.grow <= max_step:
+                    break
+                bins = np.floor(cum[cand] / level.grow)
+                first = np.concatenate([[True], bins[1:] != bins[:-1]])
+                flagged = level.batch(qs[cand[first]])
+                cand = cand[flagged[np.cumsum(first) - 1]]
+                if not len(cand):
+                    break
+            cand = np.union1d(cand, np.nonzero(tabled)[0])
+        hit = np.nonzero(self.exact.batch(qs[cand], stop_at_first=True))[0]
+        return int(cand[hit[0]]) if len(hit) else -1
 
     def segment_free(self, a: np.ndarray, b: np.ndarray, max_step: float = 0.005,
                      check_end: bool = True) -> bool:

@@ -62,3 +62,20 @@ def test_free_motions_are_free_for_fcl_at_2mm(gantry):
         if free:
             assert not any(cm.check(q).colliding for q in dense)
         seen[free] += 1
+
+
+def test_first_collision_of_a_dense_course_matches_fcl(gantry):
+    """A densely sampled course (grouped by accumulated motion, inflated copies first) gives
+    the same first colliding sample as python-fcl sample by sample."""
+    cm = gantry.collision
+    rng = np.random.default_rng(3)
+    found = 0
+    for _ in range(40):
+        a = gantry.limits.sample_soft(rng)
+        b = gantry.limits.sample_soft(rng)
+        steps = int(np.ceil(float(cm.point_step_bound(b - a)) / 0.005)) + 1
+        dense = a + np.linspace(0.0, 1.0, steps)[:, None] * (b - a)
+        reference = next((k for k, q in enumerate(dense) if cm.check(q).colliding), -1)
+        assert cm.first_collision(dense) == reference
+        found += reference > 0
+    assert found >= 10

@@ -689,7 +689,7 @@ def bench_planners(
         with console.status("mplib 0.2.1 on the same problem ..."):
             peer_summary = run_mplib(folder, peer_n, time_limit)
     meta = {"n": n, "time_limit": time_limit, "seed": seed, "planners": names, "problem": "Table 4.1",
-            "plan_time": "search + simplification (reduceVertices), one core"}
+            "plan_time": "search + simplification (reduceVertices, partialShortcutPath, reduceVertices), one core"}
     summary = write_results(folder, rows, meta, peer_summary)
     table = Table(title=f"Table 4.1 problem, {n} requests per planner, {time_limit:g} s each")
     for col in ("planner", "solved", "min", "median", "p90", "max", "path length", "trajectory"):

@@ -660,6 +660,8 @@ def bench_planners(
     quick: Annotated[bool, typer.Option(help="CI mode: 10 requests of RRTConnect and RRT.")] = False,
     peer: Annotated[str, typer.Option(help="Also run a peer on the same problem: 'mplib' or 'none'.")] = "none",
     peer_n: Annotated[int, typer.Option(min=1, help="Requests for the peer (per RRT range tried).")] = 200,
+    simplify: Annotated[str, typer.Option(help="Path simplification: shortcut, reduce, full or none.")] = "shortcut",
+    shortcut_rounds: Annotated[int, typer.Option(min=1, help="Rounds of per-joint shortcuts (shortcut).")] = 1,
     seed: SeedOpt = 0,
     out: Annotated[Path | None, typer.Option(help="Output folder (default runs/bench-planners-<time>).")] = None,
 ) -> None:
@@ -668,8 +670,9 @@ def bench_planners(
 
     from recon_cli.bench.planners import DEFAULT_PLANNERS, run_planner_bench, thesis_times, write_results
     from recon_cli.console import console, progress_bar, run_folder
-    from recon_cli.planning.planner import PLANNERS
+    from recon_cli.planning.planner import PLANNERS, PlanOptions
 
+    options = PlanOptions(simplify=simplify, shortcut_rounds=shortcut_rounds)
     names = list(DEFAULT_PLANNERS) if planners == "default" else [p.strip() for p in planners.split(",") if p.strip()]
     if quick:
         names, n = ["RRTConnect", "RRT"], min(n, 10)
@@ -681,7 +684,7 @@ def bench_planners(
         raise InputError(f"--peer '{peer}' is not known", hint="use mplib or none")
     folder = run_folder(out, "bench-planners")
     with progress_bar() as update:
-        rows = run_planner_bench(names, n, time_limit, seed, update)
+        rows = run_planner_bench(names, n, time_limit, seed, update, options)
     peer_summary = None
     if peer == "mplib":
         from recon_cli.bench.mplib_peer import run_mplib
@@ -689,7 +692,8 @@ def bench_planners(
         with console.status("mplib 0.2.1 on the same problem ..."):
             peer_summary = run_mplib(folder, peer_n, time_limit)
     meta = {"n": n, "time_limit": time_limit, "seed": seed, "planners": names, "problem": "Table 4.1",
-            "plan_time": "search + simplification (reduceVertices, partialShortcutPath, reduceVertices), one core"}
+            "simplify": simplify, "shortcut_rounds": shortcut_rounds,
+            "plan_time": "search + simplification, one core"}
     summary = write_results(folder, rows, meta, peer_summary)
     table = Table(title=f"Table 4.1 problem, {n} requests per planner, {time_limit:g} s each")
     for col in ("planner", "solved", "min", "median", "p90", "max", "path length", "trajectory"):

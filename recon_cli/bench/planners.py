@@ -15,7 +15,7 @@ import csv
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -64,12 +64,15 @@ def summarize(rows: list[RequestRow]) -> dict:
 
 
 def run_planner_bench(planners: list[str], n: int, time_limit: float, seed: int,
-                      progress: Callable[[str, int, int], None] | None = None) -> list[RequestRow]:
+                      progress: Callable[[str, int, int], None] | None = None,
+                      options: PlanOptions = PlanOptions()) -> list[RequestRow]:  # noqa: B008
+    """N requests of the Table 4.1 problem per planner; ``options`` gives everything but the
+    planner and the time limit (simplification, scaling)."""
     seed_ompl(seed)
     cell = Cell(CellConfig(), object_box=BENCH_CUBE)
     rows: list[RequestRow] = []
     for name in planners:
-        planner = MotionPlanner(cell, PlanOptions(planner=name, time_limit=time_limit))
+        planner = MotionPlanner(cell, replace(options, planner=name, time_limit=time_limit))
         for k in range(n):
             t0 = time.perf_counter()
             r = planner.plan_to_joints(TABLE_4_1_START, TABLE_4_1_GOAL, seed=seed)

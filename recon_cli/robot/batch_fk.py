@@ -1,7 +1,8 @@
-"""Forward kinematics of many configurations at once, for the collision broad phase.
+"""Forward kinematics of many configurations at once (distance tables of the collision model).
 
-pinocchio computes one configuration per call; checking a motion needs the poses of all
-links at dozens of configurations, where the per-call overhead from Python dominates.
+pinocchio computes one configuration per call; tabulating a pair's distance needs the poses
+of all links at thousands of configurations, where the per-call overhead from Python
+dominates.
 ``BatchFK`` evaluates pinocchio's own model (joint placements and joint types, nothing
 re-described) for a (K, n) batch with a handful of numpy operations per joint. Supported
 joints: revolute and prismatic about/along a coordinate axis (the cells use RZ, PX, PY).

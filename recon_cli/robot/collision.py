@@ -1,4 +1,4 @@
-"""Collision model of the cell with python-fcl (thesis section 2.2.4).
+"""Collision model of the cell (thesis section 2.2.4).
 
 The shapes come from the ``<collision>`` elements of the expanded URDF: capsules for the
 iiwa links, boxes for everything else (frame, axes, table, board, camera), all already
@@ -9,7 +9,10 @@ safety distance.
 
 Checked pairs: every robot shape against every environment shape, and robot shapes of
 different links against each other, except links on the same rigid body, a link and its
-URDF parent, and the pairs listed with a reason in robot/collision.yaml.
+URDF parent, the pairs listed with a reason in robot/collision.yaml, and the pairs proven
+apart over the whole joint range. Yes/no queries run batched in C++ (pinocchio + coal,
+``motion_check``); python-fcl on the same shapes answers distance queries, proves the
+certificates and names the pairs of a collision report.
 """
 
 from __future__ import annotations

@@ -68,8 +68,9 @@ class _Level:
         self.empty = not pairs
         self.pool = pin.BroadPhaseManagerPool_DynamicAABBTreeCollisionManager(model, gm, 1)
         self.model, self.data = model, model.createData()
-        self.manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(model, gm, pin.GeometryData(gm))
-        self._keep = gm  # the managers refer to it
+        # the manager refers to the geometry model and data: both are kept alive here
+        self._geometry, self._geometry_data = gm, pin.GeometryData(gm)
+        self.manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(model, gm, self._geometry_data)
 
     def batch(self, qs: np.ndarray, stop_at_first: bool = False) -> np.ndarray:
         """Collision flag of every configuration of qs (K, n)."""
@@ -89,8 +90,8 @@ class BatchChecker:
 
     shapes: robot shapes first (``n_robot`` of them), then the environment; pairs: index
     pairs into shapes; swept_pairs: the subset kept in the inflated levels; lever (n, R):
-    motion bound of each robot shape per unit of each joint [m]; fields: (index into pairs,
-    PairField) for the pairs left out of the inflated levels.
+    motion bound of each robot shape per unit of each joint [m]; fields: the distance tables
+    of the pairs left out of the inflated levels (pairs minus swept_pairs).
     """
 
     def __init__(self, model: pin.Model, shapes: list[CollisionShape], n_robot: int,

@@ -22,7 +22,7 @@ from recon_cli.errors import FileError, InputError
 from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.perception.charuco import BoardSpec, thesis_board
 from recon_cli.reconstruction.crop import CropBox, crop_cloud
-from recon_cli.reconstruction.global_registration import GlobalPose, PoseSource, global_pose
+from recon_cli.reconstruction.global_registration import MAX_REPROJECTION_PX, GlobalPose, PoseSource, global_pose
 from recon_cli.reconstruction.pose_graph import MultiwayOptions, MultiwayResult, register_multiway
 from recon_cli.reconstruction.scan_store import ScanStore
 from recon_cli.reconstruction.surface import (
@@ -43,6 +43,7 @@ class RegisterOptions:
     box_frame: str = "world"  # frame of ``box``: world | marker
     use_board: bool = True  # False: every pose from kinematics
     min_corners: int = 6
+    max_reprojection_px: float = MAX_REPROJECTION_PX  # board poses reprojecting worse: kinematics
     local: bool = True  # pose-graph local registration
     mesh: bool = True
     multiway: MultiwayOptions = field(default_factory=MultiwayOptions)
@@ -206,7 +207,8 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
     clouds = []
     for k, index in enumerate(indices):
         scan = store.read(index)
-        pose = global_pose(scan, board, world_T_marker, options.min_corners, options.use_board)
+        pose = global_pose(scan, board, world_T_marker, options.min_corners, options.use_board,
+                           options.max_reprojection_px)
         if pose is not None and options.perturb is not None:
             pose = replace(pose, marker_T_camera=perturbed(pose.marker_T_camera, *options.perturb, rng))
         rec = ScanRecord(index, pose)

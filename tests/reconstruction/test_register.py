@@ -99,6 +99,25 @@ def test_no_colour_means_kinematics(session, tmp_path):
     assert all(r.pose.reason == "scan has no colour image" for r in result.scans)
 
 
+def test_poorly_reprojecting_board_poses_give_way_to_kinematics(session):
+    """A board pose reprojecting worse than the limit is replaced by the kinematic pose (with
+    the reason); without a world_T_marker it is the only pose and is kept."""
+    from recon_cli.perception.charuco import thesis_board
+    from recon_cli.reconstruction.global_registration import global_pose
+    from recon_cli.reconstruction.scan_store import ScanStore
+
+    folder, _ = session
+    store = ScanStore(folder)
+    world_T_marker = np.asarray(store.session()["world_T_marker"])
+    scan = store.read(0)
+    good = global_pose(scan, thesis_board(), world_T_marker)
+    assert good.source.value == "charuco" and good.reprojection_px < 1.0
+    strict = global_pose(scan, thesis_board(), world_T_marker, max_reprojection_px=0.5 * good.reprojection_px)
+    assert strict.source.value == "kinematics" and "rejected" in strict.reason
+    alone = global_pose(scan, thesis_board(), None, max_reprojection_px=0.5 * good.reprojection_px)
+    assert alone.source.value == "charuco"
+
+
 def test_board_never_found_and_no_joint_data(session, tmp_path):
     folder, _ = session
     copy = tmp_path / "s"

@@ -84,7 +84,9 @@ class Acquisition:
         dp, dr = pose_error(self.cell.kin.world_T_camera(q), self.cell.kin.world_T_camera(plan.trajectory.goal))
         return MoveReport(plan, execution, dp, dr)
 
-    def scan(self, planned: dict, move: MoveReport | None = None) -> Scan:
+    def scan(self, planned: dict, move: MoveReport | None = None, name: str | None = None) -> Scan:
+        """Capture a frame at the settled robot and write it as the next scan (``name``, when
+        given, is stored in scan.json)."""
         t0 = time.time()
         frame = self.camera.capture()
         t1 = time.time()
@@ -97,6 +99,7 @@ class Acquisition:
             joints=dict(zip(self.cell.joint_names, q.tolist(), strict=True)),
             world_T_camera_fk=self.cell.kin.world_T_camera(q),
             meta={
+                **({"name": name} if name else {}),
                 "planned_view": planned,
                 "move": None if move is None else move.to_dict(),
                 "timestamps": {"capture_start": t0, "capture_end": t1, "backend_time": frame.timestamp},

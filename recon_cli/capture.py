@@ -18,6 +18,7 @@ from recon_cli.acquisition import Acquisition, MoveReport, view_record
 from recon_cli.errors import ReconError
 from recon_cli.geometry.view import View
 from recon_cli.objects import SceneObject, load_object
+from recon_cli.outputs import atomic_write
 from recon_cli.planning.planner import PlanOptions, seed_ompl
 from recon_cli.reconstruction.scan_store import Scan, ScanStore
 from recon_cli.robot.cell import Cell
@@ -68,8 +69,7 @@ def write_ground_truth_mesh(folder: Path, obj: SceneObject) -> Path:
     gt = folder / "ground_truth"
     gt.mkdir(exist_ok=True)
     path = gt / f"{obj.name}.ply"
-    o3d.io.write_triangle_mesh(str(path), obj.mesh_world(), write_ascii=False)
-    return path
+    return atomic_write(path, lambda tmp: o3d.io.write_triangle_mesh(str(tmp), obj.mesh_world(), write_ascii=False))
 
 
 def run_capture(opt: CaptureOptions, progress: Callable[[str, int, int], None] | None = None

@@ -30,7 +30,8 @@ app.add_typer(bench_app, name="bench")
 
 CellOpt = Annotated[str, typer.Option("--cell", help="gantry (9 DoF, linear axes) or ceiling (7 DoF).")]
 SafetyOpt = Annotated[float, typer.Option("--safety", help="Safety distance [m] that inflates every collision shape.")]
-SeedOpt = Annotated[int, typer.Option("--seed", help="Seed of the random number generator.")]
+SeedOpt = Annotated[int, typer.Option("--seed", min=0, max=2**32 - 1,
+                                      help="Seed of the random number generator (0 ... 2^32-1).")]
 FocusOpt = Annotated[str, typer.Option("--focus", help="Focus point f as x,y,z [m].")]
 RadiusOpt = Annotated[float, typer.Option("--radius", "-r", help="Camera distance r from f [m].")]
 ThetaOpt = Annotated[float, typer.Option("--theta", help="Polar angle from the vertical [deg].")]
@@ -183,7 +184,7 @@ def capture(
     """Move the simulated robot through views and write one scan per view into a scan store."""
 
     from recon_cli.capture import CaptureOptions, run_capture
-    from recon_cli.console import console, progress_bar, run_folder
+    from recon_cli.console import console, progress_bar, run_folder, styled
     from recon_cli.objects import available_objects
     from recon_cli.planning.planner import PlanOptions
     from recon_cli.robot.description import CellConfig, CellKind
@@ -217,7 +218,7 @@ def capture(
                       f"{m.camera_position_error * 1e3:.4f} mm / {np.degrees(m.camera_rotation_error):.5f}°); "
                       f"{n_points} points in {t_cap:.2f} s")
     for f in result.failures:
-        console.print(f"[yellow]view {f.view} skipped:[/] {f.message}")
+        console.print(styled(f"view {f.view} skipped:", "yellow", f" {f.message}"))
     console.print(f"{len(result.scans)} of {len(view_list)} views scanned in {result.total_seconds:.1f} s; "
                   f"scan store: {folder}")
     if not result.scans:
@@ -262,7 +263,7 @@ def register(
     """Register all scans of a folder (ChArUco or kinematics, pose-graph ICP), fuse, mesh."""
     from dataclasses import replace
 
-    from recon_cli.console import console, progress_bar
+    from recon_cli.console import console, progress_bar, styled
     from recon_cli.reconstruction.crop import CropBox
     from recon_cli.reconstruction.pipeline import RegisterOptions, run_register
 
@@ -288,7 +289,7 @@ def register(
                   + ", ".join(f"{k} {v}" for k, v in sources.items()) + ")")
     for r in result.scans:
         if r.skipped:
-            console.print(f"[yellow]scan {r.index} skipped:[/] {r.skipped}")
+            console.print(styled(f"scan {r.index} skipped:", "yellow", f" {r.skipped}"))
         elif r.pose.source.value == "kinematics":
             console.print(f"scan {r.index}: kinematics ({r.pose.reason})")
     errors = [r.charuco_error for r in result.scans if r.charuco_error is not None]
@@ -344,11 +345,11 @@ def validate(
 ) -> None:
     """Expand xacro, validate against the XSD and list the commands a script would run."""
     from recon_cli.console import console
+    from recon_cli.scripts.checks import check_script
     from recon_cli.scripts.loader import load_script
-    from recon_cli.scripts.manager import check_order
 
     s = load_script(script)
-    check_order(s)
+    check_script(s)
     dialect = "recon (schemas/recon_script.xsd)" if s.dialect == "recon" else \
         "thesis system (schemas/thesis_script.xsd)"
     console.print(f"{script}: valid, dialect {dialect}, script {s.name!r}, {len(s.commands)} commands, "
@@ -357,7 +358,13 @@ def validate(
         console.print(f"{k:4d}  {cmd.source}  {cmd.describe()}")
 
 
-@app.command("run")
+RUN_EPILOG = ("Exit codes: 0 every command done; 1 error before or outside the commands (bad script, option or "
+              "file); 2 usage error; 3 some commands failed (their scans skipped; --allow-failures gives 0); "
+              "4 aborted by a failed command (on_failure=\"abort\"); 130 interrupted by Ctrl-C, 143 by SIGTERM "
+              "(completed scans kept, the report says what was interrupted).")
+
+
+@app.command("run", epilog=RUN_EPILOG)
 def run_script(
     script: Annotated[Path, typer.Argument(help="Automation script (recon or thesis dialect).")],
     out: Annotated[Path | None, typer.Option(help="Output folder (default runs/run-<time>).")] = None,
@@ -369,9 +376,16 @@ def run_script(
                                                   "and scans (default: as the script says).")] = None,
     sequence_method: Annotated[str, typer.Option(help="'ours' (local search) or 'thesis' (Tables 2.2/2.3).")] = "ours",
     seed: SeedOpt = 0,
+    append: Annotated[bool, typer.Option("--append", help="Add this run's scans to the scan store already in "
+                                                          "--out (same cell and object); without it --out must "
+                                                          "be new or empty.")] = False,
+    allow_failures: Annotated[bool, typer.Option("--allow-failures", help="Exit 0 even when some commands "
+                                                                          "failed (default: exit 3).")] = False,
 ) -> None:
     """Run an automation script: moves, scans, registration, reconstruction, exports."""
-    from recon_cli.console import console, progress_bar, run_folder
+    from recon_cli.console import console, progress_bar, run_folder, styled
+    from recon_cli.interrupts import stop_signals
+    from recon_cli.scripts.checks import check_script
     from recon_cli.scripts.loader import load_script
     from recon_cli.scripts.manager import RunOptions, ScriptRunner
 
@@ -380,10 +394,11 @@ def run_script(
     if sequence_method not in ("ours", "thesis"):
         raise UnknownNameError("sequence method", sequence_method, ("ours", "thesis"))
     s = load_script(script)
-    folder = run_folder(out, "run")
-    with progress_bar() as update:
-        result = ScriptRunner(s, RunOptions(folder, backend, seed, dry_run, object_name, optimize, sequence_method),
-                              update).run()
+    check_script(s, object_override=object_name)  # before the output folder is made
+    folder = run_folder(out, "run", fresh=not append)
+    options = RunOptions(folder, backend, seed, dry_run, object_name, optimize, sequence_method, append)
+    with stop_signals(), progress_bar() as update:
+        result = ScriptRunner(s, options, update).run()
     counts: dict[str, int] = {}
     for r in result.reports:
         counts[r.status] = counts.get(r.status, 0) + 1
@@ -391,7 +406,7 @@ def run_script(
                   + f"), {result.scans} scans, {result.seconds:.1f} s")
     for r in result.reports:
         if r.status in ("failed", "skipped") and r.message != "dry run":
-            console.print(f"[yellow]{r.status}[/] {r.source} {r.command}: {r.message}")
+            console.print(styled(r.status, "yellow", f" {r.source} {r.command}: {r.message}"))
     for seq in result.sequences:
         console.print(f"sequence of {seq['moves']} moves ({seq['method']}): planned trajectory time "
                       f"{seq['planned_duration_s']:.1f} s with {seq['planning_requests']} planning requests "
@@ -399,6 +414,8 @@ def run_script(
     for k, v in result.outputs.items():
         console.print(f"{k}: {v}")
     console.print(f"report: {folder / 'run_report.json'}")
+    if result.exit_code and not allow_failures:
+        raise typer.Exit(result.exit_code)
 
 
 @app.command()
@@ -726,7 +743,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         result = command.main(args=argv, prog_name="recon", standalone_mode=False)
     except ReconError as exc:
-        err_console.print(f"error: {exc.one_line()}", markup=False, soft_wrap=True)
+        err_console.print(f"{exc.label}: {exc.one_line()}", markup=False, soft_wrap=True)
         return exc.exit_code
     except typer.Exit as exc:
         return exc.exit_code

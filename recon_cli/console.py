@@ -18,8 +18,18 @@ from recon_cli.serialization import to_jsonable
 
 # piped output (logs, CI, tests) gets wide tables instead of rich's 80 columns
 _WIDTH = None if sys.stdout.isatty() else int(os.environ.get("COLUMNS", "140"))
-console = Console(highlight=False, width=_WIDTH)
-err_console = Console(stderr=True, highlight=False, width=_WIDTH)
+# text from scripts, file names and messages is printed literally: no rich markup, no
+# emoji codes (a script named "[/oops]" or ":x:" is shown as written); styles are applied
+# explicitly with ``styled``
+console = Console(highlight=False, markup=False, emoji=False, width=_WIDTH)
+err_console = Console(stderr=True, highlight=False, markup=False, emoji=False, width=_WIDTH)
+
+
+def styled(label: str, style: str, rest: str = ""):
+    """``label`` in ``style`` followed by ``rest`` printed literally."""
+    from rich.text import Text
+
+    return Text.assemble((label, style), rest)
 
 
 @contextlib.contextmanager
@@ -39,10 +49,19 @@ def progress_bar() -> Iterator[Callable[[str, int, int], None]]:
         yield update
 
 
-def run_folder(base: Path | None, name: str) -> Path:
-    """A new output folder ``base/name-YYYYmmdd-HHMMSS`` (or ``base`` itself when given)."""
+def run_folder(base: Path | None, name: str, fresh: bool = False) -> Path:
+    """A new output folder ``runs/name-YYYYmmdd-HHMMSS`` (or ``base`` itself when given).
+    ``fresh``: a given ``base`` must be new or empty (so that a run never mixes its results
+    with an earlier one's)."""
     if base is None:
         base = Path("runs") / f"{name}-{datetime.now():%Y%m%d-%H%M%S}"
+    elif fresh and base.is_dir() and any(base.iterdir()):
+        held = ", ".join(sorted(p.name for p in base.iterdir())[:4])
+        raise FileError(f"output folder {base} is not empty (it holds {held}, ...)",
+                        hint="choose a new folder with --out, or pass --append to add this run's scans to the "
+                             "scan store in it")
+    elif fresh and base.exists() and not base.is_dir():
+        raise FileError(f"output folder {base} is a file", hint="choose a new folder with --out")
     try:
         base.mkdir(parents=True, exist_ok=True)
         probe = base / ".write-test"
@@ -56,6 +75,6 @@ def run_folder(base: Path | None, name: str) -> Path:
 
 def write_json(path: Path, data) -> None:
     """Write JSON atomically (temporary name, then rename)."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, default=to_jsonable) + "\n")
-    os.replace(tmp, path)
+    from recon_cli.outputs import atomic_write_text
+
+    atomic_write_text(path, json.dumps(data, indent=2, default=to_jsonable) + "\n")

@@ -12,6 +12,7 @@ class ReconError(Exception):
     """An error the user can fix (bad input, unreachable goal, missing file, ...)."""
 
     exit_code = 1
+    label = "error"  # how the CLI introduces the message
 
     def __init__(self, message: str, *, hint: str | None = None) -> None:
         self.message = message

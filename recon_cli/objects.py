@@ -201,6 +201,11 @@ def ycb_path(name: str) -> Path:
     return SHARED_DATA_DIR / "ycb" / _YCB[name][0] / "textured.obj"
 
 
+def ycb_names() -> tuple[str, ...]:
+    """Names of the YCB objects recon knows (present here or not)."""
+    return tuple(_YCB)
+
+
 def available_objects() -> dict[str, str]:
     """Name -> description of every object that can be loaded here."""
     out = {name: fn().description for name, fn in BUILTIN.items()}

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from recon_cli.errors import FileError
+from recon_cli.outputs import atomic_write
 
 
 @dataclass(frozen=True)
@@ -93,9 +94,9 @@ def _atomic(path: Path, write) -> Path:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise FileError(f"cannot create {path.parent} ({exc.strerror})", hint="choose a writable folder") from None
-    tmp = path.with_name(".tmp-" + path.name)
-    if not write(tmp):
-        tmp.unlink(missing_ok=True)
-        raise FileError(f"cannot write {path}", hint="use a .ply, .pcd, .obj or .stl name in a writable folder")
-    tmp.replace(path)
-    return path
+
+    def checked(tmp: Path) -> None:
+        if not write(tmp):
+            raise FileError(f"cannot write {path}", hint="use a .ply, .pcd, .obj or .stl name in a writable folder")
+
+    return atomic_write(path, checked)

@@ -27,11 +27,12 @@ from recon_cli.errors import FileError, InputError
 from recon_cli.geometry.view import Frame, View
 from recon_cli.paths import SCHEMA_DIR, SCRIPTS_DIR
 from recon_cli.scripts import commands as C
+from recon_cli.scripts.sandbox import LIMITS, PI_TARGET, SandboxError, sandboxed
 
 XACRO_NS = "http://www.ros.org/wiki/xacro"
 SRC_ATTR = "recon_source"
 DIALECTS = {"recon": "recon_script.xsd", "script": "thesis_script.xsd"}
-MAX_BYTES = 5_000_000
+MAX_BYTES = LIMITS.max_file_bytes
 
 
 class ScriptError(InputError):
@@ -74,12 +75,20 @@ def _resolve_include(name: str, here: Path, where: str) -> Path:
                       hint="check the filename")
 
 
+# xacro directives; every other xacro:NAME element is a macro call
+_DIRECTIVES = {"macro", "property", "include", "arg", "if", "unless", "insert_block", "element", "attribute"}
+
+
 def _annotate(path: Path, out_dir: Path, copies: dict[Path, Path], display: dict[Path, str]) -> Path:
-    """Copy ``path`` into out_dir with every element tagged file:line and includes resolved
-    to their tagged copies. Returns the copy's path."""
+    """Copy ``path`` into out_dir with every element tagged file:line, every macro call
+    preceded by a ``<?recon-src file:line?>`` instruction, and includes resolved to their
+    tagged copies. Returns the copy's path."""
     path = path.resolve()
     if path in copies:
         return copies[path]
+    if len(copies) >= LIMITS.max_files:
+        raise SandboxError(f"{display.get(path, path.name)}: the script includes more than the limit of "
+                           f"{LIMITS.max_files} files", hint="merge macro files")
     tree = _parse_file(path)
     target = out_dir / f"{len(copies):03d}_{path.name}"
     copies[path] = target
@@ -94,29 +103,35 @@ def _annotate(path: Path, out_dir: Path, copies: dict[Path, Path], display: dict
             el.set("filename", str(_annotate(included, out_dir, copies, display)))
         elif not el.tag.startswith(f"{{{XACRO_NS}}}"):
             el.set(SRC_ATTR, f"{label}:{el.sourceline}")
+        elif etree.QName(el).localname not in _DIRECTIVES and el.getparent() is not None:
+            el.addprevious(etree.ProcessingInstruction(PI_TARGET, f"{label}:{el.sourceline}"))
     tree.write(str(target), xml_declaration=True, encoding="utf-8")
     return target
 
 
 def expand(path: Path) -> tuple[etree._Element, dict[etree._Element, C.Source], str]:
-    """Parse, check and xacro-expand a script: (root, element -> source, expanded XML)."""
+    """Parse, check and xacro-expand a script in the sandbox: (root, element -> source,
+    expanded XML)."""
     import xacro
 
     path = Path(path)
     tmp = Path(tempfile.mkdtemp(prefix="recon-script-"))
     try:
         main = _annotate(path, tmp, {}, {path.resolve(): path.name})
+        roots = (path.resolve().parent, SCRIPTS_DIR.resolve())
+        frames = None
         try:
-            doc = xacro.process_file(str(main))
+            with sandboxed(roots[0], roots) as frames:
+                doc = xacro.process_file(str(main))
+                text = doc.toxml()
         except Exception as exc:  # xacro reports macro/property errors as exceptions
-            message = " ".join(str(exc).split())
-            for copy in tmp.iterdir():
-                message = message.replace(str(copy), copy.name[4:])
-            raise ScriptError(f"{path}: xacro: {message}", hint="fix the macro call or property") from None
-        text = doc.toxml()
+            raise _expansion_error(path, exc, frames, tmp) from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     root = etree.fromstring(text.encode(), _parser())
+    for pi in root.xpath("//processing-instruction()"):
+        if pi.getparent() is not None:
+            pi.getparent().remove(pi)
     tagged = {}
     for el in root.iter():
         if isinstance(el.tag, str) and el.get(SRC_ATTR):
@@ -131,6 +146,31 @@ def expand(path: Path) -> tuple[etree._Element, dict[etree._Element, C.Source], 
     new = [e for e in clean.iter() if isinstance(e.tag, str)]
     sources = {n: tagged[o] for o, n in zip(old, new, strict=True) if o in tagged}
     return clean, sources, expanded
+
+
+def _expansion_error(path: Path, exc: BaseException, frames, tmp: Path) -> ScriptError:
+    """One line for an error of the expansion: where (the element or macro call being
+    expanded, and the macro calls that led there) and what."""
+    cause: BaseException | None = exc
+    seen = set()
+    while cause is not None and not isinstance(cause, SandboxError) and id(cause) not in seen:
+        seen.add(id(cause))
+        cause = getattr(cause, "exc", None) or cause.__cause__ or cause.__context__
+    if isinstance(cause, SandboxError):
+        what, hint = cause.message, cause.hint
+    elif isinstance(exc, RecursionError):
+        what, hint = "macros or properties recurse without end", "end the recursion with xacro:if"
+    else:
+        what = " ".join(str(exc).split()) or type(exc).__name__
+        for copy in tmp.iterdir():
+            what = what.replace(str(copy), copy.name[4:])
+        what, hint = f"xacro: {what}", "fix the macro call or property"
+    stack = (frames.failure or frames.stack) if frames is not None else []
+    where = stack[-1][1] if stack else path.name
+    calls = [src for kind, src in stack if kind == "macro" and src != where]
+    if calls:
+        what += " (in macro called at " + ", called at ".join(reversed(calls)) + ")"
+    return ScriptError(f"{where}: {what}", hint=hint)
 
 
 def load_script(path: Path) -> C.Script:
@@ -149,12 +189,15 @@ def load_script(path: Path) -> C.Script:
         message = err.message.replace("{http://www.ros.org/wiki/xacro}", "xacro:")
         raise ScriptError(f"{src}: {message}", hint=f"see schemas/{DIALECTS[localname]}")
     build = _build_recon if dialect == "recon" else _build_thesis
-    cmds = []
+    cmds: list[C.Command] = []
     for el in root:
         if not isinstance(el.tag, str):
             continue
         src = sources.get(el, C.Source(path.name, el.sourceline or 0))
         cmds.extend(build(el, src))
+        if len(cmds) > LIMITS.max_commands:
+            raise ScriptError(f"{src}: the script has more than the limit of {LIMITS.max_commands} commands",
+                              hint="split it into several scripts")
     if dialect == "recon":
         name, on_failure, optimize = root.get("name"), root.get("on_failure", "skip"), _bool(root.get("optimize"))
     else:
@@ -188,13 +231,54 @@ def _finite(values, src: C.Source, what: str) -> None:
         raise ScriptError(f"{src}: {what} has a non-finite number", hint="use finite numbers")
 
 
+# largest magnitudes of written angles (degrees; the same in radians for radian fields):
+# a polar angle beyond half a turn, or an azimuth/roll beyond two turns, is a unit mistake
+ANGLE_BOUNDS_DEG = {"theta": 180.0, "phi": 720.0, "alpha": 720.0, "phi_start": 720.0, "phi_step": 360.0}
+
+
+def check_angles(src: C.Source, tag: str, unit: str, values: dict[str, str | float | None]) -> None:
+    """Refuse written angles that cannot be meant in ``unit`` (e.g. degrees in a radians field)."""
+    for name, raw in values.items():
+        if raw is None:
+            continue
+        v = float(raw)
+        bound = ANGLE_BOUNDS_DEG[name]
+        if unit == "rad":
+            bound = math.radians(bound)
+        if not math.isfinite(v) or abs(v) > bound + 1e-9:
+            if unit == "rad":
+                hint = (f"this field takes radians; if you meant {v:g} degrees write {math.radians(v):.4f}"
+                        + (' or unit="deg"' if tag != "coordinates" else ""))
+                text = f"{name} {v:g} rad is beyond +-{bound:.4f} rad (+-{ANGLE_BOUNDS_DEG[name]:g} deg)"
+            else:
+                hint = "write the angle in degrees within the bound"
+                text = f"{name} {v:g} deg is beyond +-{bound:g} deg"
+            raise ScriptError(f"{src}: <{tag}> {text}", hint=hint)
+
+
 def _view(el, src: C.Source, theta: float, phi: float) -> View:
     unit = el.get("unit", "deg")
     focus = _vec(el.get("focus"))
     radius = float(el.get("radius"))
+    check_angles(src, el.tag, unit, {"alpha": el.get("alpha")})
     alpha = _angle(el.get("alpha"), unit)
     _finite((*focus, radius, theta, phi, alpha), src, f"<{el.tag}>")
     return View(focus, radius, theta, phi, alpha, Frame(el.get("frame", "world")))
+
+
+def relative_output(name: str, src: C.Source, what: str) -> str:
+    """An output path of a script: relative, and inside the output folder."""
+    p = Path(name)
+    depth = 0
+    for part in p.parts:
+        depth += -1 if part == ".." else (0 if part == "." else 1)
+        if depth < 0:
+            break
+    if p.is_absolute() or depth < 0 or name.startswith("~"):
+        raise ScriptError(f"{src}: {what} {name!r} is outside the output folder",
+                          hint="scripts write only into the output folder (--out); give a relative path "
+                               "such as drill.ply")
+    return name
 
 
 def _build_recon(el, src: C.Source) -> list[C.Command]:
@@ -224,6 +308,7 @@ def _build_recon(el, src: C.Source) -> list[C.Command]:
         return [C.MoveHome(src)]
     if tag == "move":
         unit = a.get("unit", "deg")
+        check_angles(src, tag, unit, {"theta": a["theta"], "phi": a["phi"]})
         return [C.MoveView(src, _view(el, src, _angle(a["theta"], unit), _angle(a["phi"], unit)))]
     if tag == "pose":
         q = _vec(a["orientation"])
@@ -237,7 +322,12 @@ def _build_recon(el, src: C.Source) -> list[C.Command]:
         return [C.MoveJoints(src, tuple(values), unit)]
     if tag == "ring":
         unit = a.get("unit", "deg")
+        check_angles(src, tag, unit, {"theta": a["theta"], "phi_start": a.get("phi_start"),
+                                      "phi_step": a.get("phi_step")})
         count = int(a["count"])
+        if count > LIMITS.max_ring_count:
+            raise ScriptError(f"{src}: <ring> count {count} exceeds the limit of {LIMITS.max_ring_count} views",
+                              hint="use several rings or fewer views")
         start = float(a.get("phi_start", 0.0))
         full_turn = 360.0 if unit == "deg" else 2 * math.pi
         step = float(a["phi_step"]) if a.get("phi_step") is not None else full_turn / count
@@ -261,7 +351,8 @@ def _build_recon(el, src: C.Source) -> list[C.Command]:
         if not a.get("cloud") and not a.get("mesh"):
             raise ScriptError(f"{src}: <export> needs cloud=... and/or mesh=...",
                               hint='e.g. <export mesh="drill.ply"/>')
-        return [C.Export(src, a.get("cloud"), a.get("mesh"))]
+        return [C.Export(src, *(None if a.get(k) is None else relative_output(a[k], src, f"<export {k}>")
+                                for k in ("cloud", "mesh")))]
     if tag == "evaluate":
         return [C.Evaluate(src, a.get("reference", "ground_truth"), float(a.get("tolerance", 0.001)),
                            a.get("align", "none"))]
@@ -293,6 +384,7 @@ def _build_thesis(el, src: C.Source) -> list[C.Command]:
                                ref)]
         sphere, co = children["sphere"], children["coordinates"]
         focus, radius = _vec(sphere.get("xyz")), float(sphere.get("radius"))
+        check_angles(src, "coordinates", "rad", {k: co.get(k) for k in ("theta", "phi", "alpha")})
         theta, phi, alpha = float(co.get("theta")), float(co.get("phi")), float(co.get("alpha", 0.0))
         _finite((*focus, radius, theta, phi, alpha), src, "<move>")
         if radius <= 0:
@@ -325,7 +417,10 @@ def _build_thesis(el, src: C.Source) -> list[C.Command]:
             T = np.linalg.inv(T)
         return [C.TransformFragment(src, a["fragment"], tuple(map(tuple, T)))]
     if tag == "export":
-        return [C.ExportFragment(src, a["fragment"], a.get("type", "mesh"), a["path"])]
+        path = a["path"]  # the thesis system wrote absolute paths: recon writes them by file name into --out
+        if not Path(path).is_absolute():
+            relative_output(path, src, "export")
+        return [C.ExportFragment(src, a["fragment"], a.get("type", "mesh"), path)]
     if tag == "wait":
         return [C.Wait(src, float(a["duration"]))]
     if tag == "delete":

@@ -24,32 +24,37 @@ import numpy as np
 
 from recon_cli.errors import ReconError
 from recon_cli.geometry.view import Frame
+from recon_cli.interrupts import exit_code, signal_name
 from recon_cli.scripts import commands as C
+from recon_cli.scripts.checks import ACTIONS, check_script, is_file_name, readable_file
 from recon_cli.scripts.loader import ScriptError
 
 Progress = Callable[[str, int, int], None]
-SETUP = (C.SetCell, C.SetObject)
-ACTIONS = (C.Move, C.MoveJoints, C.MoveHome, C.Scan)
+
+#: exit codes of ``recon run`` (README "Exit codes")
+EXIT_DONE, EXIT_ERROR, EXIT_USAGE, EXIT_FAILED, EXIT_ABORTED = 0, 1, 2, 3, 4
 
 
 class ScriptAborted(ReconError):
     """A failed command under on_failure="abort"."""
 
+    exit_code = EXIT_ABORTED
+    label = "aborted"
+
+
+class RunInterrupted(ReconError):
+    """Ctrl-C or SIGTERM during a run: the robot is stopped, completed scans are kept."""
+
+    label = "interrupted"
+
+    def __init__(self, message: str, *, signal: str, hint: str | None = None) -> None:
+        super().__init__(message, hint=hint)
+        self.signal = signal
+        self.exit_code = exit_code(signal)
+
 
 class HardwareUnavailable(ReconError):
     pass
-
-
-def check_order(script: C.Script) -> None:
-    """Static checks shared by ``recon validate`` and ``recon run``: the cell and the
-    object are chosen before the first move or scan."""
-    started = None
-    for cmd in script.commands:
-        if isinstance(cmd, ACTIONS) and started is None:
-            started = cmd
-        if isinstance(cmd, SETUP) and started is not None:
-            raise ScriptError(f"{cmd.source}: <{_tag(cmd)}> after the first move or scan ({started.source})",
-                              hint="choose the cell and the object at the top of the script")
 
 
 def movable_groups(commands: tuple[C.Command, ...]) -> dict[int, int]:
@@ -80,10 +85,6 @@ def _units(commands) -> list[tuple[C.Command, list[C.Command]]]:
     return units
 
 
-def _tag(cmd: C.Command) -> str:
-    return {"SetCell": "cell", "SetObject": "object"}.get(cmd.keyword, cmd.keyword)
-
-
 @dataclass(frozen=True)
 class RunOptions:
     out: Path
@@ -93,13 +94,14 @@ class RunOptions:
     object_name: str | None = None  # simulated object (overrides the script's <object>)
     optimize: bool | None = None  # sequence optimization (None: as the script says)
     sequence_method: str = "ours"  # "ours" (local search) or "thesis" (Table 2.2 + 2.3)
+    append: bool = False  # add scans to the scan store already in ``out``
 
 
 @dataclass
 class CommandReport:
     source: str
     command: str
-    status: str  # done | failed | skipped | planned | recorded
+    status: str  # done | failed | skipped | planned | recorded | interrupted
     seconds: float = 0.0
     message: str = ""
     details: dict = field(default_factory=dict)
@@ -124,13 +126,18 @@ class RunResult:
     def failed(self) -> list[CommandReport]:
         return [r for r in self.reports if r.status == "failed"]
 
+    @property
+    def exit_code(self) -> int:
+        """0 when every command did its work, 3 when some failed (or were skipped for it)."""
+        return EXIT_FAILED if self.failed else EXIT_DONE
+
 
 class ScriptRunner:
     def __init__(self, script: C.Script, options: RunOptions, progress: Progress | None = None) -> None:
         from recon_cli.planning.planner import PlanOptions
         from recon_cli.robot.description import CellConfig
 
-        check_order(script)
+        check_script(script, object_override=options.object_name)
         self.script = script
         self.options = options
         self.progress = progress or (lambda *a: None)
@@ -152,18 +159,22 @@ class ScriptRunner:
         self.outputs: dict[str, str] = {}
         self.reports: list[CommandReport] = []
         self.sequences: list[dict] = []
+        self.current: C.Command | None = None  # the command in progress (for interruptions)
         optimize = script.optimize if options.optimize is None else options.optimize
         self.groups = movable_groups(script.commands) if optimize else {}
 
     # ------------------------------------------------------------------ run
     def run(self) -> RunResult:
+        from recon_cli.outputs import atomic_write_text, refuse_links
         from recon_cli.planning.planner import seed_ompl
 
         t0 = time.perf_counter()
         seed_ompl(self.options.seed)
         self.out.mkdir(parents=True, exist_ok=True)
-        (self.out / "script.expanded.xml").write_text(self.script.expanded_xml)
-        aborted = ""
+        if self.options.append:
+            refuse_links(self.out)
+        atomic_write_text(self.out / "script.expanded.xml", self.script.expanded_xml)
+        aborted, interrupted = "", None
         n = len(self.script.commands)
         try:
             k = 0
@@ -180,21 +191,41 @@ class ScriptRunner:
         except ScriptAborted as exc:
             aborted = str(exc)
             raise
+        except KeyboardInterrupt as exc:
+            interrupted = self._interruption(signal_name(exc))
+            aborted = interrupted["reason"]
         finally:
-            self._close()
-            self._write_report(time.perf_counter() - t0, aborted)
+            self._close()  # stops the robot first
+            self._write_report(time.perf_counter() - t0, aborted, interrupted)
+        if interrupted is not None:
+            raise RunInterrupted(
+                f"{interrupted['reason']}; {interrupted['scans_kept']} completed scan(s) kept in {self.out / 'scans'}",
+                signal=interrupted["signal"],
+                hint=f"run_report.json records it; recon register {self.out / 'scans'} works on the kept scans")
         return RunResult(self.out, self.script, self.reports, self._scan_count(), time.perf_counter() - t0,
                          dict(self.outputs), aborted, list(self.sequences))
+
+    def _interruption(self, signal: str) -> dict:
+        cmd = self.current
+        where = "between commands" if cmd is None else f"during {cmd.source} ({cmd.describe()})"
+        return {"signal": signal, "reason": f"interrupted by {signal} {where}",
+                "command": None if cmd is None else str(cmd.source), "scans_kept": self._scan_count()}
 
     def _run_command(self, cmd: C.Command, planned=None, note: str = "") -> None:
         report = CommandReport(str(cmd.source), cmd.describe(), "done", message=note)
         t = time.perf_counter()
+        self.current = cmd
         try:
             if planned is not None:
                 self._execute_planned(cmd, planned, report)
             else:
                 self._dispatch(cmd, report)
         except ScriptAborted:
+            raise
+        except KeyboardInterrupt:
+            report.status, report.message = "interrupted", "stopped by a signal; the robot was stopped"
+            report.seconds = time.perf_counter() - t
+            self.reports.append(report)
             raise
         except ReconError as exc:
             report.status, report.message = "failed", exc.one_line()
@@ -207,6 +238,7 @@ class ScriptRunner:
                                     hint="the script says on_failure=\"abort\"; earlier scans are kept") from None
         report.seconds = time.perf_counter() - t
         self.reports.append(report)
+        self.current = None
 
     # ------------------------------------------------------------------ sequence optimization
     def _run_group(self, commands: tuple[C.Command, ...]) -> None:
@@ -311,13 +343,22 @@ class ScriptRunner:
     def _scan_count(self) -> int:
         return 0 if self.store is None else len(self.store)
 
-    def _write_report(self, seconds: float, aborted: str) -> None:
+    def _write_report(self, seconds: float, aborted: str, interrupted: dict | None = None) -> None:
         from recon_cli.console import write_json
 
+        failed = any(r.status == "failed" for r in self.reports)
+        if interrupted is not None:
+            status, code = "interrupted", exit_code(interrupted["signal"])
+        elif aborted:
+            status, code = "aborted", EXIT_ABORTED
+        else:
+            status, code = ("failed", EXIT_FAILED) if failed else ("done", EXIT_DONE)
         write_json(self.out / "run_report.json", {
             "script": self.script.path, "name": self.script.name, "dialect": self.script.dialect,
             "on_failure": self.script.on_failure, "dry_run": self.options.dry_run, "backend": self.backend,
-            "seed": self.options.seed, "seconds": seconds, "scans": self._scan_count(), "aborted": aborted or None,
+            "seed": self.options.seed, "seconds": seconds, "scans": self._scan_count(),
+            "status": status, "exit_code": code, "aborted": aborted or None, "interrupted": interrupted,
+            "append": self.options.append,
             "outputs": self.outputs, "sequence_optimization": self.sequences,
             "commands": [r.to_dict() for r in self.reports],
         })
@@ -345,10 +386,14 @@ class ScriptRunner:
     def _do_SetObject(self, cmd: C.SetObject, report) -> None:  # noqa: N802
         from recon_cli.objects import load_object
 
-        if cmd.name != "auto":
-            load_object(cmd.name, cmd.scale)  # fails now, with the line, if it does not exist
-        if self.options.object_name is None:
-            self.object_name, self.object_scale = cmd.name, cmd.scale
+        if self.options.object_name is not None:
+            return
+        name = cmd.name
+        if is_file_name(name):
+            name = str(readable_file(self.script, name, cmd.source, "object mesh"))
+        if name != "auto":
+            load_object(name, cmd.scale)  # fails now, with the line, if it cannot be loaded
+        self.object_name, self.object_scale = name, cmd.scale
 
     def _do_SetBox(self, cmd: C.SetBox, report) -> None:  # noqa: N802
         self.box_command = cmd
@@ -389,7 +434,6 @@ class ScriptRunner:
         from recon_cli.capture import write_ground_truth_mesh
         from recon_cli.objects import available_objects, load_object
         from recon_cli.perception.sensor import motioncam_3d_m
-        from recon_cli.reconstruction.scan_store import ScanStore
         from recon_cli.robot.cell import Cell
         from recon_cli.robot.poses import named_configuration
 
@@ -415,7 +459,7 @@ class ScriptRunner:
                                                               else self.box_command.margin)
         if self.box_command is not None and self.box_command.center is not None:
             crop_center, crop_size = box.center, box.size
-        self.store = ScanStore.create(self.out / "scans", {
+        session = {
             "backend": self.backend, "script": self.script.path,
             "cell": {"kind": self.cell_config.kind.value, "safety_distance": self.cell_config.safety_distance},
             "sensor": sensor.name, "noise": self.noise, "seed": self.options.seed,
@@ -424,13 +468,37 @@ class ScriptRunner:
                                                      "size": list(box.size)},
             "crop_box": {"frame": "world", "center": list(crop_center), "size": list(crop_size)},
             "world_T_marker": self.cell.world_T_marker,
-        })
+        }
+        self.store = self._open_store(session)
         write_ground_truth_mesh(self.out / "scans", self.scene_object)
         self.station = SimStation(self.cell, self.scene_object, start, self.rng, noise=self.noise,
                                   resolution=self.resolution)
         self.acquisition = Acquisition(self.cell, self.station.robot, self.station.camera, self.store, self.rng,
                                        self.plan, depth_scale=sensor.depth_scale,
                                        ground_truth=self.station.ground_truth)
+
+    def _open_store(self, session: dict):
+        """A new scan store, or (``--append``) the one already in the output folder when it
+        was recorded with the same cell, object and backend."""
+        from recon_cli.errors import FileError
+        from recon_cli.reconstruction.scan_store import ScanStore
+
+        root = self.out / "scans"
+        if not (self.options.append and (root / "session.json").exists()):
+            return ScanStore.create(root, session)
+        store = ScanStore(root)
+        old = store.session()
+        for key, label in (("backend", "backend"), ("cell", "cell"), ("object", "object")):
+            mine, theirs = session.get(key), old.get(key)
+            if key == "cell":
+                mine, theirs = (mine or {}).get("kind"), (theirs or {}).get("kind")
+            elif key == "object":
+                mine, theirs = (mine or {}).get("name"), (theirs or {}).get("name")
+            if mine != theirs:
+                raise FileError(f"--append: the scans in {root} were recorded with {label} {theirs!r}, this run "
+                                f"uses {mine!r}", hint="append only runs of the same cell and object, or choose a "
+                                                       "new output folder")
+        return store
 
     # motion ------------------------------------------------------------
     def _goal_pose(self, cmd: C.Move) -> np.ndarray:
@@ -517,9 +585,7 @@ class ScriptRunner:
         last = getattr(self, "_last_view", None)
         view = last[0].view if last and isinstance(last[0], C.MoveView) else None
         T = last[1] if last else self.cell.kin.world_T_camera(self.station.robot.measured_joints())
-        scan = self.acquisition.scan(view_record(view, T))
-        if cmd.name:
-            scan.meta["name"] = cmd.name
+        scan = self.acquisition.scan(view_record(view, T), name=cmd.name)
         report.details.update(scan=scan.index, points=int(np.count_nonzero(scan.depth > 0)))
         self.registered = None  # a new scan invalidates earlier registration results
         if isinstance(cmd, C.FragmentScan):
@@ -577,16 +643,22 @@ class ScriptRunner:
         self.outputs.update(cloud=str(cloud), mesh=str(mesh_path))
         report.details.update(points=len(fused.points), triangles=len(mesh.triangles))
 
-    def _out_path(self, name: str, report: CommandReport) -> Path:
-        p = Path(name)
-        if p.is_absolute():
-            report.message = f"absolute path {name} written into the output folder as {p.name}"
-            return self.out / p.name
-        resolved = (self.out / p).resolve()
-        if not resolved.is_relative_to(self.out.resolve()):
-            report.message = f"{name} points outside the output folder; written as {p.name}"
-            return self.out / p.name
-        return resolved
+    def _out_path(self, name: str, cmd: C.Command, report: CommandReport) -> Path:
+        """Where an export goes: inside the output folder after resolving links, else refused.
+        An absolute path (thesis dialect only; the loader refuses it in recon's) is written
+        into the output folder under its file name, and the report says so."""
+        from recon_cli.errors import FileError
+        from recon_cli.outputs import inside
+
+        if Path(name).is_absolute():
+            report.message = f"absolute path {name} written into the output folder as {Path(name).name}"
+            name = Path(name).name
+        try:
+            target = inside(self.out, name, "export")
+        except FileError as exc:
+            raise FileError(f"{cmd.source}: {exc.message}", hint=exc.hint) from None
+        target.parent.mkdir(parents=True, exist_ok=True)
+        return target
 
     def _do_Export(self, cmd: C.Export, report) -> None:  # noqa: N802
         if self._skipped_in_dry_run(report):
@@ -597,9 +669,10 @@ class ScriptRunner:
             if kind not in self.reconstruction:
                 raise ReconError(f"{cmd.source}: no {kind} to export yet",
                                  hint="put <register/> and <reconstruct/> before <export>")
-            target = self._out_path(name, report)
-            target.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(self.reconstruction[kind], target)
+            from recon_cli.outputs import atomic_write
+
+            source = self.reconstruction[kind]
+            target = atomic_write(self._out_path(name, cmd, report), lambda tmp, src=source: shutil.copyfile(src, tmp))
             self.outputs[f"export_{kind}"] = str(target)
 
     def _do_Evaluate(self, cmd: C.Evaluate, report) -> None:  # noqa: N802
@@ -616,7 +689,7 @@ class ScriptRunner:
                                  hint="give reference=\"path/to/mesh.ply\"")
             reference = self.out / "scans" / "ground_truth" / f"{self.scene_object.name}.ply"
         else:
-            reference = (Path(self.script.path).parent / cmd.reference).resolve()
+            reference = readable_file(self.script, cmd.reference, cmd.source, "reference mesh")
         result = run_evaluate(self.reconstruction["cloud"], reference, cmd.tolerance,
                               self.out / "scans" if self.store else None, cmd.align,
                               out=self.out / "reconstruction")
@@ -712,10 +785,6 @@ class ScriptRunner:
         self._fragment(cmd.fragment, cmd)
         del self.fragments[cmd.fragment]
 
-    def _script_path(self, name: str) -> Path:
-        p = Path(name)
-        return p if p.is_absolute() else (Path(self.script.path).parent / p).resolve()
-
     def _do_LoadFragment(self, cmd: C.LoadFragment, report) -> None:  # noqa: N802
         import cv2
         import open3d as o3d
@@ -726,12 +795,13 @@ class ScriptRunner:
         if self._skipped_in_dry_run(report):
             return
         if cmd.kind == "point_cloud":
-            path = self._script_path(cmd.path_point_cloud)
+            path = readable_file(self.script, cmd.path_point_cloud, cmd.source, "point cloud")
             cloud = o3d.io.read_point_cloud(str(path)) if path.is_file() else o3d.geometry.PointCloud()
             if len(cloud.points) == 0:
                 raise FileError(f"{cmd.source}: {path} is missing or holds no points", hint="check path_point_cloud")
         else:
-            color_path, depth_path = self._script_path(cmd.path_color), self._script_path(cmd.path_depth)
+            color_path = readable_file(self.script, cmd.path_color, cmd.source, "colour image")
+            depth_path = readable_file(self.script, cmd.path_depth, cmd.source, "depth image")
             depth = cv2.imread(str(depth_path), cv2.IMREAD_UNCHANGED)
             color = cv2.imread(str(color_path), cv2.IMREAD_COLOR)
             if depth is None or color is None:
@@ -757,7 +827,7 @@ class ScriptRunner:
             return
         frag = self._fragment(cmd.fragment, cmd)
         T = self.cell.world_T_marker if self.store is not None else None  # scans are in the marker frame
-        target = self._out_path(cmd.path, report)
+        target = self._out_path(cmd.path, cmd, report)
         if cmd.kind == "point_cloud":
             write_cloud(target, frag, T)
         else:

@@ -13,7 +13,7 @@ from recon_cli.errors import FileError
 from recon_cli.paths import SCRIPTS_DIR
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.loader import ScriptError, load_script
-from recon_cli.scripts.manager import check_order
+from recon_cli.scripts.checks import check_script
 
 SHIPPED = sorted(SCRIPTS_DIR.glob("*.xml"))
 HEAD = '<?xml version="1.0"?>\n'
@@ -118,7 +118,7 @@ def test_setup_after_the_first_move_is_refused(tmp_path):
   <cell kind="ceiling"/>
 </recon>""")
     with pytest.raises(ScriptError, match=r"s\.xml:4: <cell> after the first move or scan \(s\.xml:3\)"):
-        check_order(load_script(p))
+        check_script(load_script(p))
 
 
 @pytest.mark.parametrize("text, words", [
@@ -129,7 +129,7 @@ def test_setup_after_the_first_move_is_refused(tmp_path):
     ('<!DOCTYPE r [<!ENTITY x SYSTEM "file:///etc/passwd">]><recon name="&x;"/>', "entity"),
     # xacro expression trying to reach Python
     ('<recon name="t" xmlns:xacro="http://www.ros.org/wiki/xacro">'
-     '<scan name="${__import__(\'os\').system(\'touch /tmp/pwned\')}"/></recon>', "xacro"),
+     '<scan name="${__import__(\'os\').system(\'touch /tmp/pwned\')}"/></recon>', "not allowed"),
     ('<recon name="t" xmlns:xacro="http://www.ros.org/wiki/xacro">'
      '<scan name="${open(\'/etc/passwd\').read()}"/></recon>', "xacro"),
     # includes outside the script folder and scripts_xml/

@@ -50,7 +50,7 @@ def test_dry_run_plans_but_does_not_move(tmp_path):
 def test_failed_move_skips_its_scan(tmp_path, capsys):
     out = tmp_path / "skip"
     p = _script(tmp_path, GOOD.format(phi=0) + UNREACHABLE + GOOD.format(phi=180))
-    assert main(["run", str(p), "--out", str(out)]) == 0
+    assert main(["run", str(p), "--out", str(out)]) == 3  # some commands failed
     report = json.loads((out / "run_report.json").read_text())
     statuses = [c["status"] for c in report["commands"][3:]]
     assert statuses == ["done", "done", "failed", "skipped", "done", "done"]
@@ -63,7 +63,7 @@ def test_failed_move_skips_its_scan(tmp_path, capsys):
 def test_abort_keeps_earlier_scans(tmp_path, capsys):
     out = tmp_path / "abort"
     p = _script(tmp_path, GOOD.format(phi=0) + UNREACHABLE + GOOD.format(phi=180), policy="abort")
-    assert main(["run", str(p), "--out", str(out)]) == 1
+    assert main(["run", str(p), "--out", str(out)]) == 4  # aborted
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "s.xml:8" in err and "abort" in err
     assert len(ScanStore(out / "scans")) == 1  # the scan before the failure is kept
@@ -73,7 +73,7 @@ def test_abort_keeps_earlier_scans(tmp_path, capsys):
 
 def test_hardware_backend_is_a_clear_error(tmp_path, capsys):
     p = _script(tmp_path, GOOD.format(phi=0))
-    assert main(["run", str(p), "--out", str(tmp_path / "hw"), "--backend", "hardware"]) == 0
+    assert main(["run", str(p), "--out", str(tmp_path / "hw"), "--backend", "hardware"]) == 3
     report = json.loads((tmp_path / "hw" / "run_report.json").read_text())
     assert "no hardware adapter" in report["commands"][3]["message"]
 

@@ -1,0 +1,186 @@
+"""Static checks of a loaded script: everything that can be known wrong before anything moves.
+
+Shared by ``recon validate`` and ``recon run`` (which checks before it opens the station):
+
+* the cell and the object are chosen before the first move or scan;
+* joint goals have one value per joint of the chosen cell and lie within its soft limits;
+* scan and fragment names are unique; registration, reconstruction, exports and
+  evaluation come after a scan (and exports/evaluation after what they need);
+* fragments are defined (scanned, loaded or added) before they are used;
+* files a script reads (object meshes, reference meshes, loaded images and clouds) lie
+  inside the script's folder or scripts_xml/ and exist.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from pathlib import Path
+
+import numpy as np
+
+from recon_cli.paths import SCRIPTS_DIR
+from recon_cli.scripts import commands as C
+from recon_cli.scripts.loader import ScriptError
+
+SETUP = (C.SetCell, C.SetObject)
+ACTIONS = (C.Move, C.MoveJoints, C.MoveHome, C.Scan)
+_TAGS = {"SetCell": "cell", "SetObject": "object", "Register": "register", "Reconstruct": "reconstruct",
+         "Export": "export", "Evaluate": "evaluate", "Multiway": "multiway"}
+
+
+def tag(cmd: C.Command) -> str:
+    return _TAGS.get(cmd.keyword, cmd.keyword)
+
+
+def readable_file(script: C.Script, name: str, src: C.Source, what: str) -> Path:
+    """A file a script reads: a relative path resolved beside the script (or in
+    scripts_xml/), which must stay inside those folders after resolving links."""
+    roots = (Path(script.path).resolve().parent, SCRIPTS_DIR.resolve())
+    p = Path(name)
+    if not p.is_absolute():
+        for base in roots:
+            candidate = (base / p).resolve()
+            if candidate.exists() and any(candidate.is_relative_to(r) for r in roots):
+                if not candidate.is_file():
+                    break
+                return candidate
+    inside = not p.is_absolute() and any((r / p).resolve().is_relative_to(r) for r in roots)
+    if not inside:
+        raise ScriptError(f"{src}: {what} {name!r} is outside the script's folder and scripts_xml/",
+                          hint="scripts read files only from their own folder or scripts_xml/; copy the file "
+                               "beside the script and give a relative path")
+    raise ScriptError(f"{src}: {what} {name!r} does not exist beside the script or in scripts_xml/",
+                      hint="check the file name")
+
+
+def is_file_name(name: str) -> bool:
+    """An object name that names a mesh file (not a built-in or YCB object)."""
+    return any(ch in name for ch in "/\\") or bool(Path(name).suffix)
+
+
+@functools.lru_cache(maxsize=4)
+def _joint_limits(kind: str):
+    from recon_cli.robot.description import CellConfig, expand_urdf
+    from recon_cli.robot.limits import limits_from_urdf
+
+    urdf = expand_urdf(CellConfig(kind=kind))
+    from lxml import etree
+
+    names = [j.get("name") for j in etree.fromstring(urdf.encode()).iter("joint")
+             if j.get("type") in ("revolute", "prismatic", "continuous")]
+    return limits_from_urdf(urdf, names)
+
+
+def _check_joints(cmd: C.MoveJoints, kind: str) -> None:
+    lim = _joint_limits(kind)
+    q = np.asarray(cmd.values, dtype=float)
+    if len(q) != lim.n:
+        raise ScriptError(f"{cmd.source}: <joints> has {len(q)} values, the {kind} cell has {lim.n} joints "
+                          f"({', '.join(lim.names)})", hint="one value per joint, in this order")
+    if cmd.unit == "deg":
+        q = np.where(lim.prismatic, q, np.radians(q))
+    for k, name in enumerate(lim.names):
+        if not lim.soft_lower[k] - 1e-9 <= q[k] <= lim.soft_upper[k] + 1e-9:
+            unit, f = ("m", 1.0) if lim.prismatic[k] else (cmd.unit, 1.0 if cmd.unit == "rad" else 180 / math.pi)
+            raise ScriptError(f"{cmd.source}: <joints> {name} = {q[k] * f:g} {unit} is outside its soft limits "
+                              f"{lim.soft_lower[k] * f:g} ... {lim.soft_upper[k] * f:g} {unit}",
+                              hint="linear axes in metres, arm joints in the element's unit (rad unless unit=\"deg\")")
+
+
+def _check_object(script: C.Script, cmd: C.SetObject) -> None:
+    from recon_cli.objects import BUILTIN, available_objects, ycb_names
+
+    if cmd.name == "auto" or cmd.name in BUILTIN:
+        return
+    if cmd.name in ycb_names():
+        if cmd.name not in available_objects():
+            raise ScriptError(f"{cmd.source}: the YCB object {cmd.name!r} needs the shared YCB data, which is not "
+                              "here", hint="use a built-in object (recon objects) or a mesh file beside the script")
+        return
+    if is_file_name(cmd.name):
+        readable_file(script, cmd.name, cmd.source, "object mesh")
+        return
+    raise ScriptError(f"{cmd.source}: unknown object {cmd.name!r}",
+                      hint="choose one of: " + ", ".join([*available_objects(), "auto", "<mesh file>"]))
+
+
+def check_script(script: C.Script, *, object_override: str | None = None) -> None:
+    """Raise a ScriptError (file:line: what; what to do) for the first problem found."""
+    started: C.Command | None = None
+    kind = "gantry"
+    scans = 0
+    registered = reconstructed = False
+    names: dict[str, C.Source] = {}
+    fragments: set[str] = set()
+    for cmd in script.commands:
+        if isinstance(cmd, ACTIONS) and started is None:
+            started = cmd
+        if isinstance(cmd, SETUP) and started is not None:
+            raise ScriptError(f"{cmd.source}: <{tag(cmd)}> after the first move or scan ({started.source})",
+                              hint="choose the cell and the object at the top of the script")
+        if isinstance(cmd, C.SetCell):
+            kind = cmd.kind
+        elif isinstance(cmd, C.SetObject) and object_override is None:
+            _check_object(script, cmd)
+        elif isinstance(cmd, C.MoveJoints):
+            _check_joints(cmd, kind)
+        elif isinstance(cmd, C.Scan):
+            scans += 1
+            registered = reconstructed = False
+            if cmd.name:
+                if cmd.name in names:
+                    raise ScriptError(f"{cmd.source}: scan name {cmd.name!r} is used already at {names[cmd.name]}",
+                                      hint="give every scan its own name")
+                names[cmd.name] = cmd.source
+            if isinstance(cmd, C.FragmentScan):
+                fragments.add(cmd.name)
+        elif isinstance(cmd, (C.Register, C.Reconstruct, C.Export, C.Evaluate)):
+            if scans == 0:
+                raise ScriptError(f"{cmd.source}: <{tag(cmd)}> before any scan", hint="scan before registering")
+            if isinstance(cmd, C.Register):
+                registered = True
+            elif isinstance(cmd, C.Reconstruct):
+                registered = reconstructed = True
+            elif isinstance(cmd, C.Export):
+                if cmd.mesh and not reconstructed:
+                    raise ScriptError(f"{cmd.source}: <export mesh> before <reconstruct/>",
+                                      hint="put <reconstruct/> before the export")
+                if cmd.cloud and not registered:
+                    raise ScriptError(f"{cmd.source}: <export cloud> before <register/> or <reconstruct/>",
+                                      hint="put <register/> before the export")
+            elif isinstance(cmd, C.Evaluate):
+                if not registered:
+                    raise ScriptError(f"{cmd.source}: <evaluate> before <register/> or <reconstruct/>",
+                                      hint="put <register/> before the evaluation")
+                if cmd.reference != "ground_truth":
+                    readable_file(script, cmd.reference, cmd.source, "reference mesh")
+        elif isinstance(cmd, C.LoadFragment):
+            if cmd.name in names:
+                raise ScriptError(f"{cmd.source}: fragment name {cmd.name!r} is used already at {names[cmd.name]}",
+                                  hint="give every fragment its own name")
+            names[cmd.name] = cmd.source
+            if cmd.kind == "point_cloud":
+                readable_file(script, cmd.path_point_cloud, cmd.source, "point cloud")
+            else:
+                readable_file(script, cmd.path_color, cmd.source, "colour image")
+                readable_file(script, cmd.path_depth, cmd.source, "depth image")
+            fragments.add(cmd.name)
+        elif isinstance(cmd, C.Multiway):
+            if len(fragments) < 2:
+                raise ScriptError(f"{cmd.source}: <multiway> needs two fragments or more ({len(fragments)} before it)",
+                                  hint="scan or load more fragments first")
+        else:
+            used = [getattr(cmd, a) for a in ("source_fragment", "target", "fragment") if hasattr(cmd, a)]
+            if isinstance(cmd, C.AddFragment):
+                used = [cmd.fragment]
+            for name in used:
+                if name not in fragments:
+                    known = ", ".join(sorted(fragments)) or "none yet"
+                    raise ScriptError(f"{cmd.source}: no fragment named {name!r} at this point (known: {known})",
+                                      hint="scan, load or add it before using it")
+            if isinstance(cmd, C.AddFragment):
+                fragments.add(cmd.target)
+            elif isinstance(cmd, C.DeleteFragment):
+                fragments.discard(cmd.fragment)
+

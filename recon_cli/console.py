@@ -21,8 +21,9 @@ _WIDTH = None if sys.stdout.isatty() else int(os.environ.get("COLUMNS", "140"))
 # text from scripts, file names and messages is printed literally: no rich markup, no
 # emoji codes (a script named "[/oops]" or ":x:" is shown as written); styles are applied
 # explicitly with ``styled``
-console = Console(highlight=False, markup=False, emoji=False, width=_WIDTH)
-err_console = Console(stderr=True, highlight=False, markup=False, emoji=False, width=_WIDTH)
+# long lines are not broken (logs and greps see one line per message; terminals wrap them)
+console = Console(highlight=False, markup=False, emoji=False, soft_wrap=True, width=_WIDTH)
+err_console = Console(stderr=True, highlight=False, markup=False, emoji=False, soft_wrap=True, width=_WIDTH)
 
 
 def styled(label: str, style: str, rest: str = ""):

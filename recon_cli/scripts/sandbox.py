@@ -47,7 +47,7 @@ class Limits:
     max_int_bits: int = 63  # integers within +-2**63
     max_size: int = 100_000  # characters of a string, items (recursively) of a list/dict
     max_text: int = 20_000_000  # characters produced by all evaluations of one script
-    max_elements: int = 100_000  # elements evaluated (each macro expansion counts again)
+    max_elements: int = 10_000  # elements evaluated (each macro expansion counts again)
     max_macro_depth: int = 100  # nested macro calls
     max_seconds: float = 10.0  # wall-clock time of the expansion
     max_file_bytes: int = 5_000_000  # a script, an included file, a YAML file
@@ -536,7 +536,7 @@ _lock = threading.Lock()
 
 
 @contextlib.contextmanager
-def sandboxed(script_dir: Path, roots: tuple[Path, ...], limits: Limits = LIMITS) -> Iterator[Frames]:
+def sandboxed(script_dir: Path, roots: tuple[Path, ...], limits: Limits | None = None) -> Iterator[Frames]:
     """Patch xacro for the expansion of one script; yields the expansion's frames (for
     error locations). xacro's module state is global, so expansions are serialized."""
     import xacro
@@ -544,7 +544,7 @@ def sandboxed(script_dir: Path, roots: tuple[Path, ...], limits: Limits = LIMITS
     with _lock:
         saved = {name: getattr(xacro, name) for name in
                  ("safe_eval", "eval_extension", "eval_text", "eval_all", "handle_macro_call", "_global_symbols")}
-        _state.guard = _Guard(limits)
+        _state.guard = _Guard(limits or LIMITS)
         _state.frames = Frames()
         eval_text, eval_all, macro_call = _patched(saved["eval_text"], saved["eval_all"], saved["handle_macro_call"])
         try:

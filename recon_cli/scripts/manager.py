@@ -173,6 +173,7 @@ class ScriptRunner:
         self.out.mkdir(parents=True, exist_ok=True)
         if self.options.append:
             refuse_links(self.out)
+            self._keep_earlier("run_report.json", "script.expanded.xml")
         atomic_write_text(self.out / "script.expanded.xml", self.script.expanded_xml)
         aborted, interrupted = "", None
         n = len(self.script.commands)
@@ -204,6 +205,16 @@ class ScriptRunner:
                 hint=f"run_report.json records it; recon register {self.out / 'scans'} works on the kept scans")
         return RunResult(self.out, self.script, self.reports, self._scan_count(), time.perf_counter() - t0,
                          dict(self.outputs), aborted, list(self.sequences))
+
+    def _keep_earlier(self, *names: str) -> None:
+        """--append: an earlier run's report and script stay, as NAME-1, NAME-2, ..."""
+        for name in names:
+            path = self.out / name
+            if path.exists():
+                k = 1
+                while (self.out / f"{path.stem}-{k}{path.suffix}").exists():
+                    k += 1
+                path.rename(self.out / f"{path.stem}-{k}{path.suffix}")
 
     def _interruption(self, signal: str) -> dict:
         cmd = self.current

@@ -129,3 +129,19 @@ def test_optimize_reorders_independent_moves(tmp_path):
 
     cmds = load_script(p).commands
     assert movable_groups(cmds) == {3: 11}
+
+
+def test_scan_name_and_append(tmp_path, capsys):
+    """A named scan keeps its name in scan.json; a second run into the same folder is
+    refused unless --append, which adds its scans to the same store."""
+    out = tmp_path / "named"
+    p = _script(tmp_path, '<move focus="0 0 0.8" radius="0.6" theta="60" phi="0"/>\n  <scan name="front"/>\n')
+    assert main(["run", str(p), "--out", str(out)]) == 0
+    meta = json.loads((out / "scans" / "scan_0000" / "scan.json").read_text())
+    assert meta["name"] == "front"
+    assert main(["run", str(p), "--out", str(out)]) == 1
+    assert "not empty" in capsys.readouterr().err
+    assert main(["run", str(p), "--out", str(out), "--append"]) == 0
+    assert len(ScanStore(out / "scans")) == 2
+    assert json.loads((out / "run_report.json").read_text())["append"] is True
+    assert json.loads((out / "run_report-1.json").read_text())["append"] is False  # the first run's report

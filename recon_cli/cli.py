@@ -24,8 +24,10 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # help texts are plain: "[m]" and "[s]" are units, not markup
 )
-bench_app = typer.Typer(help="Benchmarks with results tables and figures.", no_args_is_help=True)
+bench_app = typer.Typer(help="Benchmarks with results tables and figures.", no_args_is_help=True,
+                        rich_markup_mode=None)
 app.add_typer(bench_app, name="bench")
 
 CellOpt = Annotated[str, typer.Option("--cell", help="gantry (9 DoF, linear axes) or ceiling (7 DoF).")]

@@ -24,6 +24,14 @@ def test_help_lists_commands(capsys):
         assert command in out
 
 
+def test_help_shows_units(capsys):
+    """Units in brackets are text, not terminal markup."""
+    code, out, _ = run(capsys, "ik", "--help")
+    assert code == 0 and "Camera distance r from f [m]" in out and "Polar angle from the vertical [deg]" in out
+    code, out, _ = run(capsys, "bench", "planners", "--help")
+    assert code == 0 and "Time limit per request [s]" in out
+
+
 def test_help_is_fast_and_light():
     """`recon --help` must not import the heavy libraries."""
     code = ("import sys; from recon_cli.cli import main; main(['--help']); "

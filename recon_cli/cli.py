@@ -185,14 +185,15 @@ def capture(
 ) -> None:
     """Move the simulated robot through views and write one scan per view into a scan store."""
 
-    from recon_cli.capture import CaptureOptions, run_capture
-    from recon_cli.console import console, progress_bar, run_folder, styled
-    from recon_cli.objects import available_objects
-    from recon_cli.planning.planner import PlanOptions
-    from recon_cli.robot.description import CellConfig, CellKind
+    from dataclasses import replace
 
-    if object_name == "auto":
-        object_name = "drill" if "drill" in available_objects() else "bottle"
+    from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig
+    from recon_cli.console import console, progress_bar, run_folder, styled
+    from recon_cli.robot.description import CellConfig, CellKind
+    from recon_cli.session import resolve_object_name
+    from recon_cli.workflows.capture import CaptureOptions, run_capture
+
+    object_name = resolve_object_name(object_name)
     if views == "single":
         view_list = (_view(focus, radius, theta, phi, alpha, frame),)
     elif views == "eq-4.1":
@@ -202,14 +203,15 @@ def capture(
     else:
         raise UnknownNameError("view set", views, ("single", "eq-4.1"))
     covered = _index_list(cover_board, "--cover-board", len(view_list))
-    config = CellConfig(kind=CellKind.parse(cell), safety_distance=safety)
-    plan = PlanOptions(planner=planner, time_limit=planning_time)
     if not math.isfinite(scale) or scale <= 0:
         raise InputError(f"--scale {scale} is not a positive number", hint="e.g. 0.001 for millimetres")
+    config = DEFAULTS.replace(
+        cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
+        scene=SceneConfig(object_name, scale), sensor=SensorConfig(noise, resolution), seed=seed,
+        planner=replace(DEFAULTS.planner, planner=planner, time_limit=planning_time))
     folder = run_folder(out, "capture")
-    options = CaptureOptions(views=view_list, out=folder, object_name=object_name, object_scale=scale,
-                             cell=config, seed=seed, noise=noise, resolution=resolution, plan=plan,
-                             cover_board=frozenset(covered))
+    options = CaptureOptions(views=view_list, out=folder, config=config, cover_board=frozenset(covered),
+                             run={"command": "capture", "views": views})
     with progress_bar() as update:
         result = run_capture(options, update)
     for m, scan, n_points, t_cap in zip(result.moves, result.scans, result.points, result.capture_seconds,
@@ -389,7 +391,9 @@ def run_script(
     from recon_cli.interrupts import stop_signals
     from recon_cli.scripts.checks import check_script
     from recon_cli.scripts.loader import load_script
-    from recon_cli.scripts.manager import RunOptions, ScriptRunner
+    from recon_cli.scripts.state import RunOptions, SequenceMethod
+    from recon_cli.session import Backend
+    from recon_cli.workflows.script_run import ScriptRunner
 
     if backend is not None and backend not in ("sim", "hardware"):
         raise UnknownNameError("backend", backend, ("sim", "hardware"))
@@ -398,21 +402,22 @@ def run_script(
     s = load_script(script)
     check_script(s, object_override=object_name)  # before the output folder is made
     folder = run_folder(out, "run", fresh=not append)
-    options = RunOptions(folder, backend, seed, dry_run, object_name, optimize, sequence_method, append)
+    options = RunOptions(folder, None if backend is None else Backend(backend), seed, dry_run, object_name, optimize,
+                         SequenceMethod(sequence_method), append)
     with stop_signals(), progress_bar() as update:
         result = ScriptRunner(s, options, update).run()
     counts: dict[str, int] = {}
     for r in result.reports:
-        counts[r.status] = counts.get(r.status, 0) + 1
+        counts[r.status.value] = counts.get(r.status.value, 0) + 1
     console.print(f"{s.name}: {len(result.reports)} commands (" + ", ".join(f"{v} {k}" for k, v in counts.items())
                   + f"), {result.scans} scans, {result.seconds:.1f} s")
     for r in result.reports:
         if r.status in ("failed", "skipped") and r.message != "dry run":
-            console.print(styled(r.status, "yellow", f" {r.source} {r.command}: {r.message}"))
+            console.print(styled(r.status.value, "yellow", f" {r.source} {r.command}: {r.message}"))
     for seq in result.sequences:
-        console.print(f"sequence of {seq['moves']} moves ({seq['method']}): planned trajectory time "
-                      f"{seq['planned_duration_s']:.1f} s with {seq['planning_requests']} planning requests "
-                      f"({seq['seconds']:.1f} s)")
+        console.print(f"sequence of {seq.moves} moves ({seq.method.value}): planned trajectory time "
+                      f"{seq.planned_duration_s:.1f} s with {seq.planning_requests} planning requests "
+                      f"({seq.seconds:.1f} s)")
     for k, v in result.outputs.items():
         console.print(f"{k}: {v}")
     console.print(f"report: {folder / 'run_report.json'}")
@@ -439,21 +444,24 @@ def autoscan(
     seed: SeedOpt = 0,
 ) -> None:
     """Scan an unknown object autonomously: the ellipsoid view planner of the thesis."""
-    from recon_cli.autoscan import Autoscan, AutoscanOptions
+    from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig, ViewPlanConfig
     from recon_cli.console import console, progress_bar, run_folder
     from recon_cli.robot.description import CellConfig, CellKind
+    from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions
 
-    config = CellConfig(kind=CellKind.parse(cell), safety_distance=safety)
+    config = DEFAULTS.replace(
+        cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
+        scene=SceneConfig(object_name, scale), sensor=SensorConfig(DEFAULTS.sensor.noise, resolution), seed=seed,
+        viewplan=ViewPlanConfig(n=n, d_c=dc, m=m, sigma=sigma))
     folder = run_folder(out, "autoscan")
     view = None
     if initial is not None:
         theta, phi = parse_vector(initial, 2, "--initial", "degrees")
         from recon_cli.objects import load_object
 
-        center, _ = load_object(object_name, scale).crop_box(0.01)
+        center, _ = load_object(object_name, scale).crop_box(config.scene.box_margin)
         view = _view(",".join(map(str, center)), dc + 0.1, theta, phi, 0.0, "world")
-    opts = AutoscanOptions(folder, object_name, scale, config, n, dc, m, sigma, view, seed=seed,
-                           resolution=resolution, pictures=pictures)
+    opts = AutoscanOptions(folder, config, view, pictures=pictures, run={"command": "autoscan"})
     with progress_bar() as update:
         result = Autoscan(opts, update).run()
     if result.interrupted:
@@ -465,7 +473,7 @@ def autoscan(
                   f"in {result.seconds:.1f} s")
     if result.coverage is not None:
         console.print(f"ground truth: coverage {result.coverage * 100:.2f} % of the surface (1 mm), signed distance "
-                      f"mean {result.accuracy['mean_mm']:+.3f} mm, std {result.accuracy['std_mm']:.3f} mm")
+                      f"mean {result.accuracy.mean_mm:+.3f} mm, std {result.accuracy.std_mm:.3f} mm")
     console.print(f"mesh: {result.mesh}\ncloud: {result.cloud}\nreport: {result.report}")
     if result.pictures:
         console.print(f"pictures: {result.pictures[0].parent}")
@@ -647,10 +655,10 @@ def bench_viewplan(
 
     from rich.table import Table
 
-    from recon_cli.autoscan import METHODS
     from recon_cli.bench.viewplan import coverage_png, run_viewplan_bench
     from recon_cli.console import console, progress_bar, run_folder, write_json
     from recon_cli.robot.description import CellConfig, CellKind
+    from recon_cli.workflows.autoscan import METHODS
 
     chosen = _choices(methods, METHODS, "method")
     folder = run_folder(out, "bench-viewplan")

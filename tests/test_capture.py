@@ -8,12 +8,13 @@ import numpy as np
 import open3d as o3d
 import pytest
 
-from recon_cli.capture import CaptureOptions, run_capture
 from recon_cli.cli import main
+from recon_cli.config import DEFAULTS, SceneConfig
 from recon_cli.geometry.transforms import pose_error, transform_points
 from recon_cli.geometry.view import View
 from recon_cli.perception.sensor import motioncam_3d_m
 from recon_cli.reconstruction.scan_store import ScanStore
+from recon_cli.workflows.capture import CaptureOptions, run_capture
 
 from .conftest import SHARED_DATA
 
@@ -23,7 +24,7 @@ def drill_capture(tmp_path_factory):
     name = "drill" if (SHARED_DATA / "ycb").exists() else "bottle"
     out = tmp_path_factory.mktemp("capture")
     view = View.from_degrees((0, 0, 0.78), 0.6, 70, 0)
-    return run_capture(CaptureOptions(views=(view,), out=out, object_name=name, seed=1))
+    return run_capture(CaptureOptions(views=(view,), out=out, config=DEFAULTS.replace(scene=SceneConfig(name), seed=1)))
 
 
 def test_scan_points_lie_on_the_object(drill_capture):

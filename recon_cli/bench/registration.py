@@ -22,12 +22,13 @@ from pathlib import Path
 import numpy as np
 
 from recon_cli.bench.scenarios import eq_4_1_views
-from recon_cli.capture import CaptureOptions, run_capture
-from recon_cli.objects import available_objects
+from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig
 from recon_cli.perception.sensor import motioncam_3d_m
 from recon_cli.reconstruction.assessment import run_evaluate
 from recon_cli.reconstruction.evaluation import histogram_png, signed_distances
 from recon_cli.reconstruction.pipeline import RegisterOptions, RegisterResult, run_register
+from recon_cli.session import resolve_object_name
+from recon_cli.workflows.capture import CaptureOptions, run_capture
 
 THESIS_CHARUCO_ERROR = (1.532e-3, np.radians(0.0853))  # Table 4.2 means [m, rad]
 COVERED_VIEWS = frozenset({5, 17})
@@ -60,11 +61,13 @@ CASES = (  # name, perturbed, local registration
 
 def run_registration_bench(out: Path, object_name: str = "auto", seed: int = 0, resolution: float = 1.0,
                            progress: Callable[[str, int, int], None] | None = None) -> dict:
-    if object_name == "auto":
-        object_name = "drill" if "drill" in available_objects() else "bottle"
+    object_name = resolve_object_name(object_name)
     scans = out / "scans"
-    capture = run_capture(CaptureOptions(views=tuple(eq_4_1_views()), out=scans, object_name=object_name,
-                                         seed=seed, resolution=resolution, cover_board=COVERED_VIEWS), progress)
+    config = DEFAULTS.replace(scene=SceneConfig(object_name), seed=seed,
+                              sensor=SensorConfig(DEFAULTS.sensor.noise, resolution))
+    capture = run_capture(CaptureOptions(views=tuple(eq_4_1_views()), out=scans, config=config,
+                                         cover_board=COVERED_VIEWS, run={"command": "bench registration"}),
+                          progress)
     reference = scans / "ground_truth" / f"{capture.scene_object.name}.ply"
     rows, results = [], {}
     for k, (name, perturbed, local) in enumerate(CASES):

@@ -20,14 +20,12 @@ import cv2
 import numpy as np
 
 from recon_cli.bench.scenarios import eq_4_1_views
+from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig
 from recon_cli.geometry.transforms import invert, pose_error
-from recon_cli.objects import load_object
 from recon_cli.perception.charuco import detect, estimate_pose, thesis_board
-from recon_cli.planning.planner import MotionPlanner, PlanOptions, seed_ompl
-from recon_cli.robot.cell import Cell
-from recon_cli.robot.description import CellConfig
+from recon_cli.planning.planner import MotionPlanner, PlanOptions
 from recon_cli.robot.ik import IKOptions
-from recon_cli.robot.poses import named_configuration
+from recon_cli.session import Mode, SessionSpec, open_session
 
 
 @dataclass(frozen=True)
@@ -56,18 +54,13 @@ class SimBenchResult:
 
 def run_sim_bench(out: Path, object_name: str = "drill", seed: int = 0,
                   progress: Callable[[str, int, int], None] | None = None) -> SimBenchResult:
-    from recon_cli.backends.sim.station import SimStation
-
     rng = np.random.default_rng(seed)
-    seed_ompl(seed)
-    obj = load_object(object_name)
-    config = CellConfig()
-    cell = Cell(config, object_box=obj.bounding_box(0.01))
-    home = named_configuration(config.kind, "home", cell.joint_names)
     spec = thesis_board()
     rows: list[ViewRow] = []
     thumbs = []
-    with SimStation(cell, obj, home, rng, noise=True) as station:
+    config = DEFAULTS.replace(scene=SceneConfig(object_name), sensor=SensorConfig(noise=True), seed=seed)
+    with open_session(SessionSpec(out / "scans", config, Mode.BENCHMARK, run={"command": "bench sim"}), rng) as s:
+        station, cell, obj, home = s.station, s.cell, s.scene_object, s.start
         views = eq_4_1_views()
         for i, view in enumerate(views, start=1):
             ik = cell.solve_view(view, rng, options=IKOptions(max_solutions=1))

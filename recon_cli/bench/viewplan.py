@@ -5,16 +5,18 @@ built-in object, same N, same d_c, same initial view; plus the wood block seen f
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from recon_cli.autoscan import METHODS, Autoscan, AutoscanOptions
+from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig
 from recon_cli.errors import ReconError
 from recon_cli.geometry.view import View
 from recon_cli.objects import load_object
 from recon_cli.robot.description import CellConfig
+from recon_cli.viewplan.policy import Method
+from recon_cli.workflows.autoscan import METHODS, Autoscan, AutoscanOptions
 
 BUILT_IN = ("wood_block", "toy_blocks", "bottle", "mug")
 
@@ -53,9 +55,11 @@ def run_viewplan_bench(out: Path, objects=BUILT_IN, methods=METHODS, n: int = 16
         runs.append(("wood_block", "ellipsoid", "face-on"))
     for k, (name, method, initial) in enumerate(runs):
         folder = out / (f"{name}_{method}" + ("_face_on" if initial == "face-on" else ""))
-        opts = AutoscanOptions(folder, name, n=n, d_c=d_c, method=method, seed=seed,
-                               resolution=resolution, cell=cell or CellConfig(), pictures=method == "ellipsoid",
-                               initial=face_on_view(name, d_c) if initial == "face-on" else None)
+        config = DEFAULTS.replace(cell=cell or DEFAULTS.cell, scene=SceneConfig(name), seed=seed,
+                                  sensor=SensorConfig(DEFAULTS.sensor.noise, resolution),
+                                  viewplan=replace(DEFAULTS.viewplan, n=n, d_c=d_c))
+        opts = AutoscanOptions(folder, config, face_on_view(name, d_c) if initial == "face-on" else None,
+                               Method(method), pictures=method == "ellipsoid", run={"command": "bench viewplan"})
         try:
             r = Autoscan(opts).run()
         except ReconError as exc:  # reported as a failed run, the others go on
@@ -63,8 +67,8 @@ def run_viewplan_bench(out: Path, objects=BUILT_IN, methods=METHODS, n: int = 16
                                     exc.one_line()))
             continue
         rows.append(ViewplanRow(name, method, initial, r.scans, r.coverage or 0.0,
-                                (r.accuracy or {}).get("mean_mm", float("nan")),
-                                (r.accuracy or {}).get("std_mm", float("nan")), r.infeasible, r.requests,
+                                r.accuracy.mean_mm if r.accuracy else float("nan"),
+                                r.accuracy.std_mm if r.accuracy else float("nan"), r.infeasible, r.requests,
                                 r.trajectory_s, r.seconds))
         if progress:
             progress("autoscans", k + 1, len(runs))

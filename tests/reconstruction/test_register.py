@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 
 from recon_cli.bench.scenarios import eq_4_1_views
-from recon_cli.capture import CaptureOptions, run_capture
 from recon_cli.cli import main
+from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig
 from recon_cli.errors import FileError, InputError
 from recon_cli.perception.sensor import motioncam_3d_m
 from recon_cli.reconstruction.assessment import run_evaluate
 from recon_cli.reconstruction.pipeline import RegisterOptions, run_register
+from recon_cli.workflows.capture import CaptureOptions, run_capture
 
 from ..conftest import SHARED_DATA
 
@@ -27,8 +28,8 @@ def session(tmp_path_factory):
     name = "drill" if (SHARED_DATA / "ycb").exists() else "bottle"
     out = tmp_path_factory.mktemp("eq41")
     views = tuple(eq_4_1_views()[0:12:2])  # theta 70 deg, every 60 deg
-    run_capture(CaptureOptions(views=views, out=out, object_name=name, seed=2, resolution=0.5,
-                               cover_board=frozenset({COVERED})))
+    config = DEFAULTS.replace(scene=SceneConfig(name), sensor=SensorConfig(resolution=0.5), seed=2)
+    run_capture(CaptureOptions(views=views, out=out, config=config, cover_board=frozenset({COVERED})))
     return out, name
 
 

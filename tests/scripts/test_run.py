@@ -110,7 +110,7 @@ def test_optimize_reorders_independent_moves(tmp_path):
     """--optimize: the moves between set-up and registration are reordered as one group,
     every view is visited once, the planned paths are the ones executed (no second
     planning), and the report gives the planned total time and the request count."""
-    from recon_cli.scripts.manager import movable_groups
+    from recon_cli.scripts.optimize import movable_groups
 
     body = "".join(GOOD.format(phi=phi) for phi in (0, 180, 60, 240)) + "<register/>\n"
     p = _script(tmp_path, body)

@@ -11,22 +11,24 @@ import time
 
 import pytest
 
-from recon_cli.autoscan import Autoscan, AutoscanOptions
 from recon_cli.cli import main
+from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig, ViewPlanConfig
 from recon_cli.reconstruction.pipeline import RegisterOptions, run_register
 from recon_cli.reconstruction.scan_store import ScanStore
 from recon_cli.robot.description import CellConfig, CellKind
+from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions
 
 
 @pytest.mark.parametrize("kind", [CellKind.GANTRY, CellKind.CEILING])
 def test_autoscan_small(tmp_path, kind):
     out = tmp_path / kind.value
-    r = Autoscan(AutoscanOptions(out, "bottle", cell=CellConfig(kind=kind), n=5, resolution=0.25, seed=1,
-                                 mesh=False)).run()
+    config = DEFAULTS.replace(cell=CellConfig(kind=kind), scene=SceneConfig("bottle"), seed=1,
+                              sensor=SensorConfig(resolution=0.25), viewplan=ViewPlanConfig(n=5))
+    r = Autoscan(AutoscanOptions(out, config, mesh=False)).run()
     assert r.scans == 5 and len(ScanStore(out)) == 5
     statuses = [v.status for v in r.views]
     assert statuses.count("completed") == 5
-    assert r.coverage > 0.6 and abs(r.accuracy["mean_mm"]) < 1.0
+    assert r.coverage > 0.6 and abs(r.accuracy.mean_mm) < 1.0
     assert len(r.pictures) == 4 and all(p.exists() for p in r.pictures)
     report = json.loads(r.report.read_text())
     assert report["scans"] == 5 and report["planning_requests"] >= 4

@@ -19,43 +19,44 @@ from pathlib import Path
 
 import numpy as np
 
+from recon_cli.config import DEFAULTS, Config
 from recon_cli.errors import ReconError
 from recon_cli.geometry.view import View
-from recon_cli.planning.planner import PlanOptions
-from recon_cli.robot.description import CellConfig
+from recon_cli.session import Backend, Mode, SessionSpec, open_session
+from recon_cli.viewplan.policy import Feasibility, Method, Status, baseline_views, lifted
 
-METHODS = ("ellipsoid", "sphere", "random")
+METHODS = tuple(m.value for m in Method)
 
 
 @dataclass(frozen=True)
 class AutoscanOptions:
     out: Path
-    object_name: str = "bottle"
-    object_scale: float = 1.0
-    cell: CellConfig = field(default_factory=CellConfig)
-    n: int = 16  # scans in total, the initial one included
-    d_c: float = 0.55  # [m] camera distance to the ellipsoid
-    m: int = 200  # preliminary samples per view (thesis: 200)
-    sigma: float = 1e-5  # regularization of the potential field (thesis: 1e-5)
-    initial: View | None = None  # default: 45 deg above the object, from +x
-    method: str = "ellipsoid"  # ellipsoid | sphere | random (baselines)
-    seed: int = 0
-    resolution: float = 1.0
-    noise: bool = True
-    box_margin: float = 0.01
-    plan: PlanOptions = field(default_factory=PlanOptions)
+    config: Config = DEFAULTS  # viewplan: N, d_c, M, sigma, ...; scene: the object; sensor, planner, cell
+    initial: View | None = None  # default: the first reachable of a few views above the object
+    method: Method = Method.ELLIPSOID  # the thesis' planner, or a baseline
+    backend: Backend = Backend.SIM
     pictures: bool = True
     mesh: bool = True
-    lift: bool = True  # raise infeasible views toward the vertical (ours; False: as the thesis)
-    min_height: float = 0.05  # [m] lowest camera height above the board plane (thesis: above it)
-    min_axis_ratio: float = 0.3  # ours: no semi-axis below this share of the largest (0: the thesis)
+    run: dict = field(default_factory=dict)  # recorded in config.yaml
 
 
 @dataclass
 class ViewRecord:
     world_T_camera: np.ndarray
-    status: str  # completed | infeasible | planned | active
+    status: Status
     iteration: int
+
+
+@dataclass(frozen=True)
+class Accuracy:
+    """Signed distances of the fused cloud to the ground truth (simulation)."""
+
+    mean_mm: float
+    std_mm: float
+    points: int
+
+    def to_dict(self) -> dict:
+        return {"mean_mm": self.mean_mm, "std_mm": self.std_mm, "points": self.points}
 
 
 @dataclass
@@ -68,7 +69,7 @@ class AutoscanResult:
     trajectory_s: float
     seconds: float
     coverage: float | None
-    accuracy: dict | None
+    accuracy: Accuracy | None
     cloud: Path | None
     mesh: Path | None
     report: Path
@@ -78,59 +79,41 @@ class AutoscanResult:
 
 class Autoscan:
     def __init__(self, opt: AutoscanOptions, progress: Callable[[str, int, int], None] | None = None) -> None:
-        if opt.method not in METHODS:
+        try:
+            method = Method(opt.method)
+        except ValueError:
             from recon_cli.errors import UnknownNameError
 
-            raise UnknownNameError("view planning method", opt.method, METHODS)
-        if opt.n < 2:
-            raise ReconError(f"--n {opt.n}: at least two scans are needed", hint="e.g. --n 16")
+            raise UnknownNameError("view planning method", str(opt.method), METHODS) from None
+        if opt.config.viewplan.n < 2:
+            raise ReconError(f"--n {opt.config.viewplan.n}: at least two scans are needed", hint="e.g. --n 16")
         self.opt = opt
+        self.method = method
+        self.vp = opt.config.viewplan
         self.progress = progress or (lambda *a: None)
-        self.rng = np.random.default_rng(opt.seed)
+        self.rng = np.random.default_rng(opt.config.seed)
 
     # ------------------------------------------------------------------ set-up
     def _setup(self) -> None:
-        from recon_cli.acquisition import Acquisition
-        from recon_cli.backends.sim.station import SimStation
-        from recon_cli.capture import write_ground_truth_mesh
-        from recon_cli.objects import load_object
-        from recon_cli.perception.sensor import motioncam_3d_m
         from recon_cli.planning.lower_bound import duration_lower_bound
-        from recon_cli.planning.planner import MotionPlanner, seed_ompl
+        from recon_cli.planning.planner import MotionPlanner
         from recon_cli.reconstruction.crop import CropBox
-        from recon_cli.reconstruction.scan_store import ScanStore
-        from recon_cli.robot.cell import Cell
-        from recon_cli.robot.poses import named_configuration
 
-        opt = self.opt
-        seed_ompl(opt.seed)
-        self.obj = load_object(opt.object_name, opt.object_scale)
-        box = self.obj.bounding_box(opt.box_margin)  # the known bounding volume
-        self.cell = Cell(opt.cell, object_box=box)
-        center, size = self.obj.crop_box(opt.box_margin)
-        self.sensor = motioncam_3d_m()
-        self.store = ScanStore.create(opt.out, {
-            "backend": "sim", "mode": f"autoscan ({opt.method})",
-            "cell": {"kind": opt.cell.kind.value, "safety_distance": opt.cell.safety_distance},
-            "sensor": self.sensor.name, "noise": opt.noise, "seed": opt.seed,
-            "object": {"name": self.obj.name, "world_T_object": self.obj.world_T_object},
-            "object_box": {"frame": "world", "center": list(box.center), "size": list(box.size)},
-            "crop_box": {"frame": "world", "center": list(center), "size": list(size)},
-            "world_T_marker": self.cell.world_T_marker,
-        })
-        write_ground_truth_mesh(opt.out, self.obj)
+        opt, cfg = self.opt, self.opt.config
+        spec = SessionSpec(opt.out, cfg, Mode.AUTOSCAN, opt.backend, run={"method": self.method.value, **opt.run})
+        self.session = open_session(spec, self.rng)
+        self.obj, self.cell, self.store = self.session.scene_object, self.session.cell, self.session.store
+        self.station, self.acq = self.session.station, self.session.acquisition
+        center, size = self.obj.crop_box(cfg.scene.box_margin)
         T = np.eye(4)
         T[:3, 3] = center
-        self.marker_T_world = np.linalg.inv(self.cell.world_T_marker)
+        self.feasible = Feasibility(self.cell, self.rng, self.vp.min_height)
+        self.marker_T_world = self.feasible.marker_T_world
         self.crop_marker = CropBox(self.marker_T_world @ T, tuple(size))
-        start = named_configuration(opt.cell.kind, "home", self.cell.joint_names)
-        self.station = SimStation(self.cell, self.obj, start, self.rng, noise=opt.noise, resolution=opt.resolution)
-        self.acq = Acquisition(self.cell, self.station.robot, self.station.camera, self.store, self.rng, opt.plan,
-                               depth_scale=self.sensor.depth_scale, ground_truth=self.station.ground_truth)
-        self.motion = MotionPlanner(self.cell, opt.plan)
-        lim = self.cell.limits
+        self.motion = MotionPlanner(self.cell, cfg.planner)
+        lim, plan = self.cell.limits, cfg.planner
         self.lower = lambda a, b: duration_lower_bound(a, b, lim.velocity, lim.acceleration,
-                                                       opt.plan.velocity_scale, opt.plan.acceleration_scale)
+                                                       plan.velocity_scale, plan.acceleration_scale)
         self.center = np.asarray(center, float)
         self.partial: list[np.ndarray] = []
         self.requests = 0
@@ -141,19 +124,6 @@ class Autoscan:
         self.requests += 1
         r = self.motion.plan_to_joints(a, b, seed=int(self.rng.integers(1 << 30)))
         return r.trajectory if r.ok else None
-
-    def _feasible(self, T: np.ndarray, seed: np.ndarray) -> np.ndarray | None:
-        """An IK solution of the camera pose (collision-free, soft limits), or None."""
-        from recon_cli.robot.ik import IKOptions
-
-        marker_z = (self.marker_T_world @ T)[2, 3]
-        if marker_z < self.opt.min_height:  # the thesis' rule: the camera stays above the board
-            return None
-        try:
-            r = self.cell.solve_pose(T, self.rng, seed=seed, options=IKOptions(max_solutions=1, max_attempts=20))
-        except ReconError:
-            return None
-        return r.solutions[0].q
 
     def _scan(self, view_T: np.ndarray) -> None:
         """Scan where the robot is; add the registered, cropped points to the partial object."""
@@ -180,9 +150,9 @@ class Autoscan:
         q = self.station.robot.measured_joints()
         for theta in (45.0, 30.0, 60.0, 20.0):
             for phi in (0.0, 90.0, 180.0, 270.0):
-                T = self.cell.view_pose(View(tuple(self.center), self.opt.d_c + 0.1, np.radians(theta),
+                T = self.cell.view_pose(View(tuple(self.center), self.vp.d_c + 0.1, np.radians(theta),
                                              np.radians(phi)))
-                if self._feasible(T, q) is not None:
+                if self.feasible(T, q) is not None:
                     return T
         raise ReconError("no initial view around the object is reachable",
                          hint="give one with --initial theta,phi or a smaller --dc")
@@ -192,80 +162,31 @@ class Autoscan:
         from recon_cli.viewplan.views import camera_pose, next_sample
 
         A = [ell.nearest_point(ell.to_local(v.world_T_camera[:3, 3])) for v in views
-             if v.status in ("completed", "infeasible")]
+             if v.status in (Status.COMPLETED, Status.INFEASIBLE)]
         planned = []
         tries = 0
         while len(planned) < needed and tries < 20 * needed + 50:
             tries += 1
-            p = next_sample(ell, np.array(A).reshape(-1, 3), self.opt.m, self.opt.sigma, self.rng)
+            p = next_sample(ell, np.array(A).reshape(-1, 3), self.vp.m, self.vp.sigma, self.rng)
             A.append(p)
-            T = camera_pose(ell, p, self.opt.d_c)
-            config = self._feasible(T, q)
-            if config is None and self.opt.lift:
-                T, config = self._lifted(T, ell.to_world(p), q)
+            T = camera_pose(ell, p, self.vp.d_c)
+            config = self.feasible(T, q)
+            if config is None and self.vp.lift:
+                T, config = lifted(T, ell.to_world(p), q, self.feasible)
                 if config is not None:  # the view is where the lifted camera is
                     A.append(ell.nearest_point(ell.to_local(T[:3, 3])))
             if config is None:
-                views.append(ViewRecord(T, "infeasible", it))
+                views.append(ViewRecord(T, Status.INFEASIBLE, it))
             else:
                 planned.append((T, config))
         return planned
 
-    def _lifted(self, T: np.ndarray, target: np.ndarray, q: np.ndarray):
-        """Ours, beyond the thesis: a view that is infeasible (under or against the table,
-        out of reach) is raised in steps of 15 deg toward the vertical, still looking at the
-        same surface point from the same distance; the first feasible one replaces it. A
-        region next to the table is then seen from above instead of being left out (the
-        thesis marks such samples infeasible, and they repel later samples)."""
-        from recon_cli.geometry.view import look_at_pose
-
-        d = T[:3, 3] - target
-        dist = float(np.linalg.norm(d))
-        d /= dist
-        horizontal = np.hypot(d[0], d[1])
-        elevation = np.arctan2(d[2], horizontal)
-        azimuth = np.arctan2(d[1], d[0])
-        for step in (15.0, 30.0, 45.0, 60.0):
-            e = min(elevation + np.radians(step), np.radians(85.0))
-            direction = np.array([np.cos(e) * np.cos(azimuth), np.cos(e) * np.sin(azimuth), np.sin(e)])
-            lifted = look_at_pose(target + dist * direction, target)
-            config = self._feasible(lifted, q)
-            if config is not None:
-                return lifted, config
-        return T, None
-
     def _fixed_candidates(self, ell, views: list[ViewRecord], q: np.ndarray) -> list:
         """Baselines: all views at once, at the ellipsoid planner's typical distance from the
         box centre (d_c + the mean semi-axis of the first ellipsoid)."""
-        from recon_cli.geometry.view import look_at_pose
-
-        radius = self.opt.d_c + float(np.mean(ell.axes))
-        need = self.opt.n - 1
-        out = []
-        if self.opt.method == "sphere":  # Fibonacci spiral over the upper hemisphere
-            k = np.arange(need) + 0.5
-            z = 1.0 - k / need * 0.95  # cos(theta) from ~1 down to 0.05
-            phi = np.pi * (3.0 - np.sqrt(5.0)) * k
-            dirs = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], 1)
-        else:
-            dirs = None
-        tries = 0
-        while len(out) < need and tries < 40 * need:
-            if dirs is not None:
-                if tries >= len(dirs):
-                    break
-                d = dirs[tries]
-            else:
-                d = self.rng.normal(size=3)
-                d[2] = abs(d[2])
-                d /= np.linalg.norm(d)
-            tries += 1
-            T = look_at_pose(self.center + radius * d, self.center)
-            config = self._feasible(T, q)
-            if config is None:
-                views.append(ViewRecord(T, "infeasible", 0))
-            else:
-                out.append((T, config))
+        radius = self.vp.d_c + float(np.mean(ell.axes))
+        out, infeasible = baseline_views(self.method, self.center, radius, self.vp.n - 1, q, self.feasible, self.rng)
+        views.extend(ViewRecord(T, Status.INFEASIBLE, 0) for T in infeasible)
         return out
 
     # ------------------------------------------------------------------ run
@@ -273,7 +194,7 @@ class Autoscan:
         from recon_cli.sequence.view_selection import select_view
         from recon_cli.viewplan.ellipsoid import Ellipsoid
 
-        opt = self.opt
+        opt, vp, ellipsoid = self.opt, self.vp, self.method is Method.ELLIPSOID
         t0 = time.perf_counter()
         self._setup()
         views: list[ViewRecord] = []
@@ -286,15 +207,15 @@ class Autoscan:
             self.requests += move.plan.attempts
             self.trajectory_s += move.execution.duration
             self._scan(T0)
-            views.append(ViewRecord(T0, "completed", 0))
-            self.progress("scans", 1, opt.n)
+            views.append(ViewRecord(T0, Status.COMPLETED, 0))
+            self.progress("scans", 1, vp.n)
             it, stuck = 0, 0
-            while len(self.store) < opt.n and stuck < 3:
+            while len(self.store) < vp.n and stuck < 3:
                 it += 1
-                ell = Ellipsoid.from_cloud(self._partial_points()).with_min_ratio(opt.min_axis_ratio)
+                ell = Ellipsoid.from_cloud(self._partial_points()).with_min_ratio(vp.min_axis_ratio)
                 q = self.station.robot.measured_joints()
-                if opt.method == "ellipsoid":
-                    planned = self._ellipsoid_candidates(ell, views, opt.n - len(self.store), q, it)
+                if ellipsoid:
+                    planned = self._ellipsoid_candidates(ell, views, vp.n - len(self.store), q, it)
                 else:
                     if not queue and it == 1:
                         queue = self._fixed_candidates(ell, views, q)
@@ -303,67 +224,69 @@ class Autoscan:
                     break
                 sel = select_view(q, [c for _, c in planned], self.lower, self._plan_edge)
                 if sel.index is None:  # nothing reachable: those views are infeasible
-                    for T, _ in planned:
-                        views.append(ViewRecord(T, "infeasible", it))
+                    views.extend(ViewRecord(T, Status.INFEASIBLE, it) for T, _ in planned)
                     stuck += 1
-                    if opt.method != "ellipsoid":
+                    if not ellipsoid:
                         break
                     continue
                 stuck = 0
                 T, _ = planned[sel.index]
-                if opt.pictures and opt.method == "ellipsoid":
+                if opt.pictures and ellipsoid:
                     pictures.append(self._picture(it, ell, views, [p for k, (p, _) in enumerate(planned)
                                                                    if k != sel.index], T))
-                if opt.method != "ellipsoid":
+                if not ellipsoid:
                     queue.pop(sel.index)
                 self.station.robot.execute(sel.trajectory)
                 self.trajectory_s += sel.trajectory.duration
                 self._scan(T)
-                views.append(ViewRecord(T, "completed", it))
-                self.progress("scans", len(self.store), opt.n)
+                views.append(ViewRecord(T, Status.COMPLETED, it))
+                self.progress("scans", len(self.store), vp.n)
         except KeyboardInterrupt:
             interrupted = True
         finally:
-            self.station.close()
+            self.session.close()  # stops the robot first
         return self._finish(views, pictures, t0, interrupted)
 
     # ------------------------------------------------------------------ results
     def _finish(self, views, pictures, t0: float, interrupted) -> AutoscanResult:
         from recon_cli.console import write_json
 
-        opt = self.opt
+        opt, cfg, vp = self.opt, self.opt.config, self.vp
         scanning = time.perf_counter() - t0
         cloud = mesh = None
         coverage = accuracy = None
         if not interrupted and len(self.store) > 0:
-            from recon_cli.reconstruction.evaluation import signed_distances
-            from recon_cli.reconstruction.pipeline import RegisterOptions, run_register
+            from dataclasses import replace
 
-            reg = run_register(opt.out, opt.out / "reconstruction", RegisterOptions(mesh=opt.mesh, seed=opt.seed))
+            from recon_cli.reconstruction.evaluation import signed_distances
+            from recon_cli.reconstruction.pipeline import run_register
+
+            reg = run_register(opt.out, opt.out / "reconstruction",
+                               replace(cfg.registration, mesh=opt.mesh, seed=cfg.seed))
             cloud, mesh = reg.cloud, reg.mesh
             import open3d as o3d
 
             pts = np.asarray(o3d.io.read_point_cloud(str(cloud)).points)
-            coverage = surface_coverage(self.obj, pts, 0.001, np.random.default_rng(opt.seed))
+            coverage = surface_coverage(self.obj, pts, 0.001, np.random.default_rng(cfg.seed))
             d = signed_distances(pts, self.obj.mesh_world())
-            accuracy = {"mean_mm": float(d.mean() * 1e3), "std_mm": float(d.std() * 1e3), "points": len(pts)}
+            accuracy = Accuracy(float(d.mean() * 1e3), float(d.std() * 1e3), len(pts))
         seconds_total = time.perf_counter() - t0
+        infeasible = sum(v.status is Status.INFEASIBLE for v in views)
         report = opt.out / "autoscan_report.json"
         write_json(report, {
-            "method": opt.method, "object": self.obj.name, "cell": opt.cell.kind.value, "n": opt.n, "d_c": opt.d_c,
-            "m": opt.m, "sigma": opt.sigma, "seed": opt.seed, "scans": len(self.store),
-            "interrupted": interrupted, "infeasible_views": sum(v.status == "infeasible" for v in views),
+            "method": self.method.value, "object": self.obj.name, "cell": cfg.cell.kind.value, "n": vp.n,
+            "d_c": vp.d_c, "m": vp.m, "sigma": vp.sigma, "seed": cfg.seed, "scans": len(self.store),
+            "interrupted": interrupted, "infeasible_views": infeasible,
             "planning_requests": self.requests, "trajectory_s": self.trajectory_s,
             "coverage_1mm": coverage, "accuracy": accuracy, "seconds_scanning": scanning,
             "seconds_total": seconds_total,
-            "views": [{"status": v.status, "iteration": v.iteration, "world_T_camera": v.world_T_camera}
+            "views": [{"status": v.status.value, "iteration": v.iteration, "world_T_camera": v.world_T_camera}
                       for v in views],
             "outputs": {"cloud": None if cloud is None else str(cloud), "mesh": None if mesh is None else str(mesh),
                         "pictures": [str(p) for p in pictures]},
         })
-        return AutoscanResult(opt.out, len(self.store), views, sum(v.status == "infeasible" for v in views),
-                              self.requests, self.trajectory_s, seconds_total, coverage, accuracy, cloud, mesh,
-                              report, pictures, interrupted)
+        return AutoscanResult(opt.out, len(self.store), views, infeasible, self.requests, self.trajectory_s,
+                              seconds_total, coverage, accuracy, cloud, mesh, report, pictures, interrupted)
 
     def _picture(self, it: int, ell, views: list[ViewRecord], planned: list[np.ndarray], active: np.ndarray) -> Path:
         from recon_cli.viewplan.picture import iteration_png

@@ -1,0 +1,247 @@
+"""The typed state of a script run, its options, command reports and outcomes.
+
+The run loop (:mod:`recon_cli.workflows.script_run`) owns a :class:`RunState`; command
+handlers (:mod:`recon_cli.scripts.handlers`) read and change it. Everything a run writes
+goes into ``RunState.out``::
+
+    <out>/scans/                 the scan store (one atomic folder per scan)
+    <out>/reconstruction/        registration and surface results (cloud, mesh, report)
+    <out>/script.expanded.xml    the script after xacro
+    <out>/config.yaml            the effective configuration
+    <out>/run_report.json        every command: where it was written, status, time, message
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from enum import StrEnum
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from recon_cli.config import Config
+from recon_cli.errors import FileError, ReconError
+from recon_cli.geometry.view import Frame
+from recon_cli.interrupts import exit_code
+from recon_cli.scripts import commands as C
+from recon_cli.session import Backend, Mode, Session, SessionSpec, open_session
+
+#: exit codes of ``recon run`` (README, "Exit codes")
+EXIT_DONE, EXIT_ERROR, EXIT_USAGE, EXIT_FAILED, EXIT_ABORTED = 0, 1, 2, 3, 4
+
+
+class OnFailure(StrEnum):
+    SKIP = "skip"  # report, skip the scans of a failed move, go on
+    ABORT = "abort"  # stop the run at the first failed command
+
+
+class SequenceMethod(StrEnum):
+    OURS = "ours"  # local search over the view graph
+    THESIS = "thesis"  # lazy minimum-spanning-tree tour (Tables 2.2/2.3)
+
+
+class CommandStatus(StrEnum):
+    DONE = "done"
+    FAILED = "failed"
+    SKIPPED = "skipped"
+    PLANNED = "planned"  # dry run: the move was planned, not executed
+    RECORDED = "recorded"  # display instructions of the thesis' GUI
+    INTERRUPTED = "interrupted"
+
+
+class RunStatus(StrEnum):
+    DONE = "done"
+    FAILED = "failed"  # finished, some commands failed
+    ABORTED = "aborted"  # stopped by a failed command (on_failure="abort")
+    INTERRUPTED = "interrupted"  # stopped by a signal
+
+
+class ScriptAborted(ReconError):
+    """A failed command under on_failure="abort"."""
+
+    exit_code = EXIT_ABORTED
+    label = "aborted"
+
+
+class RunInterrupted(ReconError):
+    """Ctrl-C or SIGTERM during a run: the robot is stopped, completed scans are kept."""
+
+    label = "interrupted"
+
+    def __init__(self, message: str, *, signal: str, hint: str | None = None) -> None:
+        super().__init__(message, hint=hint)
+        self.signal = signal
+        self.exit_code = exit_code(signal)
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    out: Path
+    backend: Backend | None = None  # overrides the script's <cell backend=...>
+    seed: int = 0
+    dry_run: bool = False
+    object_name: str | None = None  # simulated object (overrides the script's <object>)
+    optimize: bool | None = None  # sequence optimization (None: as the script says)
+    sequence_method: SequenceMethod = SequenceMethod.OURS
+    append: bool = False  # add scans to the scan store already in ``out``
+
+
+@dataclass
+class CommandReport:
+    source: str
+    command: str
+    status: CommandStatus = CommandStatus.DONE
+    seconds: float = 0.0
+    message: str = ""
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {"source": self.source, "command": self.command, "status": self.status.value,
+                "seconds": round(self.seconds, 4), "message": self.message, **self.details}
+
+
+@dataclass(frozen=True)
+class SequenceReport:
+    """One run of moves reordered by the sequence optimizer."""
+
+    moves: int
+    method: SequenceMethod
+    ik_draws: int
+    order: list[str]
+    planned_duration_s: float
+    planning_requests: int
+    script_order_lower_bound_s: float
+    seconds: float
+
+    def to_dict(self) -> dict:
+        return {"moves": self.moves, "method": self.method.value, "ik_draws": self.ik_draws, "order": self.order,
+                "planned_duration_s": self.planned_duration_s, "planning_requests": self.planning_requests,
+                "script_order_lower_bound_s": self.script_order_lower_bound_s, "seconds": self.seconds}
+
+
+@dataclass
+class RunState:
+    """What a run knows at the current command."""
+
+    script: C.Script
+    options: RunOptions
+    config: Config
+    rng: np.random.Generator
+    backend: Backend = Backend.SIM
+    box_command: C.SetBox | None = None
+    session: Session | None = None
+    cell: Any = None  # robot.cell.Cell, once the session (or a dry run's cell) is open
+    q_planned: np.ndarray | None = None  # dry run: where the previous planned move ended
+    last_view: tuple[C.Command, np.ndarray] | None = None  # the move the next scan belongs to, its goal pose
+    move_failed: bool = False
+    registered: Any = None  # reconstruction.pipeline.RegisterResult of the current scans
+    reconstruction: dict[str, Path] = field(default_factory=dict)
+    fragments: dict[str, Any] = field(default_factory=dict)  # thesis dialect: name -> Open3D cloud
+    fragment_box: Any = None  # crop box of fragments (marker frame)
+    outputs: dict[str, str] = field(default_factory=dict)
+    sequences: list[SequenceReport] = field(default_factory=list)
+
+    @property
+    def out(self) -> Path:
+        return Path(self.options.out)
+
+    @property
+    def dry_run(self) -> bool:
+        return self.options.dry_run
+
+    @property
+    def station(self):
+        return None if self.session is None else self.session.station
+
+    @property
+    def store(self):
+        return None if self.session is None else self.session.store
+
+    @property
+    def acquisition(self):
+        return None if self.session is None else self.session.acquisition
+
+    @property
+    def scene_object(self):
+        return None if self.session is None else self.session.scene_object
+
+    def scan_count(self) -> int:
+        return 0 if self.store is None else len(self.store)
+
+    # ------------------------------------------------------------------ session
+    def ensure_session(self) -> None:
+        """Open the session at the first command that needs the cell or the robot (a dry
+        run opens the cell only)."""
+        if self.session is not None:
+            return
+        spec = SessionSpec(self.out / "scans", self.config, Mode.SCRIPT, self.backend, box=self._explicit_box(),
+                           script=self.script.path, append=self.options.append, run_folder=self.out,
+                           run={"command": "run", "dialect": self.script.dialect, "dry_run": self.dry_run})
+        self.session = open_session(spec, self.rng, plan_only=self.dry_run)
+        self.cell = self.session.cell
+        self.q_planned = self.session.start
+
+    def _explicit_box(self):
+        """The <box> with centre and size, in the world frame (None: the object's own box)."""
+        b = self.box_command
+        if b is None or b.center is None:
+            return None
+        center = np.asarray(b.center, dtype=float)
+        if b.frame == Frame.MARKER.value:
+            center = (self.world_T_marker() @ np.r_[center, 1.0])[:3]
+        return tuple(center), tuple(b.size)
+
+    def object_box(self):
+        """The collision box of the object: the <box>, or the object's box grown by its margin."""
+        from recon_cli.robot.collision import ObjectBox
+
+        explicit = self._explicit_box()
+        if explicit is not None:
+            return ObjectBox(*explicit)
+        return None if self.scene_object is None else self.scene_object.bounding_box(self.config.scene.box_margin)
+
+    def world_T_marker(self) -> np.ndarray:
+        from recon_cli.robot.cell import Cell
+
+        return (self.cell or Cell(self.config.cell)).world_T_marker
+
+    def set_config(self, **sections) -> None:
+        self.config = replace(self.config, **sections)
+
+    # ------------------------------------------------------------------ helpers of handlers
+    def goal_pose(self, cmd: C.Move) -> np.ndarray:
+        if isinstance(cmd, C.MoveView):
+            return self.cell.view_pose(cmd.view)
+        from scipy.spatial.transform import Rotation
+
+        T = np.eye(4)
+        T[:3, :3] = Rotation.from_quat(cmd.orientation).as_matrix()
+        T[:3, 3] = cmd.position
+        return self.cell.world_T_marker @ T if cmd.frame == Frame.MARKER.value else T
+
+    def skipped_in_dry_run(self, report: CommandReport) -> bool:
+        """A dry run plans moves only: every other command is reported as skipped."""
+        if self.dry_run:
+            report.status, report.message = CommandStatus.SKIPPED, "dry run"
+        return self.dry_run
+
+    def out_path(self, name: str, cmd: C.Command, report: CommandReport) -> Path:
+        """Where an export goes: inside the output folder after resolving links, else refused.
+        An absolute path (thesis dialect only; the loader refuses it in recon's) is written
+        into the output folder under its file name, and the report says so."""
+        from recon_cli.outputs import inside
+
+        if Path(name).is_absolute():
+            report.message = f"absolute path {name} written into the output folder as {Path(name).name}"
+            name = Path(name).name
+        try:
+            target = inside(self.out, name, "export")
+        except FileError as exc:
+            raise FileError(f"{cmd.source}: {exc.message}", hint=exc.hint) from None
+        target.parent.mkdir(parents=True, exist_ok=True)
+        return target
+
+    def close(self) -> None:
+        if self.session is not None:
+            self.session.close()

@@ -1,0 +1,252 @@
+"""One acquisition session for every workflow: object, cell, station, scan store.
+
+Capture, autoscan, script runs and the benchmarks open their session here and nowhere
+else::
+
+    with open_session(SessionSpec(out, config, mode=Mode.CAPTURE)) as s:
+        move = s.acquisition.move_to_pose(T)      # plan -> check -> execute -> settle
+        s.acquisition.scan(view_record(view, T))  # capture -> write the scan (atomic)
+
+:func:`open_session` loads the object, builds the cell with the object's box as collision
+object, opens the station (the simulation, or a hardware station when the backend says
+so), creates the scan store with a typed :class:`SessionInfo` (``session.json``, versioned)
+and writes the effective configuration (``config.yaml``) beside it. ``plan_only=True``
+(dry runs) stops after the cell: nothing is written, nothing moves.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from recon_cli.config import DEFAULTS, Config, write_config
+from recon_cli.errors import FileError, InputError, ReconError
+
+SESSION_FORMAT = 1
+
+
+class Backend(StrEnum):
+    SIM = "sim"
+    HARDWARE = "hardware"
+
+
+class Mode(StrEnum):
+    """What produced a session's scans."""
+
+    CAPTURE = "capture"
+    AUTOSCAN = "autoscan"
+    SCRIPT = "script"
+    BENCHMARK = "benchmark"
+
+
+class HardwareUnavailable(ReconError):
+    """The hardware backend was asked for, but no station adapters are configured here."""
+
+
+def resolve_object_name(name: str) -> str:
+    """"auto": the YCB drill of the thesis where the shared data is present, else the
+    built-in bottle; any other name as given."""
+    if name != "auto":
+        return name
+    from recon_cli.objects import available_objects
+
+    return "drill" if "drill" in available_objects() else "bottle"
+
+
+# --------------------------------------------------------------------- session.json
+@dataclass(frozen=True)
+class BoxInfo:
+    """An axis-aligned box: centre and edge lengths [m] in ``frame`` (world or marker)."""
+
+    center: tuple[float, float, float]
+    size: tuple[float, float, float]
+    frame: str = "world"
+
+    def to_dict(self) -> dict:
+        return {"frame": self.frame, "center": list(self.center), "size": list(self.size)}
+
+
+@dataclass(frozen=True)
+class SessionInfo:
+    """What produced a scan store (``session.json``): read back by ``recon register``."""
+
+    backend: str
+    mode: str
+    cell_kind: str
+    safety_distance: float
+    table_lift: float
+    sensor: str
+    noise: bool
+    seed: int
+    object_name: str | None
+    world_T_object: np.ndarray | None
+    object_box: BoxInfo | None
+    crop_box: BoxInfo | None
+    world_T_marker: np.ndarray | None
+    script: str | None = None
+    created: float = field(default_factory=time.time)
+    format: int = SESSION_FORMAT
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "format": self.format, "created": self.created, "backend": self.backend, "mode": self.mode,
+            "cell": {"kind": self.cell_kind, "safety_distance": self.safety_distance, "table_lift": self.table_lift},
+            "sensor": self.sensor, "noise": self.noise, "seed": self.seed, "script": self.script,
+            "object": None if self.object_name is None else {"name": self.object_name,
+                                                             "world_T_object": self.world_T_object},
+            "object_box": None if self.object_box is None else self.object_box.to_dict(),
+            "crop_box": None if self.crop_box is None else self.crop_box.to_dict(),
+            "world_T_marker": self.world_T_marker,
+        }
+
+
+# --------------------------------------------------------------------- the session
+@dataclass(frozen=True)
+class SessionSpec:
+    """Everything a workflow says about its session; the rest comes from ``config``."""
+
+    out: Path  # the scan store folder
+    config: Config = DEFAULTS
+    mode: Mode = Mode.CAPTURE
+    backend: Backend = Backend.SIM
+    box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None  # centre, size [m] (world)
+    script: str | None = None  # the script of a script run
+    append: bool = False  # add to the scan store in ``out`` (same cell, object and backend)
+    run_folder: Path | None = None  # where config.yaml goes (default: ``out``)
+    run: dict = field(default_factory=dict)  # what else config.yaml records (command, options)
+
+
+class Session:
+    """An open session: use as a context manager (closing stops the robot and frees the
+    station)."""
+
+    def __init__(self, spec: SessionSpec, rng: np.random.Generator, plan_only: bool = False) -> None:
+        from recon_cli.objects import load_object
+        from recon_cli.robot.cell import Cell
+        from recon_cli.robot.poses import named_configuration
+
+        cfg = spec.config
+        self.spec = spec
+        self.rng = rng
+        self.scene_object = load_object(resolve_object_name(cfg.scene.object_name), cfg.scene.object_scale)
+        self.object_box = self._object_box()
+        self.cell = Cell(cfg.cell, object_box=self.object_box)
+        self.start = named_configuration(cfg.cell.kind, "home", self.cell.joint_names)
+        self.station = self.store = self.acquisition = None
+        self.info: SessionInfo | None = None
+        if plan_only:
+            return
+        try:
+            self._open()
+        except BaseException:
+            self.close()
+            raise
+
+    def _object_box(self):
+        from recon_cli.robot.collision import ObjectBox
+
+        if self.spec.box is not None:
+            return ObjectBox(tuple(self.spec.box[0]), tuple(self.spec.box[1]))
+        return self.scene_object.bounding_box(self.spec.config.scene.box_margin)
+
+    def _open(self) -> None:
+        from recon_cli.acquisition import Acquisition
+        from recon_cli.perception.sensor import motioncam_3d_m
+
+        spec, cfg = self.spec, self.spec.config
+        sensor = motioncam_3d_m()
+        box = self.object_box
+        if spec.box is not None:
+            crop = BoxInfo(tuple(box.center), tuple(box.size))
+        else:
+            c, s = self.scene_object.crop_box(cfg.scene.box_margin)
+            crop = BoxInfo(tuple(c), tuple(s))
+        self.info = SessionInfo(
+            backend=spec.backend.value, mode=spec.mode.value, cell_kind=cfg.cell.kind.value,
+            safety_distance=cfg.cell.safety_distance, table_lift=cfg.cell.table_lift, sensor=sensor.name,
+            noise=cfg.sensor.noise, seed=cfg.seed, object_name=self.scene_object.name,
+            world_T_object=self.scene_object.world_T_object,
+            object_box=BoxInfo(tuple(box.center), tuple(box.size)), crop_box=crop,
+            world_T_marker=self.cell.world_T_marker, script=spec.script)
+        self.station = open_station(spec.backend, self.cell, self.scene_object, self.start, self.rng, cfg)
+        self.store = self._open_store()
+        write_config(spec.run_folder or spec.out, cfg, mode=spec.mode.value, backend=spec.backend.value,
+                     script=spec.script, object=self.scene_object.name, **spec.run)
+        if spec.backend is Backend.SIM:
+            write_ground_truth_mesh(spec.out, self.scene_object)
+        self.acquisition = Acquisition(self.cell, self.station.robot, self.station.camera, self.store, self.rng,
+                                       cfg.planner, depth_scale=sensor.depth_scale,
+                                       ground_truth=self.station.ground_truth)
+
+    def _open_store(self):
+        from recon_cli.reconstruction.scan_store import ScanStore
+
+        root = Path(self.spec.out)
+        if not (self.spec.append and (root / "session.json").exists()):
+            return ScanStore.create(root, self.info.to_dict())
+        store = ScanStore(root)
+        old = store.session()
+        mine = self.info.to_dict()
+        for label, get in (("backend", lambda d: d.get("backend")),
+                           ("cell", lambda d: (d.get("cell") or {}).get("kind")),
+                           ("object", lambda d: (d.get("object") or {}).get("name"))):
+            if get(mine) != get(old):
+                raise FileError(f"--append: the scans in {root} were recorded with {label} {get(old)!r}, this run "
+                                f"uses {get(mine)!r}",
+                                hint="append only runs of the same cell and object, or choose a new output folder")
+        return store
+
+    def close(self) -> None:
+        """Stop and release the station (the robot stops first); idempotent."""
+        if self.station is not None:
+            station, self.station = self.station, None
+            station.close()
+
+    def __enter__(self) -> Session:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def open_session(spec: SessionSpec, rng: np.random.Generator | None = None, *, plan_only: bool = False) -> Session:
+    """Open the session a workflow asks for (see the module docstring)."""
+    from recon_cli.planning.planner import seed_ompl
+
+    cfg = spec.config
+    if not (math.isfinite(cfg.scene.object_scale) and cfg.scene.object_scale > 0):
+        raise InputError(f"object scale {cfg.scene.object_scale} is not a positive number",
+                         hint="e.g. 0.001 for millimetres")
+    seed_ompl(cfg.seed)
+    return Session(spec, rng if rng is not None else np.random.default_rng(cfg.seed), plan_only)
+
+
+def open_station(backend: Backend, cell, scene_object, start: np.ndarray, rng: np.random.Generator, cfg: Config):
+    """The station of a backend: the MuJoCo simulation of the cell, or hardware adapters."""
+    if backend is Backend.HARDWARE:
+        raise HardwareUnavailable(
+            "no hardware adapter is configured on this machine (robot and camera drivers)",
+            hint="run with the simulation (backend sim) here; on the cell, install the adapters for "
+                 "RobotBackend/CameraBackend (recon_cli/backends/base.py)")
+    from recon_cli.backends.sim.station import SimStation
+
+    return SimStation(cell, scene_object, start, rng, noise=cfg.sensor.noise, resolution=cfg.sensor.resolution)
+
+
+def write_ground_truth_mesh(folder: Path, obj) -> Path:
+    """The simulated object's exact mesh in the world frame, beside (not inside) the scan
+    data (``ground_truth/NAME.ply``; evaluation only)."""
+    import open3d as o3d
+
+    from recon_cli.outputs import atomic_write
+
+    gt = Path(folder) / "ground_truth"
+    gt.mkdir(exist_ok=True)
+    return atomic_write(gt / f"{obj.name}.ply",
+                        lambda tmp: o3d.io.write_triangle_mesh(str(tmp), obj.mesh_world(), write_ascii=False))

@@ -1,0 +1,82 @@
+"""``recon capture``: move the robot through views and take one scan at each.
+
+Views that cannot be reached (IK or planning fails) are reported and skipped; scans already
+written stay. ``cover_board`` lists views (1-based) at which a plain sheet lies over the
+ChArUco board (simulation), so registration must fall back to kinematics there.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from recon_cli.acquisition import MoveReport, view_record
+from recon_cli.config import DEFAULTS, Config
+from recon_cli.errors import ReconError
+from recon_cli.geometry.view import View
+from recon_cli.objects import SceneObject
+from recon_cli.reconstruction.scan_store import Scan
+from recon_cli.session import Backend, Mode, SessionSpec, open_session
+
+
+@dataclass(frozen=True)
+class CaptureOptions:
+    views: tuple[View, ...]
+    out: Path
+    config: Config = DEFAULTS
+    backend: Backend = Backend.SIM
+    cover_board: frozenset[int] = frozenset()  # 1-based views with the board covered (simulation)
+    run: dict = field(default_factory=dict)  # recorded in config.yaml
+
+
+@dataclass(frozen=True)
+class ViewFailure:
+    view: int  # 1-based
+    message: str
+
+
+@dataclass(frozen=True)
+class CaptureResult:
+    folder: Path
+    scans: list[Scan]
+    moves: list[MoveReport]
+    failures: list[ViewFailure]
+    capture_seconds: list[float]
+    total_seconds: float
+    scene_object: SceneObject
+
+    @property
+    def points(self) -> list[int]:
+        return [int(np.count_nonzero(s.depth > 0)) for s in self.scans]
+
+
+def run_capture(opt: CaptureOptions, progress: Callable[[str, int, int], None] | None = None
+                ) -> CaptureResult:
+    t0 = time.perf_counter()
+    n = len(opt.views)
+    step = (lambda k: progress("capture", k, n)) if progress else (lambda k: None)
+    scans, moves, failures, capture_seconds = [], [], [], []
+    spec = SessionSpec(opt.out, opt.config, Mode.CAPTURE, opt.backend, run=opt.run)
+    with open_session(spec) as session:
+        cell, acq = session.cell, session.acquisition
+        for k, view in enumerate(opt.views, start=1):
+            try:
+                T = cell.view_pose(view)
+                move = acq.move_to_pose(T, what=f"view {k}")
+            except ReconError as exc:  # unreachable or unplannable view: report, go on
+                failures.append(ViewFailure(k, str(exc)))
+                step(k)
+                continue
+            if hasattr(session.station, "cover_board"):
+                session.station.cover_board(k in opt.cover_board)
+            t_cap = time.perf_counter()
+            scans.append(acq.scan(view_record(view, T), move))
+            capture_seconds.append(time.perf_counter() - t_cap)
+            moves.append(move)
+            step(k)
+    return CaptureResult(opt.out, scans, moves, failures, capture_seconds, time.perf_counter() - t0,
+                         session.scene_object)

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from recon_cli.backends.base import Station
 from recon_cli.config import DEFAULTS, Config, write_config
 from recon_cli.errors import FileError, InputError, ReconError
 
@@ -227,7 +228,8 @@ def open_session(spec: SessionSpec, rng: np.random.Generator | None = None, *, p
     return Session(spec, rng if rng is not None else np.random.default_rng(cfg.seed), plan_only)
 
 
-def open_station(backend: Backend, cell, scene_object, start: np.ndarray, rng: np.random.Generator, cfg: Config):
+def open_station(backend: Backend, cell, scene_object, start: np.ndarray, rng: np.random.Generator,
+                 cfg: Config) -> Station:
     """The station of a backend: the MuJoCo simulation of the cell, or hardware adapters."""
     if backend is Backend.HARDWARE:
         raise HardwareUnavailable(

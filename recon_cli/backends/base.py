@@ -1,7 +1,8 @@
 """The backend interfaces: the only things that differ between simulation and hardware.
 
 A ``RobotBackend`` executes a time-parameterized, already checked trajectory and reports
-the measured joints; a ``CameraBackend`` captures colour + depth with its intrinsics.
+the measured joints; a ``CameraBackend`` captures colour + depth with its intrinsics; a
+``Station`` holds both for one session (``recon_cli.session.open_station`` opens it).
 Everything above (planning, scripts, view planning, registration) uses only these.
 """
 
@@ -59,3 +60,29 @@ class RobotBackend(Protocol):
 class CameraBackend(Protocol):
     def capture(self) -> RGBDFrame:
         """Colour and depth images of the current view."""
+
+
+@runtime_checkable
+class Station(Protocol):
+    """A cell's robot and camera, opened together (usable as a context manager).
+
+    backend: "sim" or "hardware"; ground_truth(): what only a simulation knows (true camera
+    pose, object pose), stored apart from the scan data for evaluation, or None on
+    hardware; close(): stop the robot first, then release the devices (idempotent).
+    """
+
+    backend: str
+    robot: RobotBackend
+    camera: CameraBackend
+
+    def ground_truth(self) -> dict | None:
+        """Ground truth of the current state (simulation), or None."""
+
+    def close(self) -> None:
+        """Stop the robot, then release robot and camera."""
+
+    def __enter__(self) -> Station:
+        ...
+
+    def __exit__(self, *exc) -> None:
+        ...

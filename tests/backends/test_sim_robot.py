@@ -46,3 +46,14 @@ def test_hold_still_at_rest(gantry, sim):
     report = sim.execute(straight_line(q, q, gantry.limits.velocity, gantry.limits.acceleration))
     assert report.settled
     assert np.max(np.abs(sim.measured_joints() - q)) < 1e-5
+
+
+def test_sim_station_is_a_station(gantry, rng):
+    from recon_cli.backends.base import Station
+    from recon_cli.backends.sim.station import SimStation
+    from recon_cli.robot.poses import named_configuration
+
+    home = named_configuration(gantry.config.kind, "home", gantry.joint_names)
+    with SimStation(gantry, None, home, rng, noise=False, resolution=0.1) as station:
+        assert isinstance(station, Station)
+        assert station.ground_truth()["world_T_camera"].shape == (4, 4)

@@ -489,8 +489,7 @@ def bench_ik(
     out: Annotated[Path | None, typer.Option(help="Output folder (default runs/bench-ik-<time>).")] = None,
 ) -> None:
     """IK success rate and time on random reachable camera poses around the table."""
-    from rich.table import Table
-
+    from recon_cli.bench import render
     from recon_cli.bench.ik import IKBenchConfig, run_ik_bench
     from recon_cli.console import console, progress_bar, run_folder, write_json
 
@@ -501,26 +500,8 @@ def bench_ik(
         result = run_ik_bench(c, cfg, update)
     write_json(folder / "bench_ik.json", {"config": cfg.__dict__, "safety_distance": safety,
                                           "result": result.to_dict()})
-    table = Table(title=f"IK benchmark, {c.config.kind.value} cell, {result.n_poses} poses "
-                        f"(from {result.samples_drawn} random configurations)")
-    table.add_column("measure")
-    table.add_column("value", justify="right")
-    rows = [
-        ("success, first solution", f"{result.success_first * 100:.1f} %"),
-        ("median time to first solution", f"{result.median_ms_first:.2f} ms"),
-        ("p90 time to first solution", f"{result.p90_ms_first:.2f} ms"),
-        (f"success, asking for {solutions}", f"{result.success_multi * 100:.1f} %"),
-        ("mean distinct solutions found", f"{result.mean_solutions:.2f}"),
-        ("median time per solution", f"{result.median_ms_per_solution:.2f} ms"),
-        ("max position error", f"{result.max_position_error_m:.2e} m"),
-        ("max rotation error", f"{result.max_rotation_error_rad:.2e} rad"),
-        ("all within soft limits", str(result.all_within_soft_limits)),
-        ("all collision-free", str(result.all_collision_free)),
-        ("min separation of solutions", f"{result.min_pairwise_separation:.3f}"),
-    ]
-    for row in rows:
-        table.add_row(*row)
-    console.print(table)
+    for item in render.ik_report(result, c.config.kind.value, solutions):
+        console.print(item)
     console.print(f"results: {folder / 'bench_ik.json'}")
 
 
@@ -533,8 +514,7 @@ def bench_sim(
     """Board detection in the 24 views of eq. 4.1, capture time, execution precision."""
     from dataclasses import asdict
 
-    from rich.table import Table
-
+    from recon_cli.bench import render
     from recon_cli.bench.sim import run_sim_bench
     from recon_cli.console import console, progress_bar, run_folder, write_json
 
@@ -543,23 +523,8 @@ def bench_sim(
         result = run_sim_bench(folder, object_name, seed, update)
     write_json(folder / "bench_sim.json", {"object": result.object_name, "views": [asdict(r) for r in result.rows],
                                            "move": result.move})
-    table = Table(title=f"24 views of eq. 4.1 around the {result.object_name}: board found in "
-                        f"{result.found} of {len(result.rows)}")
-    for col in ("view", "corners", "markers", "ChArUco pose error", "reprojection", "capture", "points"):
-        table.add_column(col, justify="right")
-    for r in result.rows:
-        err = (f"{r.translation_error_mm:.3f} mm / {r.rotation_error_deg:.4f}°" if r.found else "not found")
-        rep = f"{r.reprojection_px:.3f} px" if r.found else "-"
-        table.add_row(str(r.view), str(r.corners), str(r.markers), err, rep, f"{r.capture_s:.3f} s", str(r.points))
-    console.print(table)
-    found = [r for r in result.rows if r.found]
-    if found:
-        console.print(f"mean ChArUco pose error {np.mean([r.translation_error_mm for r in found]):.3f} mm, "
-                      f"{np.mean([r.rotation_error_deg for r in found]):.4f}° (thesis Table 4.2: 1.532 mm, 0.0853°)")
-    times = [r.capture_s for r in result.rows]
-    console.print(f"capture time (render + noise, 1600 x 1200): median {np.median(times):.3f} s, "
-                  f"max {max(times):.3f} s")
-    console.print(f"move home -> view 1: {result.move}")
+    for item in render.sim_report(result):
+        console.print(item)
     console.print(f"results: {folder / 'bench_sim.json'}, picture: {folder / 'eq_4_1_views.png'}")
 
 
@@ -572,8 +537,7 @@ def bench_registration(
     out: Annotated[Path | None, typer.Option(help="Output folder (default runs/bench-registration-<time>).")] = None,
 ) -> None:
     """Thesis 4.2: ChArUco pose errors (Table 4.2) and global vs local registration accuracy."""
-    from rich.table import Table
-
+    from recon_cli.bench import render
     from recon_cli.bench.registration import run_registration_bench
     from recon_cli.console import console, progress_bar, run_folder, write_json
 
@@ -581,19 +545,8 @@ def bench_registration(
     with progress_bar() as update:
         data = run_registration_bench(folder, object_name, seed, resolution, update)
     write_json(folder / "bench_registration.json", data)
-    m = data["charuco_mean"]
-    covered = ", ".join(map(str, data["covered_views"]))
-    console.print(f"{data['views']} views of the {data['object']} (board covered in views {covered}): ChArUco "
-                  f"pose error mean {m['translation_mm']:.3f} mm, {m['rotation_deg']:.4f}° "
-                  "(thesis Table 4.2: 1.532 mm, 0.0853°)")
-    table = Table(title=f"fused cloud vs ground truth (noise sigma at 0.6 m: {data['noise_sigma_at_0.6m_mm']:.3f} mm)")
-    for col in ("case", "mean", "std", "±0.5 mm", "coverage (visible)", "pose error", "relative", "time"):
-        table.add_column(col, justify="right")
-    for r in data["cases"]:
-        table.add_row(r.case, f"{r.mean_mm:+.3f} mm", f"{r.std_mm:.3f} mm", f"{r.within_half_mm * 100:.1f} %",
-                      f"{r.coverage_visible * 100:.2f} %", f"{r.pose_error_mm:.3f} mm / {r.pose_error_deg:.4f}°",
-                      f"{r.relative_error_mm:.3f} mm / {r.relative_error_deg:.4f}°", f"{r.seconds:.1f} s")
-    console.print(table)
+    for item in render.registration_report(data):
+        console.print(item)
     console.print(f"results: {folder / 'bench_registration.json'}, histogram: {folder / 'distances.png'}, "
                   f"mesh: {data['mesh']}")
 
@@ -610,30 +563,25 @@ def bench_sequence(
     """Thesis 4.3: total trajectory time and planning requests of the 24 views of eq. 4.1."""
     from dataclasses import asdict
 
-    from rich.table import Table
-
+    from recon_cli.bench import render
     from recon_cli.bench.sequence import CASES, ecdf_png, run_sequence_bench, summarize
+    from recon_cli.config import DEFAULTS
     from recon_cli.console import console, progress_bar, run_folder, write_json
 
     chosen = _choices(cases, CASES, "case")
     folder = run_folder(out, "bench-sequence")
     n = 3 if quick else runs
+    plan = DEFAULTS.planner
     with progress_bar() as update:
-        rows = run_sequence_bench(n, seed, chosen, update)
+        rows = run_sequence_bench(n, seed, chosen, update, plan)
     summary = summarize(rows)
-    write_json(folder / "bench_sequence.json", {"runs_per_case": n, "seed": seed, "velocity_scale": 0.15,
-                                                "acceleration_scale": 0.3, "summary": summary,
+    write_json(folder / "bench_sequence.json", {"runs_per_case": n, "seed": seed, "planner": plan,
+                                                "velocity_scale": plan.velocity_scale,
+                                                "acceleration_scale": plan.acceleration_scale, "summary": summary,
                                                 "runs": [asdict(r) for r in rows]})
     ecdf_png(folder / "t_p_ecdf.png", rows)
-    table = Table(title=f"eq. 4.1 from the Table 4.1 start, {n} runs per case (velocity x0.15, acceleration x0.3)")
-    for col in ("case", "mean t_p", "vs A", "mean n_req", "max n_req", "failed", "thesis t_p / n_req", "wall / run"):
-        table.add_column(col, justify="right")
-    for case, v in summary.items():
-        th = v["thesis"]
-        table.add_row(case, f"{v['t_p_mean']:.2f} s", "-" if v["vs_A"] is None else f"{v['vs_A'] * 100:+.2f} %",
-                      f"{v['n_req_mean']:.2f}", str(v["n_req_max"]), str(v["failed"]),
-                      "-" if th is None else f"{th[0]:.2f} s / {th[1]:.2f}", f"{v['wall_s_mean']:.1f} s")
-    console.print(table)
+    for item in render.sequence_report(summary, n, plan.velocity_scale, plan.acceleration_scale):
+        console.print(item)
     console.print(f"results: {folder / 'bench_sequence.json'}, plot: {folder / 't_p_ecdf.png'}")
 
 
@@ -653,8 +601,7 @@ def bench_viewplan(
     """Thesis 4.4: ellipsoid view planner vs evenly spread and random views, every object."""
     from dataclasses import asdict
 
-    from rich.table import Table
-
+    from recon_cli.bench import render
     from recon_cli.bench.viewplan import coverage_png, run_viewplan_bench
     from recon_cli.console import console, progress_bar, run_folder, write_json
     from recon_cli.robot.description import CellConfig, CellKind
@@ -667,15 +614,8 @@ def bench_viewplan(
                                   resolution, CellConfig(kind=CellKind.parse(cell)), update)
     write_json(folder / "bench_viewplan.json", {"n": n, "d_c": dc, "cell": cell, "rows": [asdict(r) for r in rows]})
     coverage_png(folder / "coverage.png", rows)
-    table = Table(title=f"N = {n}, d_c = {dc} m, {cell} cell")
-    for col in ("object", "method", "initial", "scans", "coverage", "mean", "std", "infeasible", "requests",
-                "trajectories", "wall clock"):
-        table.add_column(col, justify="right")
-    for r in rows:
-        table.add_row(r.object_name, r.method, r.initial, str(r.scans), f"{r.coverage * 100:.2f} %",
-                      f"{r.mean_mm:+.3f} mm", f"{r.std_mm:.3f} mm", str(r.infeasible), str(r.requests),
-                      f"{r.trajectory_s:.1f} s", f"{r.seconds:.1f} s")
-    console.print(table)
+    for item in render.viewplan_report(rows, n, dc, cell):
+        console.print(item)
     console.print(f"results: {folder / 'bench_viewplan.json'}, plot: {folder / 'coverage.png'}")
 
 
@@ -693,8 +633,7 @@ def bench_planners(
     out: Annotated[Path | None, typer.Option(help="Output folder (default runs/bench-planners-<time>).")] = None,
 ) -> None:
     """The Table 4.1 planning benchmark (thesis 4.1): success, plan times, path lengths."""
-    from rich.table import Table
-
+    from recon_cli.bench import render
     from recon_cli.bench.planners import DEFAULT_PLANNERS, run_planner_bench, thesis_times, write_results
     from recon_cli.console import console, progress_bar, run_folder
     from recon_cli.planning.planner import PLANNERS, PlanOptions
@@ -722,25 +661,8 @@ def bench_planners(
             "simplify": simplify, "shortcut_rounds": shortcut_rounds,
             "plan_time": "search + simplification, one core"}
     summary = write_results(folder, rows, meta, peer_summary)
-    table = Table(title=f"Table 4.1 problem, {n} requests per planner, {time_limit:g} s each")
-    for col in ("planner", "solved", "min", "median", "p90", "max", "path length", "trajectory"):
-        table.add_column(col, justify="right")
-    for name, sm in summary.items():
-        table.add_row(name, f"{sm['success_rate'] * 100:.1f} %", f"{sm['time_min']:.3f} s",
-                      f"{sm['time_median']:.3f} s", f"{sm['time_p90']:.3f} s", f"{sm['time_max']:.3f} s",
-                      f"{sm['path_length_median']:.2f}", f"{sm['trajectory_duration_median']:.2f} s")
-    for name, t in thesis_times().items():
-        table.add_row(f"{name} (thesis)", "", f"{t.min():.3f} s", f"{float(np.median(t)):.3f} s",
-                      f"{np.percentile(t, 90):.3f} s", f"{t.max():.3f} s", "", "")
-    if peer_summary:
-        ps = peer_summary
-        table.add_row(f"RRTConnect (mplib, range {ps['range']:g})", f"{ps['success_rate'] * 100:.1f} %",
-                      "", f"{ps['time_median']:.3f} s", "", "", f"{ps['path_length_median']:.2f}", "")
-    console.print(table)
-    if peer_summary and "RRTConnect" in summary:
-        ours = summary["RRTConnect"]["time_median"]
-        console.print(f"RRTConnect median: recon {ours:.3f} s, mplib {peer_summary['time_median']:.3f} s, "
-                      f"ratio recon/mplib {ours / peer_summary['time_median']:.2f}")
+    for item in render.planners_report(summary, n, time_limit, thesis_times(), peer_summary):
+        console.print(item)
     console.print(f"results: {folder / 'bench_planners.json'}, {folder / 'requests.csv'}, "
                   f"plot: {folder / 'plan_times.png'}")
 

@@ -59,7 +59,7 @@ class SequenceProblem:
 
     def __init__(self, options: PlanOptions | None = None) -> None:
         self.cell = Cell(CellConfig(), object_box=BENCH_CUBE)
-        self.options = options or PlanOptions(velocity_scale=0.15, acceleration_scale=0.3)
+        self.options = options or PlanOptions()  # velocity x0.15, acceleration x0.3, as the thesis benchmarked
         self.planner = MotionPlanner(self.cell, self.options)
         self.poses = [self.cell.view_pose(v) for v in eq_4_1_views()]
         lim = self.cell.limits
@@ -138,9 +138,10 @@ def _bound_ratio(graph: ViewGraph, problem: SequenceProblem) -> float:
 
 
 def run_sequence_bench(runs: int, seed: int, cases=CASES,
-                       progress: Callable[[str, int, int], None] | None = None) -> list[RunRow]:
+                       progress: Callable[[str, int, int], None] | None = None,
+                       options: PlanOptions | None = None) -> list[RunRow]:
     seed_ompl(seed)
-    problem = SequenceProblem()
+    problem = SequenceProblem(options)
     rows = []
     for case in cases:
         for r in range(runs):

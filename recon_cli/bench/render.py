@@ -1,0 +1,115 @@
+"""Terminal output of the benchmarks: rich tables and summary lines (what ``recon bench ...``
+prints after writing its JSON and figures)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+from rich.table import Table
+
+THESIS_TABLE_4_2 = "thesis Table 4.2: 1.532 mm, 0.0853°"
+
+
+def _table(title: str, columns: tuple[str, ...], justify: str = "right") -> Table:
+    table = Table(title=title)
+    for col in columns:
+        table.add_column(col, justify=justify)
+    return table
+
+
+def ik_report(result, kind: str, solutions: int) -> Iterator:
+    table = _table(f"IK benchmark, {kind} cell, {result.n_poses} poses (from {result.samples_drawn} random "
+                   "configurations)", ("measure", "value"))
+    rows = [
+        ("success, first solution", f"{result.success_first * 100:.1f} %"),
+        ("median time to first solution", f"{result.median_ms_first:.2f} ms"),
+        ("p90 time to first solution", f"{result.p90_ms_first:.2f} ms"),
+        (f"success, asking for {solutions}", f"{result.success_multi * 100:.1f} %"),
+        ("mean distinct solutions found", f"{result.mean_solutions:.2f}"),
+        ("median time per solution", f"{result.median_ms_per_solution:.2f} ms"),
+        ("max position error", f"{result.max_position_error_m:.2e} m"),
+        ("max rotation error", f"{result.max_rotation_error_rad:.2e} rad"),
+        ("all within soft limits", str(result.all_within_soft_limits)),
+        ("all collision-free", str(result.all_collision_free)),
+        ("min separation of solutions", f"{result.min_pairwise_separation:.3f}"),
+    ]
+    for row in rows:
+        table.add_row(*row)
+    yield table
+
+
+def sim_report(result) -> Iterator:
+    table = _table(f"24 views of eq. 4.1 around the {result.object_name}: board found in {result.found} of "
+                   f"{len(result.rows)}", ("view", "corners", "markers", "ChArUco pose error", "reprojection",
+                                            "capture", "points"))
+    for r in result.rows:
+        err = f"{r.translation_error_mm:.3f} mm / {r.rotation_error_deg:.4f}°" if r.found else "not found"
+        rep = f"{r.reprojection_px:.3f} px" if r.found else "-"
+        table.add_row(str(r.view), str(r.corners), str(r.markers), err, rep, f"{r.capture_s:.3f} s", str(r.points))
+    yield table
+    found = [r for r in result.rows if r.found]
+    if found:
+        yield (f"mean ChArUco pose error {np.mean([r.translation_error_mm for r in found]):.3f} mm, "
+               f"{np.mean([r.rotation_error_deg for r in found]):.4f}° ({THESIS_TABLE_4_2})")
+    times = [r.capture_s for r in result.rows]
+    yield f"capture time (render + noise, 1600 x 1200): median {np.median(times):.3f} s, max {max(times):.3f} s"
+    yield f"move home -> view 1: {result.move}"
+
+
+def registration_report(data: dict) -> Iterator:
+    m = data["charuco_mean"]
+    covered = ", ".join(map(str, data["covered_views"]))
+    yield (f"{data['views']} views of the {data['object']} (board covered in views {covered}): ChArUco pose error "
+           f"mean {m['translation_mm']:.3f} mm, {m['rotation_deg']:.4f}° ({THESIS_TABLE_4_2})")
+    table = _table(f"fused cloud vs ground truth (noise sigma at 0.6 m: {data['noise_sigma_at_0.6m_mm']:.3f} mm)",
+                   ("case", "mean", "std", "±0.5 mm", "coverage (visible)", "pose error", "relative", "time"))
+    for r in data["cases"]:
+        table.add_row(r.case, f"{r.mean_mm:+.3f} mm", f"{r.std_mm:.3f} mm", f"{r.within_half_mm * 100:.1f} %",
+                      f"{r.coverage_visible * 100:.2f} %", f"{r.pose_error_mm:.3f} mm / {r.pose_error_deg:.4f}°",
+                      f"{r.relative_error_mm:.3f} mm / {r.relative_error_deg:.4f}°", f"{r.seconds:.1f} s")
+    yield table
+
+
+def sequence_report(summary: dict, n: int, velocity_scale: float, acceleration_scale: float) -> Iterator:
+    table = _table(f"eq. 4.1 from the Table 4.1 start, {n} runs per case (velocity x{velocity_scale:g}, "
+                   f"acceleration x{acceleration_scale:g})",
+                   ("case", "mean t_p", "vs A", "mean n_req", "max n_req", "failed", "thesis t_p / n_req",
+                    "wall / run"))
+    for case, v in summary.items():
+        th = v["thesis"]
+        table.add_row(case, f"{v['t_p_mean']:.2f} s", "-" if v["vs_A"] is None else f"{v['vs_A'] * 100:+.2f} %",
+                      f"{v['n_req_mean']:.2f}", str(v["n_req_max"]), str(v["failed"]),
+                      "-" if th is None else f"{th[0]:.2f} s / {th[1]:.2f}", f"{v['wall_s_mean']:.1f} s")
+    yield table
+
+
+def viewplan_report(rows, n: int, dc: float, cell: str) -> Iterator:
+    table = _table(f"N = {n}, d_c = {dc} m, {cell} cell",
+                   ("object", "method", "initial", "scans", "coverage", "mean", "std", "infeasible", "requests",
+                    "trajectories", "wall clock"))
+    for r in rows:
+        table.add_row(r.object_name, r.method, r.initial, str(r.scans), f"{r.coverage * 100:.2f} %",
+                      f"{r.mean_mm:+.3f} mm", f"{r.std_mm:.3f} mm", str(r.infeasible), str(r.requests),
+                      f"{r.trajectory_s:.1f} s", f"{r.seconds:.1f} s")
+    yield table
+
+
+def planners_report(summary: dict, n: int, time_limit: float, thesis: dict, peer: dict | None) -> Iterator:
+    table = _table(f"Table 4.1 problem, {n} requests per planner, {time_limit:g} s each",
+                   ("planner", "solved", "min", "median", "p90", "max", "path length", "trajectory"))
+    for name, sm in summary.items():
+        table.add_row(name, f"{sm['success_rate'] * 100:.1f} %", f"{sm['time_min']:.3f} s",
+                      f"{sm['time_median']:.3f} s", f"{sm['time_p90']:.3f} s", f"{sm['time_max']:.3f} s",
+                      f"{sm['path_length_median']:.2f}", f"{sm['trajectory_duration_median']:.2f} s")
+    for name, t in thesis.items():
+        table.add_row(f"{name} (thesis)", "", f"{t.min():.3f} s", f"{float(np.median(t)):.3f} s",
+                      f"{np.percentile(t, 90):.3f} s", f"{t.max():.3f} s", "", "")
+    if peer:
+        table.add_row(f"RRTConnect (mplib, range {peer['range']:g})", f"{peer['success_rate'] * 100:.1f} %",
+                      "", f"{peer['time_median']:.3f} s", "", "", f"{peer['path_length_median']:.2f}", "")
+    yield table
+    if peer and "RRTConnect" in summary:
+        ours = summary["RRTConnect"]["time_median"]
+        yield (f"RRTConnect median: recon {ours:.3f} s, mplib {peer['time_median']:.3f} s, "
+               f"ratio recon/mplib {ours / peer['time_median']:.2f}")

@@ -1,16 +1,32 @@
-"""Where the project's data folders are (robot/, schemas/, scripts_xml/).
+"""Where recon's data folders are: the cell description (robot/), the schemas (schemas/) and
+the shipped scripts (scripts_xml/).
 
-recon is installed in editable mode from its checkout (README), so the folders are found
-beside the package. ``RECON_HOME`` overrides the checkout root.
+In a checkout (and an editable install) they are the folders beside the package; an
+installed wheel carries them as package data (``recon_cli._data``). ``RECON_HOME`` points
+to another checkout root. Public test data outside the repository (YCB meshes, the thesis'
+benchmark results) is found only where a path or ``RECON_SHARED_DATA`` says, or beside a
+checkout as ``../shared/data``.
 """
 
 from __future__ import annotations
 
 import os
+from importlib import resources
 from pathlib import Path
 
-ROOT = Path(os.environ.get("RECON_HOME", Path(__file__).resolve().parents[1]))
-ROBOT_DIR = ROOT / "robot"
-SCHEMA_DIR = ROOT / "schemas"
-SCRIPTS_DIR = ROOT / "scripts_xml"
-SHARED_DATA_DIR = ROOT.parent / "shared" / "data"
+_CHECKOUT = Path(os.environ.get("RECON_HOME", Path(__file__).resolve().parents[1]))
+
+
+def _data_dir(name: str) -> Path:
+    folder = _CHECKOUT / name
+    if folder.is_dir():
+        return folder
+    return Path(str(resources.files("recon_cli._data") / name))
+
+
+#: the checkout root (or, installed, the folder that holds the package)
+ROOT = _CHECKOUT
+ROBOT_DIR = _data_dir("robot")
+SCHEMA_DIR = _data_dir("schemas")
+SCRIPTS_DIR = _data_dir("scripts_xml")
+SHARED_DATA_DIR = Path(os.environ.get("RECON_SHARED_DATA", _CHECKOUT.parent / "shared" / "data"))

@@ -173,9 +173,19 @@ def _expansion_error(path: Path, exc: BaseException, frames, tmp: Path) -> Scrip
     return ScriptError(f"{where}: {what}", hint=hint)
 
 
-def load_script(path: Path) -> C.Script:
-    """Expand, validate and compile a script file into typed commands."""
+def shipped_or_given(path: Path) -> Path:
+    """``scripts_xml/NAME`` (or ``NAME``) that is not a file here names a shipped script,
+    wherever recon is installed; any other path as given."""
     path = Path(path)
+    if not path.exists() and path.parent.name in ("", "scripts_xml") and (SCRIPTS_DIR / path.name).is_file():
+        return SCRIPTS_DIR / path.name
+    return path
+
+
+def load_script(path: Path) -> C.Script:
+    """Expand, validate and compile a script file into typed commands (``scripts_xml/NAME``
+    finds the shipped scripts from any folder)."""
+    path = shipped_or_given(path)
     root, sources, expanded = expand(path)
     localname = etree.QName(root).localname
     dialect = {"recon": "recon", "script": "thesis"}.get(localname)

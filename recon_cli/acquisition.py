@@ -15,16 +15,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from recon_cli.backends.base import CameraBackend, ExecutionReport, RobotBackend
-from recon_cli.errors import ReconError
+from recon_cli.errors import PlanningError
 from recon_cli.geometry.transforms import pose_error
 from recon_cli.geometry.view import View
 from recon_cli.planning.planner import MotionPlanner, PlanOptions, PlanResult
 from recon_cli.reconstruction.scan_store import Scan, ScanStore
 from recon_cli.robot.cell import Cell
-
-
-class PlanningError(ReconError):
-    """A move that could not be planned (no path, invalid start or goal)."""
 
 
 @dataclass(frozen=True)
@@ -78,7 +74,7 @@ class Acquisition:
         plan = self.planner.plan_to_pose(q0, world_T_camera, self.rng, what=what)
         if not plan.ok:
             raise PlanningError(f"cannot move to the {what}: {plan.status.value} ({plan.message})",
-                                hint="try another view, a longer planning time or another planner")
+                                hint="try another view, a longer planning time or another planner", status=plan.status)
         execution = self.robot.execute(plan.trajectory)
         q = self.robot.measured_joints()
         dp, dr = pose_error(self.cell.kin.world_T_camera(q), self.cell.kin.world_T_camera(plan.trajectory.goal))

@@ -1,11 +1,14 @@
-"""The one exception family for errors a user can cause.
+"""The one exception family for errors a user can cause, each carrying its data.
 
 Every message says what went wrong, where, and what to do about it; the CLI prints it as
-one line and exits non-zero (see :func:`recon_cli.cli.main`). Internal bugs are ordinary
-exceptions and keep their traceback.
+one line (``label: message; hint``) and exits with the error's ``exit_code``. The data
+(file:line, joint and bounds, limit and value, signal, ...) stays on the exception for
+callers that handle it. Internal bugs are ordinary exceptions and keep their traceback.
 """
 
 from __future__ import annotations
+
+import signal as _signal
 
 
 class ReconError(Exception):
@@ -26,6 +29,7 @@ class ReconError(Exception):
         return text.replace("\n", " ")
 
 
+# --------------------------------------------------------------------- input
 class InputError(ReconError):
     """A malformed value on the command line or in a file."""
 
@@ -37,18 +41,89 @@ class UnknownNameError(InputError):
         self.kind = kind
         self.name = name
         self.choices = tuple(choices)
-        super().__init__(
-            f"unknown {kind} '{name}'", hint=f"choose one of: {', '.join(self.choices)}"
-        )
+        super().__init__(f"unknown {kind} '{name}'", hint=f"choose one of: {', '.join(self.choices)}")
+
+
+class FileError(ReconError):
+    """A file or folder that is missing, unreadable, malformed or not writable."""
+
+
+class ScriptError(InputError):
+    """A script that cannot be loaded, validated or run as written; ``source`` is the
+    file:line of what the user wrote (when known)."""
+
+    def __init__(self, message: str, *, hint: str | None = None, source: str | None = None) -> None:
+        self.source = source
+        super().__init__(message, hint=hint)
+
+
+class LimitError(ScriptError):
+    """A script asked for something a script may not do, or exceeded a hard limit of its
+    expansion; ``limit`` names it (e.g. "max_int_bits"), ``bound`` is its value."""
+
+    def __init__(self, message: str, *, hint: str | None = None, limit: str | None = None,
+                 bound: float | None = None) -> None:
+        self.limit = limit
+        self.bound = bound
+        super().__init__(message, hint=hint)
+
+
+class JointLimitError(ScriptError):
+    """A joint goal outside a joint's soft limits: the joint, the value and the bounds (in
+    the unit the user wrote)."""
+
+    def __init__(self, message: str, *, joint: str, value: float, lower: float, upper: float, unit: str,
+                 hint: str | None = None, source: str | None = None) -> None:
+        self.joint, self.value, self.lower, self.upper, self.unit = joint, value, lower, upper, unit
+        super().__init__(message, hint=hint, source=source)
+
+
+# --------------------------------------------------------------------- views and motion
+class InvalidViewError(ReconError):
+    """A view that cannot be taken at all (camera inside an obstacle, bad radius, ...)."""
 
 
 class UnreachableViewError(ReconError):
     """No collision-free inverse-kinematics solution within the soft limits."""
 
 
-class InvalidViewError(ReconError):
-    """A view that cannot be taken at all (camera inside an obstacle, bad radius, ...)."""
+class PlanningError(ReconError):
+    """A move that could not be planned (no path, invalid start or goal); ``status`` is the
+    planner's PlanStatus when there was a request."""
+
+    def __init__(self, message: str, *, hint: str | None = None, status=None) -> None:
+        self.status = status
+        super().__init__(message, hint=hint)
 
 
-class FileError(ReconError):
-    """A file or folder that is missing, unreadable or not writable."""
+class TrajectoryError(ReconError):
+    """A trajectory that may not be executed (limits or collisions)."""
+
+
+# --------------------------------------------------------------------- stations and runs
+class HardwareUnavailable(ReconError):
+    """The hardware backend was asked for, but no station adapters are configured here."""
+
+
+class ScriptAborted(ReconError):
+    """A failed command under on_failure="abort"; ``source`` is its file:line."""
+
+    exit_code = 4
+    label = "aborted"
+
+    def __init__(self, message: str, *, hint: str | None = None, source: str | None = None) -> None:
+        self.source = source
+        super().__init__(message, hint=hint)
+
+
+class RunInterrupted(ReconError):
+    """Ctrl-C or SIGTERM during a run: the robot is stopped, completed scans are kept. The
+    exit code is the shell's 128 + signal number (130, 143)."""
+
+    label = "interrupted"
+
+    def __init__(self, message: str, *, signal: str, scans_kept: int = 0, hint: str | None = None) -> None:
+        self.signal = signal
+        self.scans_kept = scans_kept
+        self.exit_code = 128 + int(getattr(_signal, signal, _signal.SIGINT))
+        super().__init__(message, hint=hint)

@@ -27,7 +27,7 @@ import numpy as np
 
 from recon_cli.backends.base import Station
 from recon_cli.config import DEFAULTS, Config, write_config
-from recon_cli.errors import FileError, InputError, ReconError
+from recon_cli.errors import FileError, HardwareUnavailable, InputError
 
 SESSION_FORMAT = 1
 
@@ -44,10 +44,6 @@ class Mode(StrEnum):
     AUTOSCAN = "autoscan"
     SCRIPT = "script"
     BENCHMARK = "benchmark"
-
-
-class HardwareUnavailable(ReconError):
-    """The hardware backend was asked for, but no station adapters are configured here."""
 
 
 def resolve_object_name(name: str) -> str:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from recon_cli.errors import ReconError
+from recon_cli.errors import TrajectoryError
 
 
 @dataclass(frozen=True)
@@ -48,10 +48,6 @@ class Trajectory:
         qd = np.stack([np.interp(t, self.times, self.qd[:, j]) for j in range(self.q.shape[1])], 1)
         qdd = np.stack([np.interp(t, self.times, self.qdd[:, j]) for j in range(self.q.shape[1])], 1)
         return q, qd, qdd
-
-
-class TrajectoryError(ReconError):
-    """A trajectory that may not be executed (limits or collisions)."""
 
 
 #: toppra enforces the limits at its grid points only; between them a curved path can

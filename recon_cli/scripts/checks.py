@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from recon_cli.errors import JointLimitError, ScriptError
 from recon_cli.paths import SCRIPTS_DIR
 from recon_cli.scripts import commands as C
-from recon_cli.scripts.loader import ScriptError
 
 SETUP = (C.SetCell, C.SetObject)
 ACTIONS = (C.Move, C.MoveJoints, C.MoveHome, C.Scan)
@@ -83,9 +83,11 @@ def _check_joints(cmd: C.MoveJoints, kind: str) -> None:
     for k, name in enumerate(lim.names):
         if not lim.soft_lower[k] - 1e-9 <= q[k] <= lim.soft_upper[k] + 1e-9:
             unit, f = ("m", 1.0) if lim.prismatic[k] else (cmd.unit, 1.0 if cmd.unit == "rad" else 180 / math.pi)
-            raise ScriptError(f"{cmd.source}: <joints> {name} = {q[k] * f:g} {unit} is outside its soft limits "
-                              f"{lim.soft_lower[k] * f:g} ... {lim.soft_upper[k] * f:g} {unit}",
-                              hint="linear axes in metres, arm joints in the element's unit (rad unless unit=\"deg\")")
+            raise JointLimitError(f"{cmd.source}: <joints> {name} = {q[k] * f:g} {unit} is outside its soft limits "
+                                  f"{lim.soft_lower[k] * f:g} ... {lim.soft_upper[k] * f:g} {unit}",
+                                  hint="linear axes in metres, arm joints in the element's unit (rad unless "
+                                       "unit=\"deg\")", joint=name, value=q[k] * f, lower=lim.soft_lower[k] * f,
+                                  upper=lim.soft_upper[k] * f, unit=unit, source=str(cmd.source))
 
 
 def _check_object(script: C.Script, cmd: C.SetObject) -> None:

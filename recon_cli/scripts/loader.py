@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
-from recon_cli.errors import FileError, InputError
+from recon_cli.errors import FileError, LimitError, ScriptError
 from recon_cli.geometry.view import Frame, View
 from recon_cli.paths import SCHEMA_DIR, SCRIPTS_DIR
 from recon_cli.scripts import commands as C
@@ -33,10 +33,6 @@ XACRO_NS = "http://www.ros.org/wiki/xacro"
 SRC_ATTR = "recon_source"
 DIALECTS = {"recon": "recon_script.xsd", "script": "thesis_script.xsd"}
 MAX_BYTES = LIMITS.max_file_bytes
-
-
-class ScriptError(InputError):
-    """A script that cannot be loaded or validated (one line: file:line: what)."""
 
 
 def _parser() -> etree.XMLParser:
@@ -156,8 +152,9 @@ def _expansion_error(path: Path, exc: BaseException, frames, tmp: Path) -> Scrip
     while cause is not None and not isinstance(cause, SandboxError) and id(cause) not in seen:
         seen.add(id(cause))
         cause = getattr(cause, "exc", None) or cause.__cause__ or cause.__context__
+    limit = None
     if isinstance(cause, SandboxError):
-        what, hint = cause.message, cause.hint
+        what, hint, limit = cause.message, cause.hint, cause
     elif isinstance(exc, RecursionError):
         what, hint = "macros or properties recurse without end", "end the recursion with xacro:if"
     else:
@@ -170,7 +167,9 @@ def _expansion_error(path: Path, exc: BaseException, frames, tmp: Path) -> Scrip
     calls = [src for kind, src in stack if kind == "macro" and src != where]
     if calls:
         what += " (in macro called at " + ", called at ".join(reversed(calls)) + ")"
-    return ScriptError(f"{where}: {what}", hint=hint)
+    if limit is not None:
+        return LimitError(f"{where}: {what}", hint=hint, limit=limit.limit, bound=limit.bound)
+    return ScriptError(f"{where}: {what}", hint=hint, source=where)
 
 
 def shipped_or_given(path: Path) -> Path:

@@ -35,7 +35,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from recon_cli.errors import InputError
+from recon_cli.errors import LimitError
 
 PI_TARGET = "recon-src"  # processing instruction placed before macro calls: <?recon-src file:line?>
 
@@ -59,9 +59,7 @@ class Limits:
 LIMITS = Limits()
 
 
-class SandboxError(InputError):
-    """A script asked for something a script may not do, or exceeded a limit."""
-
+SandboxError = LimitError  # what the sandbox raises
 
 # --------------------------------------------------------------------- value guards
 def _size(value, budget: int) -> int:
@@ -101,7 +99,8 @@ class _Guard:
     def tick(self) -> None:
         if time.monotonic() > self.deadline:
             raise SandboxError(f"the expansion takes longer than the limit of {self.limits.max_seconds:g} s",
-                               hint="simplify the script's macros and expressions")
+                               hint="simplify the script's macros and expressions", limit="max_seconds",
+                               bound=self.limits.max_seconds)
 
     def value(self, v):
         lim = self.limits
@@ -110,20 +109,22 @@ class _Guard:
         if isinstance(v, int):
             if v.bit_length() > lim.max_int_bits:
                 raise SandboxError(f"an expression gives an integer beyond the limit of +-2**{lim.max_int_bits}",
-                                   hint="use numbers of a sensible size")
+                                   hint="use numbers of a sensible size", limit="max_int_bits", bound=lim.max_int_bits)
             return v
         if isinstance(v, (float, complex)):
             return v
         if _size(v, lim.max_size) > lim.max_size:
             raise SandboxError(f"an expression gives a value larger than the limit of {lim.max_size} "
-                               "characters or items", hint="use smaller strings and lists")
+                               "characters or items", hint="use smaller strings and lists", limit="max_size",
+                               bound=lim.max_size)
         return v
 
     def add_text(self, n: int) -> None:
         self.text += n
         if self.text > self.limits.max_text:
             raise SandboxError(f"the expansion produces more than the limit of {self.limits.max_text} characters "
-                               "of text", hint="the script expands into too much; simplify its macros")
+                               "of text", hint="the script expands into too much; simplify its macros",
+                               limit="max_text", bound=self.limits.max_text)
 
 
 _state = threading.local()
@@ -150,16 +151,17 @@ def _binop(name: str, a, b):
     ints = isinstance(a, int) and isinstance(b, int)
     if name == "Pow" and ints and b > 0 and abs(a) > 1 and b * math.log2(abs(a)) > lim.max_int_bits:
         raise SandboxError(f"{a} ** {b} is beyond the integer limit of +-2**{lim.max_int_bits}",
-                           hint="use numbers of a sensible size")
+                           hint="use numbers of a sensible size", limit="max_int_bits", bound=lim.max_int_bits)
     if name == "LShift" and ints and b > lim.max_int_bits:
         raise SandboxError(f"<< {b} is beyond the integer limit of +-2**{lim.max_int_bits}",
-                           hint="use numbers of a sensible size")
+                           hint="use numbers of a sensible size", limit="max_int_bits", bound=lim.max_int_bits)
     if name == "Mult":
         seq, n = (a, b) if isinstance(b, int) else (b, a)
         if isinstance(seq, (str, list, tuple)) and isinstance(n, int) and n > 0:
             if _size(seq, lim.max_size) * n > lim.max_size:
                 raise SandboxError(f"repeating a value {n} times exceeds the limit of {lim.max_size} characters "
-                                   "or items", hint="use smaller strings and lists")
+                                   "or items", hint="use smaller strings and lists", limit="max_size",
+                                   bound=lim.max_size)
     if name == "Mod" and isinstance(a, str):
         raise SandboxError("%-formatting of strings is not allowed in scripts", hint="use + to join strings")
     return g.value(_BINOPS[name](a, b))
@@ -207,7 +209,7 @@ def _call(f, *args, **kwargs):
         r = range(*args)
         if len(r) > g.limits.max_size:
             raise SandboxError(f"range of {len(r)} items exceeds the limit of {g.limits.max_size}",
-                               hint="use a smaller range")
+                               hint="use a smaller range", limit="max_size", bound=g.limits.max_size)
         return r
     if f is round and len(args) > 1 and isinstance(args[1], int) and abs(args[1]) > 400:
         raise SandboxError("round() to more than 400 digits is not allowed in scripts", hint="round to fewer digits")
@@ -295,7 +297,8 @@ def check_expression(expr: str) -> ast.Expression:
             if isinstance(node.value, int) and not isinstance(node.value, bool) \
                     and node.value.bit_length() > lim.max_int_bits:
                 raise SandboxError(f"integer literal beyond the limit of +-2**{lim.max_int_bits}",
-                                   hint="use numbers of a sensible size")
+                                   hint="use numbers of a sensible size", limit="max_int_bits",
+                                   bound=lim.max_int_bits)
             if isinstance(node.value, (str, bytes)) and len(node.value) > lim.max_size:
                 raise SandboxError(f"string literal longer than the limit of {lim.max_size} characters",
                                    hint="use shorter strings")
@@ -493,7 +496,8 @@ def _patched(original_eval_text, original_eval_all, original_macro_call):
         g.elements += 1
         if g.elements > g.limits.max_elements:
             raise SandboxError(f"the expansion exceeds the limit of {g.limits.max_elements} elements",
-                               hint="call fewer macros, or smaller ones")
+                               hint="call fewer macros, or smaller ones", limit="max_elements",
+                               bound=g.limits.max_elements)
         src = node.getAttribute(_SRC_ATTR) if hasattr(node, "getAttribute") else ""
         if src:
             frames.stack.append(("element", src))
@@ -518,7 +522,8 @@ def _patched(original_eval_text, original_eval_all, original_macro_call):
         try:
             if g.depth > g.limits.max_macro_depth:
                 raise SandboxError(f"macro calls nest deeper than the limit of {g.limits.max_macro_depth} "
-                                   f"({node.tagName} calls itself?)", hint="end the recursion with xacro:if")
+                                   f"({node.tagName} calls itself?)", hint="end the recursion with xacro:if",
+                                   limit="max_macro_depth", bound=g.limits.max_macro_depth)
             return original_macro_call(node, macros, symbols)
         except BaseException:
             if frames.failure is None:

@@ -21,9 +21,8 @@ from typing import Any
 import numpy as np
 
 from recon_cli.config import Config
-from recon_cli.errors import FileError, ReconError
+from recon_cli.errors import FileError
 from recon_cli.geometry.view import Frame
-from recon_cli.interrupts import exit_code
 from recon_cli.scripts import commands as C
 from recon_cli.session import Backend, Mode, Session, SessionSpec, open_session
 
@@ -55,24 +54,6 @@ class RunStatus(StrEnum):
     FAILED = "failed"  # finished, some commands failed
     ABORTED = "aborted"  # stopped by a failed command (on_failure="abort")
     INTERRUPTED = "interrupted"  # stopped by a signal
-
-
-class ScriptAborted(ReconError):
-    """A failed command under on_failure="abort"."""
-
-    exit_code = EXIT_ABORTED
-    label = "aborted"
-
-
-class RunInterrupted(ReconError):
-    """Ctrl-C or SIGTERM during a run: the robot is stopped, completed scans are kept."""
-
-    label = "interrupted"
-
-    def __init__(self, message: str, *, signal: str, hint: str | None = None) -> None:
-        super().__init__(message, hint=hint)
-        self.signal = signal
-        self.exit_code = exit_code(signal)
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from recon_cli.config import DEFAULTS, SceneConfig
-from recon_cli.errors import ReconError
+from recon_cli.errors import ReconError, RunInterrupted, ScriptAborted
 from recon_cli.interrupts import exit_code, signal_name
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.checks import ACTIONS, check_script
@@ -34,11 +34,9 @@ from recon_cli.scripts.state import (
     CommandReport,
     CommandStatus,
     OnFailure,
-    RunInterrupted,
     RunOptions,
     RunState,
     RunStatus,
-    ScriptAborted,
     SequenceReport,
 )
 from recon_cli.session import Backend
@@ -136,7 +134,7 @@ class ScriptRunner:
         if interrupted is not None:
             scans = self.out / "scans"
             raise RunInterrupted(f"{interrupted.reason}; {interrupted.scans_kept} completed scan(s) kept in {scans}",
-                                 signal=interrupted.signal,
+                                 signal=interrupted.signal, scans_kept=interrupted.scans_kept,
                                  hint=f"run_report.json records it; recon register {scans} works on the kept scans")
         return RunResult(self.out, self.script, self.reports, self.state.scan_count(), time.perf_counter() - t0,
                          dict(self.state.outputs), aborted, list(self.state.sequences))
@@ -178,7 +176,7 @@ class ScriptRunner:
             if self.on_failure is OnFailure.ABORT:
                 report.seconds = time.perf_counter() - t
                 self.reports.append(report)
-                raise ScriptAborted(f"{cmd.source}: {exc.one_line()}",
+                raise ScriptAborted(f"{cmd.source}: {exc.one_line()}", source=str(cmd.source),
                                     hint="the script says on_failure=\"abort\"; earlier scans are kept") from None
         report.seconds = time.perf_counter() - t
         self.reports.append(report)
@@ -208,7 +206,7 @@ class ScriptRunner:
             self.reports.append(CommandReport(str(scan.source), scan.describe(), CommandStatus.SKIPPED,
                                               message="the move before it failed"))
         if self.on_failure is OnFailure.ABORT:
-            raise ScriptAborted(f"{move.source}: {exc.one_line()}",
+            raise ScriptAborted(f"{move.source}: {exc.one_line()}", source=str(move.source),
                                 hint="the script says on_failure=\"abort\"; earlier scans are kept")
 
     # ------------------------------------------------------------------ report

@@ -310,3 +310,21 @@ def test_expansion_time_limit(tree, capsys, monkeypatch):
     monkeypatch.setattr(sandbox, "LIMITS", sandbox.Limits(max_seconds=0.0))
     code, _, err = run_case(tree, capsys, recon(MOVE), V)
     assert_error(code, err, 1, "longer than the limit of 0 s")
+
+
+def test_errors_carry_their_data(tree):
+    from recon_cli.errors import JointLimitError, LimitError
+    from recon_cli.scripts.checks import check_script
+    from recon_cli.scripts.loader import load_script
+
+    p = tree["scripts"] / "j.xml"
+    p.write_text(HEAD + recon('<joints values="0 0 0 0 0 175 0 0 0" unit="deg"/>'))
+    with pytest.raises(JointLimitError) as exc:
+        check_script(load_script(p))
+    e = exc.value
+    assert (e.joint, e.value, e.unit, e.source) == ("arm_joint_4", 175.0, "deg", "j.xml:4")
+    assert e.lower == pytest.approx(-110.0) and e.upper == pytest.approx(110.0)
+    p.write_text(HEAD + recon('<scan name="${9**9**9}"/>'))
+    with pytest.raises(LimitError) as exc:
+        load_script(p)
+    assert exc.value.limit == "max_int_bits" and exc.value.bound == 63

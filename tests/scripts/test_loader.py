@@ -9,11 +9,11 @@ from pathlib import Path
 import pytest
 
 from recon_cli.cli import main
-from recon_cli.errors import FileError
+from recon_cli.errors import FileError, ScriptError
 from recon_cli.paths import SCRIPTS_DIR
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.checks import check_script
-from recon_cli.scripts.loader import ScriptError, load_script
+from recon_cli.scripts.loader import load_script
 
 SHIPPED = sorted(SCRIPTS_DIR.glob("*.xml"))
 HEAD = '<?xml version="1.0"?>\n'

@@ -11,10 +11,9 @@ import time
 
 import numpy as np
 
-from recon_cli.acquisition import PlanningError
+from recon_cli.errors import PlanningError, ScriptError
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.handlers import handles
-from recon_cli.scripts.loader import ScriptError
 from recon_cli.scripts.state import CommandReport, CommandStatus, RunState
 
 

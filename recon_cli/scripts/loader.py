@@ -15,18 +15,16 @@
 
 from __future__ import annotations
 
-import math
 import shutil
 import tempfile
 from pathlib import Path
 
-import numpy as np
 from lxml import etree
 
 from recon_cli.errors import FileError, LimitError, ScriptError
-from recon_cli.geometry.view import Frame, View
 from recon_cli.paths import SCHEMA_DIR, SCRIPTS_DIR
 from recon_cli.scripts import commands as C
+from recon_cli.scripts.build import as_bool, build_recon, build_thesis
 from recon_cli.scripts.sandbox import LIMITS, PI_TARGET, SandboxError, sandboxed
 
 XACRO_NS = "http://www.ros.org/wiki/xacro"
@@ -197,7 +195,7 @@ def load_script(path: Path) -> C.Script:
         src = _source_at(root, err.line, sources) or C.Source(path.name, err.line)
         message = err.message.replace("{http://www.ros.org/wiki/xacro}", "xacro:")
         raise ScriptError(f"{src}: {message}", hint=f"see schemas/{DIALECTS[localname]}")
-    build = _build_recon if dialect == "recon" else _build_thesis
+    build = build_recon if dialect == "recon" else build_thesis
     cmds: list[C.Command] = []
     for el in root:
         if not isinstance(el.tag, str):
@@ -208,9 +206,9 @@ def load_script(path: Path) -> C.Script:
             raise ScriptError(f"{src}: the script has more than the limit of {LIMITS.max_commands} commands",
                               hint="split it into several scripts")
     if dialect == "recon":
-        name, on_failure, optimize = root.get("name"), root.get("on_failure", "skip"), _bool(root.get("optimize"))
+        name, on_failure, optimize = root.get("name"), root.get("on_failure", "skip"), as_bool(root.get("optimize"))
     else:
-        name, on_failure, optimize = root.get("name"), "skip", _bool(root.get("optimization"))
+        name, on_failure, optimize = root.get("name"), "skip", as_bool(root.get("optimization"))
     return C.Script(str(path), name, dialect, on_failure, optimize, tuple(cmds), expanded)
 
 
@@ -219,223 +217,3 @@ def _source_at(root, line: int, sources) -> C.Source | None:
         if isinstance(el.tag, str) and el.sourceline == line and el in sources:
             return sources[el]
     return None
-
-
-# --------------------------------------------------------------------- element -> command
-def _bool(text: str | None, default: bool = False) -> bool:
-    return default if text is None else text.strip() in ("true", "1")
-
-
-def _vec(text: str | None) -> tuple[float, ...] | None:
-    return None if text is None else tuple(float(v) for v in text.split())
-
-
-def _angle(value: str | None, unit: str, default: float = 0.0) -> float:
-    v = default if value is None else float(value)
-    return math.radians(v) if unit == "deg" else v
-
-
-def _finite(values, src: C.Source, what: str) -> None:
-    if not all(math.isfinite(v) for v in values):
-        raise ScriptError(f"{src}: {what} has a non-finite number", hint="use finite numbers")
-
-
-# largest magnitudes of written angles (degrees; the same in radians for radian fields):
-# a polar angle beyond half a turn, or an azimuth/roll beyond two turns, is a unit mistake
-ANGLE_BOUNDS_DEG = {"theta": 180.0, "phi": 720.0, "alpha": 720.0, "phi_start": 720.0, "phi_step": 360.0}
-
-
-def check_angles(src: C.Source, tag: str, unit: str, values: dict[str, str | float | None]) -> None:
-    """Refuse written angles that cannot be meant in ``unit`` (e.g. degrees in a radians field)."""
-    for name, raw in values.items():
-        if raw is None:
-            continue
-        v = float(raw)
-        bound = ANGLE_BOUNDS_DEG[name]
-        if unit == "rad":
-            bound = math.radians(bound)
-        if not math.isfinite(v) or abs(v) > bound + 1e-9:
-            if unit == "rad":
-                hint = (f"this field takes radians; if you meant {v:g} degrees write {math.radians(v):.4f}"
-                        + (' or unit="deg"' if tag != "coordinates" else ""))
-                text = f"{name} {v:g} rad is beyond +-{bound:.4f} rad (+-{ANGLE_BOUNDS_DEG[name]:g} deg)"
-            else:
-                hint = "write the angle in degrees within the bound"
-                text = f"{name} {v:g} deg is beyond +-{bound:g} deg"
-            raise ScriptError(f"{src}: <{tag}> {text}", hint=hint)
-
-
-def _view(el, src: C.Source, theta: float, phi: float) -> View:
-    unit = el.get("unit", "deg")
-    focus = _vec(el.get("focus"))
-    radius = float(el.get("radius"))
-    check_angles(src, el.tag, unit, {"alpha": el.get("alpha")})
-    alpha = _angle(el.get("alpha"), unit)
-    _finite((*focus, radius, theta, phi, alpha), src, f"<{el.tag}>")
-    return View(focus, radius, theta, phi, alpha, Frame(el.get("frame", "world")))
-
-
-def relative_output(name: str, src: C.Source, what: str) -> str:
-    """An output path of a script: relative, and inside the output folder."""
-    p = Path(name)
-    depth = 0
-    for part in p.parts:
-        depth += -1 if part == ".." else (0 if part == "." else 1)
-        if depth < 0:
-            break
-    if p.is_absolute() or depth < 0 or name.startswith("~"):
-        raise ScriptError(f"{src}: {what} {name!r} is outside the output folder",
-                          hint="scripts write only into the output folder (--out); give a relative path "
-                               "such as drill.ply")
-    return name
-
-
-def _build_recon(el, src: C.Source) -> list[C.Command]:
-    tag, a = el.tag, el.attrib
-    if tag == "cell":
-        return [C.SetCell(src, a.get("kind", "gantry"), float(a.get("safety_distance", 0.03)),
-                          a.get("backend", "sim"), float(a.get("resolution", 1.0)), _bool(a.get("noise"), True))]
-    if tag == "object":
-        return [C.SetObject(src, a["name"], float(a.get("scale", 1.0)))]
-    if tag == "box":
-        center, size = _vec(a.get("center")), _vec(a.get("size"))
-        if (center is None) != (size is None):
-            raise ScriptError(f"{src}: <box> needs both center and size, or neither (box around the object)",
-                              hint='e.g. <box center="0 0 0.83" size="0.3 0.3 0.3"/>')
-        if size is not None and min(size) <= 0:
-            raise ScriptError(f"{src}: <box> sizes must be positive", hint="give edge lengths in metres")
-        return [C.SetBox(src, center, size, a.get("frame", "world"), float(a.get("margin", 0.01)))]
-    if tag == "planner":
-        from recon_cli.planning.planner import PLANNERS
-
-        name = a.get("name", "RRTConnect")
-        if name not in PLANNERS:
-            raise ScriptError(f"{src}: unknown planner {name!r}", hint="one of " + ", ".join(PLANNERS))
-        return [C.SetPlanner(src, name, float(a.get("time", 5.0)), float(a.get("velocity_scale", 0.15)),
-                             float(a.get("acceleration_scale", 0.3)))]
-    if tag == "home":
-        return [C.MoveHome(src)]
-    if tag == "move":
-        unit = a.get("unit", "deg")
-        check_angles(src, tag, unit, {"theta": a["theta"], "phi": a["phi"]})
-        return [C.MoveView(src, _view(el, src, _angle(a["theta"], unit), _angle(a["phi"], unit)))]
-    if tag == "pose":
-        q = _vec(a["orientation"])
-        if np.linalg.norm(q) < 1e-9:
-            raise ScriptError(f"{src}: <pose> orientation quaternion is zero", hint="give x y z w of a rotation")
-        return [C.MovePose(src, _vec(a["position"]), tuple(np.asarray(q) / np.linalg.norm(q)), a.get("frame", "world"))]
-    if tag == "joints":
-        unit = a.get("unit", "rad")
-        values = _vec(a["values"])
-        _finite(values, src, "<joints>")
-        return [C.MoveJoints(src, tuple(values), unit)]
-    if tag == "ring":
-        unit = a.get("unit", "deg")
-        check_angles(src, tag, unit, {"theta": a["theta"], "phi_start": a.get("phi_start"),
-                                      "phi_step": a.get("phi_step")})
-        count = int(a["count"])
-        if count > LIMITS.max_ring_count:
-            raise ScriptError(f"{src}: <ring> count {count} exceeds the limit of {LIMITS.max_ring_count} views",
-                              hint="use several rings or fewer views")
-        start = float(a.get("phi_start", 0.0))
-        full_turn = 360.0 if unit == "deg" else 2 * math.pi
-        step = float(a["phi_step"]) if a.get("phi_step") is not None else full_turn / count
-        theta = _angle(a["theta"], unit)
-        out: list[C.Command] = []
-        for k in range(count):
-            out.append(C.MoveView(src, _view(el, src, theta, _angle(str(start + k * step), unit))))
-            if _bool(a.get("scan"), True):
-                out.append(C.Scan(src))
-        return out
-    if tag == "scan":
-        return [C.Scan(src, a.get("name"))]
-    if tag == "wait":
-        return [C.Wait(src, float(a["seconds"]))]
-    if tag == "register":
-        return [C.Register(src, _bool(a.get("local"), True), _bool(a.get("board"), True),
-                           a.get("loop_closures", "icp"))]
-    if tag == "reconstruct":
-        return [C.Reconstruct(src, float(a.get("voxel", 0.001)), int(a.get("depth", 9)), float(a.get("trim", 0.02)))]
-    if tag == "export":
-        if not a.get("cloud") and not a.get("mesh"):
-            raise ScriptError(f"{src}: <export> needs cloud=... and/or mesh=...",
-                              hint='e.g. <export mesh="drill.ply"/>')
-        return [C.Export(src, *(None if a.get(k) is None else relative_output(a[k], src, f"<export {k}>")
-                                for k in ("cloud", "mesh")))]
-    if tag == "evaluate":
-        return [C.Evaluate(src, a.get("reference", "ground_truth"), float(a.get("tolerance", 0.001)),
-                           a.get("align", "none"))]
-    raise ScriptError(f"{src}: unexpected element <{tag}>", hint="see schemas/recon_script.xsd")
-
-
-def _quat_matrix(xyzw) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
-
-    q = np.asarray(xyzw, dtype=float)
-    if np.linalg.norm(q) < 1e-9:
-        raise ValueError("zero quaternion")
-    return Rotation.from_quat(q / np.linalg.norm(q)).as_matrix()
-
-
-def _build_thesis(el, src: C.Source) -> list[C.Command]:
-    tag, a = el.tag, el.attrib
-    if tag == "move":
-        ref = a.get("reference", "world")
-        if ref not in ("world", "marker"):
-            raise ScriptError(f"{src}: move reference {ref!r} is not a frame recon knows",
-                              hint="use reference=\"world\" or \"marker\"")
-        children = {c.tag: c for c in el if isinstance(c.tag, str)}
-        if "position" in children:
-            q = _vec(children["orientation"].get("xyzw"))
-            if np.linalg.norm(q) < 1e-9:
-                raise ScriptError(f"{src}: orientation quaternion is zero", hint="give x y z w of a rotation")
-            return [C.MovePose(src, _vec(children["position"].get("xyz")), tuple(np.asarray(q) / np.linalg.norm(q)),
-                               ref)]
-        sphere, co = children["sphere"], children["coordinates"]
-        focus, radius = _vec(sphere.get("xyz")), float(sphere.get("radius"))
-        check_angles(src, "coordinates", "rad", {k: co.get(k) for k in ("theta", "phi", "alpha")})
-        theta, phi, alpha = float(co.get("theta")), float(co.get("phi")), float(co.get("alpha", 0.0))
-        _finite((*focus, radius, theta, phi, alpha), src, "<move>")
-        if radius <= 0:
-            raise ScriptError(f"{src}: sphere radius must be positive", hint="the camera distance in metres")
-        return [C.MoveView(src, View(focus, radius, theta, phi, alpha, Frame(ref)))]
-    if tag == "scan":
-        return [C.FragmentScan(src, a["name"], a.get("path_color", ""), a.get("path_depth", ""),
-                               a.get("path_pose", ""))]
-    if tag == "load":
-        return [C.LoadFragment(src, a["name"], a.get("type", "rgbd_image"), a.get("path_color", "/"),
-                               a.get("path_depth", "/"), a.get("path_point_cloud", "/"))]
-    if tag == "register":
-        return [C.PairRegister(src, a["source"], a["target"], a.get("method", "point_to_plane_icp"),
-                               float(a["threshold"]))]
-    if tag == "multiway":
-        return [C.Multiway(src, a.get("method", "point_to_plane_icp"), float(a["threshold"]))]
-    if tag == "add":
-        return [C.AddFragment(src, a["fragment"], a["target"])]
-    if tag == "downsample":
-        return [C.Downsample(src, a["fragment"], float(a["voxel_size"]))]
-    if tag == "transform":
-        children = {c.tag: c for c in el if isinstance(c.tag, str)}
-        T = np.eye(4)
-        try:
-            T[:3, :3] = _quat_matrix(_vec(children["rotation"].get("xyzw")))
-        except ValueError:
-            raise ScriptError(f"{src}: rotation quaternion is zero", hint="give x y z w of a rotation") from None
-        T[:3, 3] = _vec(children["translation"].get("xyz"))
-        if not _bool(a.get("forward"), True):
-            T = np.linalg.inv(T)
-        return [C.TransformFragment(src, a["fragment"], tuple(map(tuple, T)))]
-    if tag == "export":
-        path = a["path"]  # the thesis system wrote absolute paths: recon writes them by file name into --out
-        if not Path(path).is_absolute():
-            relative_output(path, src, "export")
-        return [C.ExportFragment(src, a["fragment"], a.get("type", "mesh"), path)]
-    if tag == "wait":
-        return [C.Wait(src, float(a["duration"]))]
-    if tag == "delete":
-        return [C.DeleteFragment(src, a["fragment"])]
-    if tag in ("show", "hide"):
-        return [C.Display(src, tag, a["fragment"])]
-    if tag == "color":
-        return [C.Display(src, "color", a["fragment"], _vec(a["rgb"]))]
-    raise ScriptError(f"{src}: unexpected element <{tag}>", hint="see schemas/thesis_script.xsd")

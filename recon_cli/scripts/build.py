@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from recon_cli.config import DEFAULTS as D
 from recon_cli.errors import ScriptError
 from recon_cli.geometry.view import Frame, View
 from recon_cli.scripts import commands as C
@@ -90,10 +91,11 @@ def relative_output(name: str, src: C.Source, what: str) -> str:
 def build_recon(el, src: C.Source) -> list[C.Command]:
     tag, a = el.tag, el.attrib
     if tag == "cell":
-        return [C.SetCell(src, a.get("kind", "gantry"), float(a.get("safety_distance", 0.03)),
-                          a.get("backend", "sim"), float(a.get("resolution", 1.0)), as_bool(a.get("noise"), True))]
+        return [C.SetCell(src, a.get("kind", D.cell.kind.value),
+                          float(a.get("safety_distance", D.cell.safety_distance)), a.get("backend", "sim"),
+                          float(a.get("resolution", D.sensor.resolution)), as_bool(a.get("noise"), D.sensor.noise))]
     if tag == "object":
-        return [C.SetObject(src, a["name"], float(a.get("scale", 1.0)))]
+        return [C.SetObject(src, a["name"], float(a.get("scale", D.scene.object_scale)))]
     if tag == "box":
         center, size = _vec(a.get("center")), _vec(a.get("size"))
         if (center is None) != (size is None):
@@ -101,15 +103,16 @@ def build_recon(el, src: C.Source) -> list[C.Command]:
                               hint='e.g. <box center="0 0 0.83" size="0.3 0.3 0.3"/>')
         if size is not None and min(size) <= 0:
             raise ScriptError(f"{src}: <box> sizes must be positive", hint="give edge lengths in metres")
-        return [C.SetBox(src, center, size, a.get("frame", "world"), float(a.get("margin", 0.01)))]
+        return [C.SetBox(src, center, size, a.get("frame", "world"), float(a.get("margin", D.scene.box_margin)))]
     if tag == "planner":
         from recon_cli.planning.planner import PLANNERS
 
-        name = a.get("name", "RRTConnect")
+        name = a.get("name", D.planner.planner)
         if name not in PLANNERS:
             raise ScriptError(f"{src}: unknown planner {name!r}", hint="one of " + ", ".join(PLANNERS))
-        return [C.SetPlanner(src, name, float(a.get("time", 5.0)), float(a.get("velocity_scale", 0.15)),
-                             float(a.get("acceleration_scale", 0.3)))]
+        return [C.SetPlanner(src, name, float(a.get("time", D.planner.time_limit)),
+                             float(a.get("velocity_scale", D.planner.velocity_scale)),
+                             float(a.get("acceleration_scale", D.planner.acceleration_scale)))]
     if tag == "home":
         return [C.MoveHome(src)]
     if tag == "move":
@@ -149,10 +152,13 @@ def build_recon(el, src: C.Source) -> list[C.Command]:
     if tag == "wait":
         return [C.Wait(src, float(a["seconds"]))]
     if tag == "register":
-        return [C.Register(src, as_bool(a.get("local"), True), as_bool(a.get("board"), True),
-                           a.get("loop_closures", "icp"))]
+        return [C.Register(src, as_bool(a.get("local"), D.registration.local),
+                           as_bool(a.get("board"), D.registration.use_board),
+                           a.get("loop_closures", D.registration.multiway.loop_closure_init))]
     if tag == "reconstruct":
-        return [C.Reconstruct(src, float(a.get("voxel", 0.001)), int(a.get("depth", 9)), float(a.get("trim", 0.02)))]
+        surface = D.registration.surface
+        return [C.Reconstruct(src, float(a.get("voxel", surface.voxel)), int(a.get("depth", surface.poisson_depth)),
+                              float(a.get("trim", surface.density_quantile)))]
     if tag == "export":
         if not a.get("cloud") and not a.get("mesh"):
             raise ScriptError(f"{src}: <export> needs cloud=... and/or mesh=...",

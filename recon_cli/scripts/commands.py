@@ -38,11 +38,13 @@ class Command:
 # --------------------------------------------------------------------- set-up
 @dataclass(frozen=True)
 class SetCell(Command):
-    kind: str = "gantry"
-    safety_distance: float = 0.03
-    backend: str = "sim"
-    resolution: float = 1.0
-    noise: bool = True
+    """Defaults of the attributes: recon_cli.config.DEFAULTS (the builder fills them in)."""
+
+    kind: str
+    safety_distance: float
+    backend: str
+    resolution: float
+    noise: bool
 
     def describe(self) -> str:
         return (f"cell {self.kind}, safety distance {self.safety_distance:g} m, backend {self.backend}, "
@@ -51,8 +53,8 @@ class SetCell(Command):
 
 @dataclass(frozen=True)
 class SetObject(Command):
-    name: str = "drill"
-    scale: float = 1.0
+    name: str
+    scale: float
 
     def describe(self) -> str:
         name = "the drill if the YCB data is here, else the bottle" if self.name == "auto" else self.name
@@ -64,10 +66,10 @@ class SetBox(Command):
     """Object bounding box (collision object and crop box). Without centre and size: the
     simulated object's own box grown by ``margin``."""
 
-    center: tuple[float, float, float] | None = None
-    size: tuple[float, float, float] | None = None
-    frame: str = "world"
-    margin: float = 0.01
+    center: tuple[float, float, float] | None
+    size: tuple[float, float, float] | None
+    frame: str
+    margin: float
 
     def describe(self) -> str:
         if self.center is None:
@@ -77,10 +79,10 @@ class SetBox(Command):
 
 @dataclass(frozen=True)
 class SetPlanner(Command):
-    name: str = "RRTConnect"
-    time: float = 5.0
-    velocity_scale: float = 0.15
-    acceleration_scale: float = 0.3
+    name: str
+    time: float
+    velocity_scale: float
+    acceleration_scale: float
 
     def describe(self) -> str:
         return (f"planner {self.name}, {self.time:g} s, velocity x{self.velocity_scale:g}, "
@@ -150,9 +152,9 @@ class Wait(Command):
 # --------------------------------------------------------------------- reconstruction (all scans)
 @dataclass(frozen=True)
 class Register(Command):
-    local: bool = True
-    board: bool = True
-    loop_closures: str = "icp"
+    local: bool
+    board: bool
+    loop_closures: str
 
     def describe(self) -> str:
         return (f"register all scans ({'ChArUco, else kinematics' if self.board else 'kinematics'}"
@@ -161,9 +163,9 @@ class Register(Command):
 
 @dataclass(frozen=True)
 class Reconstruct(Command):
-    voxel: float = 0.001
-    depth: int = 9
-    trim: float = 0.02
+    voxel: float
+    depth: int
+    trim: float
 
     def describe(self) -> str:
         return f"reconstruct (voxel {self.voxel:g} m, Poisson depth {self.depth}, trim {self.trim:g})"

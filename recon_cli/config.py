@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from recon_cli.planning.planner import PlanOptions
-from recon_cli.reconstruction.pipeline import RegisterOptions
+from recon_cli.planning.options import PlanOptions
+from recon_cli.reconstruction.options import RegisterOptions
 from recon_cli.robot.description import CellConfig
 
 CONFIG_FORMAT = 1

@@ -48,6 +48,16 @@ class FileError(ReconError):
     """A file or folder that is missing, unreadable, malformed or not writable."""
 
 
+class MetadataError(FileError):
+    """A metadata file of a scan store (scan.json, session.json) or a scan's image that is
+    broken, malformed or inconsistent; ``path`` is the file, ``where`` the line or the key."""
+
+    def __init__(self, message: str, *, path: str, where: str | None = None, hint: str | None = None) -> None:
+        self.path = path
+        self.where = where
+        super().__init__(message, hint=hint)
+
+
 class ScriptError(InputError):
     """A script that cannot be loaded, validated or run as written; ``source`` is the
     file:line of what the user wrote (when known)."""

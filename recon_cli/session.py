@@ -17,19 +17,16 @@ and writes the effective configuration (``config.yaml``) beside it. ``plan_only=
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from recon_cli.backends.base import Station
 from recon_cli.config import DEFAULTS, Config, write_config
 from recon_cli.errors import FileError, HardwareUnavailable, InputError
-
-SESSION_FORMAT = 1
+from recon_cli.reconstruction.metadata import SESSION_FORMAT, BoxInfo, SessionInfo  # noqa: F401 (re-exported)
 
 
 class Backend(StrEnum):
@@ -54,53 +51,6 @@ def resolve_object_name(name: str) -> str:
     from recon_cli.objects import available_objects
 
     return "drill" if "drill" in available_objects() else "bottle"
-
-
-# --------------------------------------------------------------------- session.json
-@dataclass(frozen=True)
-class BoxInfo:
-    """An axis-aligned box: centre and edge lengths [m] in ``frame`` (world or marker)."""
-
-    center: tuple[float, float, float]
-    size: tuple[float, float, float]
-    frame: str = "world"
-
-    def to_dict(self) -> dict:
-        return {"frame": self.frame, "center": list(self.center), "size": list(self.size)}
-
-
-@dataclass(frozen=True)
-class SessionInfo:
-    """What produced a scan store (``session.json``): read back by ``recon register``."""
-
-    backend: str
-    mode: str
-    cell_kind: str
-    safety_distance: float
-    table_lift: float
-    sensor: str
-    noise: bool
-    seed: int
-    object_name: str | None
-    world_T_object: np.ndarray | None
-    object_box: BoxInfo | None
-    crop_box: BoxInfo | None
-    world_T_marker: np.ndarray | None
-    script: str | None = None
-    created: float = field(default_factory=time.time)
-    format: int = SESSION_FORMAT
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "format": self.format, "created": self.created, "backend": self.backend, "mode": self.mode,
-            "cell": {"kind": self.cell_kind, "safety_distance": self.safety_distance, "table_lift": self.table_lift},
-            "sensor": self.sensor, "noise": self.noise, "seed": self.seed, "script": self.script,
-            "object": None if self.object_name is None else {"name": self.object_name,
-                                                             "world_T_object": self.world_T_object},
-            "object_box": None if self.object_box is None else self.object_box.to_dict(),
-            "crop_box": None if self.crop_box is None else self.crop_box.to_dict(),
-            "world_T_marker": self.world_T_marker,
-        }
 
 
 # --------------------------------------------------------------------- the session
@@ -188,11 +138,9 @@ class Session:
         if not (self.spec.append and (root / "session.json").exists()):
             return ScanStore.create(root, self.info.to_dict())
         store = ScanStore(root)
-        old = store.session()
-        mine = self.info.to_dict()
-        for label, get in (("backend", lambda d: d.get("backend")),
-                           ("cell", lambda d: (d.get("cell") or {}).get("kind")),
-                           ("object", lambda d: (d.get("object") or {}).get("name"))):
+        old, mine = store.session(), self.info
+        for label, get in (("backend", lambda s: s.backend), ("cell", lambda s: s.cell_kind),
+                           ("object", lambda s: s.object_name)):
             if get(mine) != get(old):
                 raise FileError(f"--append: the scans in {root} were recorded with {label} {get(old)!r}, this run "
                                 f"uses {get(mine)!r}",

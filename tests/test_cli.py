@@ -132,4 +132,4 @@ def test_bench_planners_bad_names(capsys):
     code, _, err = run(capsys, "bench", "planners", "--planners", "EST", "--n", "1")
     assert code == 1 and "unknown planner 'EST'" in err
     code, _, err = run(capsys, "bench", "planners", "--peer", "moveit", "--n", "1")
-    assert code == 1 and "--peer 'moveit'" in err
+    assert code == 1 and "unknown peer 'moveit'" in err and "mplib" in err

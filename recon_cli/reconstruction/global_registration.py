@@ -16,6 +16,7 @@ import numpy as np
 
 from recon_cli.geometry.transforms import invert
 from recon_cli.perception.charuco import BoardSpec, detect, estimate_pose
+from recon_cli.reconstruction.options import MAX_REPROJECTION_PX
 from recon_cli.reconstruction.scan_store import Scan
 
 
@@ -39,11 +40,6 @@ class GlobalPose:
         return {"scan": self.index, "source": self.source.value, "corners": self.corners,
                 "reprojection_px": self.reprojection_px, "reason": self.reason,
                 "marker_T_camera": self.marker_T_camera}
-
-
-#: [px] a board pose whose corners reproject worse than this is not trusted (a grazing view
-#: of the board: in simulation such a pose was 2.85 mm off at 2.7 px, the good ones < 0.4 px)
-MAX_REPROJECTION_PX = 1.0
 
 
 def global_pose(scan: Scan, board: BoardSpec, world_T_marker: np.ndarray | None,

@@ -18,13 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
-from recon_cli.errors import FileError, InputError
+from recon_cli.errors import FileError, InputError, MetadataError
 from recon_cli.geometry.transforms import invert, pose_error
-from recon_cli.perception.charuco import BoardSpec, thesis_board
+from recon_cli.perception.charuco import thesis_board
 from recon_cli.reconstruction.crop import CropBox, crop_cloud
-from recon_cli.reconstruction.global_registration import MAX_REPROJECTION_PX, GlobalPose, PoseSource, global_pose
-from recon_cli.reconstruction.pose_graph import MultiwayOptions, MultiwayResult, register_multiway
-from recon_cli.reconstruction.scan_store import ScanStore
+from recon_cli.reconstruction.global_registration import GlobalPose, PoseSource, global_pose
+from recon_cli.reconstruction.metadata import SessionInfo
+from recon_cli.reconstruction.options import RegisterOptions  # noqa: F401 (re-exported)
+from recon_cli.reconstruction.pose_graph import MultiwayResult, register_multiway
+from recon_cli.reconstruction.scan_store import ScanStore, read_scan
 from recon_cli.reconstruction.surface import (
     SurfaceOptions,
     fuse,
@@ -37,25 +39,6 @@ from recon_cli.reconstruction.surface import (
 Progress = Callable[[str, int, int], None]
 
 
-@dataclass(frozen=True)
-class RegisterOptions:
-    box: CropBox | None = None  # in the world frame (default: the session's object box)
-    box_frame: str = "world"  # frame of ``box``: world | marker
-    use_board: bool = True  # False: every pose from kinematics
-    min_corners: int = 6
-    max_reprojection_px: float = MAX_REPROJECTION_PX  # board poses reprojecting worse: kinematics
-    local: bool = True  # pose-graph local registration
-    mesh: bool = True
-    multiway: MultiwayOptions = field(default_factory=MultiwayOptions)
-    surface: SurfaceOptions = field(default_factory=SurfaceOptions)
-    board: BoardSpec | None = None
-    # evaluation aid: move every global pose by this translation [m] and rotation [rad] in
-    # random directions (seeded), e.g. the thesis' ChArUco errors on a simulated camera whose
-    # poses are otherwise nearly exact; recorded in the report
-    perturb: tuple[float, float] | None = None
-    seed: int = 0
-
-
 @dataclass
 class ScanRecord:
     index: int
@@ -65,6 +48,7 @@ class ScanRecord:
     charuco_error: tuple[float, float] | None = None  # [m, rad] vs simulation ground truth
     final_marker_T_camera: np.ndarray | None = None
     true_marker_T_camera: np.ndarray | None = None  # simulation only (evaluation)
+    folder: str = ""  # the scan's folder name in the store
 
     gauge: dict[str, np.ndarray] = field(default_factory=dict)  # see _set_gauges
 
@@ -85,8 +69,12 @@ class ScanRecord:
         return out
 
 
+    @property
+    def name(self) -> str:
+        return self.folder or f"scan {self.index}"
+
     def to_dict(self) -> dict:
-        d = {"scan": self.index, "points": self.points, "skipped": self.skipped or None,
+        d = {"scan": self.index, "folder": self.folder or None, "points": self.points, "skipped": self.skipped or None,
              "pose": None if self.pose is None else self.pose.to_dict(),
              "final_marker_T_camera": self.final_marker_T_camera}
         if self.charuco_error is not None:
@@ -147,16 +135,16 @@ def perturbed(T: np.ndarray, translation: float, rotation: float, rng: np.random
     return out
 
 
-def _crop_box(options: RegisterOptions, session: dict, world_T_marker: np.ndarray | None) -> CropBox:
+def _crop_box(options: RegisterOptions, session: SessionInfo, world_T_marker: np.ndarray | None) -> CropBox:
     """The crop box in the marker frame."""
     box, frame = options.box, options.box_frame
     if box is None:
-        spec = session.get("crop_box")
+        spec = session.crop_box
         if spec is None:
             raise InputError("the session has no crop box", hint="pass --box cx,cy,cz,sx,sy,sz")
         T = np.eye(4)
-        T[:3, 3] = spec["center"]
-        box, frame = CropBox(T, tuple(spec["size"])), spec.get("frame", "world")
+        T[:3, 3] = spec.center
+        box, frame = CropBox(T, tuple(spec.size)), spec.frame
     if frame == "marker":
         return box
     if world_T_marker is None:
@@ -174,10 +162,9 @@ def scan_cloud(scan, pose: GlobalPose, box: CropBox | None, surface: SurfaceOpti
     return oriented_cloud(cloud, pose.marker_T_camera[:3, 3], surface)
 
 
-def crop_box_marker(options: RegisterOptions, session: dict) -> CropBox:
+def crop_box_marker(options: RegisterOptions, session: SessionInfo) -> CropBox:
     """The crop box of a session (or of the options) in the marker frame."""
-    wtm = session.get("world_T_marker")
-    return _crop_box(options, session, None if wtm is None else np.asarray(wtm, dtype=float))
+    return _crop_box(options, session, session.world_T_marker)
 
 
 def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOptions(),  # noqa: B008
@@ -191,13 +178,12 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
     if not folder.is_dir():
         raise FileError(f"{folder} is not a folder", hint="point to a scan store (a folder of scan_NNNN)")
     store = ScanStore(folder)
-    indices = store.indices()
-    if not indices:
-        raise FileError(f"{folder} holds no scans (no scan_NNNN/scan.json)",
+    scan_folders = store.scan_folders()
+    if not scan_folders:
+        raise FileError(f"{folder} holds no scans (no scan_NNNN folder)",
                         hint="record scans first, e.g. recon capture --views eq-4.1")
     session = store.session()
-    wtm = session.get("world_T_marker")
-    world_T_marker = None if wtm is None else np.asarray(wtm, dtype=float)
+    world_T_marker = session.world_T_marker
     box = _crop_box(options, session, world_T_marker)
     board = options.board or thesis_board()
     rng = np.random.default_rng(options.seed)
@@ -205,13 +191,18 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
     # 1. global registration, cropping, oriented normals (per scan)
     records: list[ScanRecord] = []
     clouds = []
-    for k, index in enumerate(indices):
-        scan = store.read(index)
+    for k, (index, scan_folder) in enumerate(scan_folders):
+        try:
+            scan = read_scan(scan_folder)
+        except MetadataError as exc:  # a bad scan is skipped with its reason, the others go on
+            records.append(ScanRecord(index, None, skipped=exc.one_line(), folder=scan_folder.name))
+            step("global registration", k + 1, len(scan_folders))
+            continue
         pose = global_pose(scan, board, world_T_marker, options.min_corners, options.use_board,
                            options.max_reprojection_px)
         if pose is not None and options.perturb is not None:
             pose = replace(pose, marker_T_camera=perturbed(pose.marker_T_camera, *options.perturb, rng))
-        rec = ScanRecord(index, pose)
+        rec = ScanRecord(index, pose, folder=scan_folder.name)
         records.append(rec)
         if pose is None:
             rec.skipped = "board not found and no world_T_marker for the kinematic fallback"
@@ -227,12 +218,14 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
                 rec.skipped = f"{rec.points} points inside the crop box"
             else:
                 clouds.append(cloud)
-        step("global registration", k + 1, len(indices))
+        step("global registration", k + 1, len(scan_folders))
     used = [r for r in records if not r.skipped]
     if not used:
         reasons = sorted({r.skipped for r in records})
-        raise InputError(f"no scan of {folder} can be used ({'; '.join(reasons)})",
-                         hint="check the crop box (--box) and that the board or joint data is recorded")
+        shown = "; ".join(reasons[:3]) + (f"; and {len(reasons) - 3} more" if len(reasons) > 3 else "")
+        raise InputError(f"none of the {len(records)} scans of {folder} can be used ({shown})",
+                         hint="check the crop box (--box), the scan files and that the board or joint data "
+                              "is recorded")
     t_global = time.perf_counter()
 
     out = Path(out)
@@ -273,6 +266,7 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
     truth = [r.pose_errors() for r in used if r.pose_errors()]
     write_json(report, {
         "scan_store": str(folder), "frame": frame, "world_T_marker": world_T_marker,
+        "scans_registered": len(used), "scans_skipped": len(records) - len(used),
         "crop_box_marker": {"marker_T_box": box.frame_T_box, "size": box.size,
                             "support_margin": box.support_margin},
         "scans": [r.to_dict() for r in records],

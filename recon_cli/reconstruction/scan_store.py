@@ -28,13 +28,14 @@ from typing import Any
 import cv2
 import numpy as np
 
-from recon_cli.errors import FileError
+from recon_cli.errors import FileError, MetadataError
 from recon_cli.geometry.transforms import transform_points
 from recon_cli.perception.camera_model import Intrinsics, backproject
+from recon_cli.reconstruction.metadata import SCAN_FORMAT, SessionInfo, load_json, read_scan_meta, read_session
 from recon_cli.serialization import to_jsonable
 
 SCAN_DIR = re.compile(r"^scan_(\d{4,})$")
-FORMAT_VERSION = 1
+FORMAT_VERSION = SCAN_FORMAT
 
 
 @dataclass
@@ -121,9 +122,6 @@ class ScanStore:
                             hint="choose a writable output folder") from None
         return store
 
-    def next_index(self) -> int:
-        return max(self.indices(), default=-1) + 1
-
     def write(self, scan: Scan, depth_scale: float) -> Path:
         """Write a scan atomically (temporary folder, then rename). Returns its folder."""
         final = self.root / f"scan_{scan.index:04d}"
@@ -169,21 +167,27 @@ class ScanStore:
         return final
 
     # ------------------------------------------------------------------ reading
-    def session(self) -> dict[str, Any]:
-        path = self.root / "session.json"
-        if not path.exists():
-            return {}
-        return json.loads(path.read_text())
+    def session(self) -> SessionInfo:
+        """``session.json``, checked and typed (empty when the store has none)."""
+        return read_session(self.root)
 
-    def indices(self) -> list[int]:
+    def scan_folders(self) -> list[tuple[int, Path]]:
+        """Every ``scan_NNNN`` folder (complete or not), by index."""
         if not self.root.is_dir():
             return []
         out = []
         for child in self.root.iterdir():
             m = SCAN_DIR.match(child.name)
-            if m and child.is_dir() and (child / "scan.json").exists():
-                out.append(int(m.group(1)))
+            if m and child.is_dir():
+                out.append((int(m.group(1)), child))
         return sorted(out)
+
+    def indices(self) -> list[int]:
+        """Indices of the scan folders that hold a scan.json."""
+        return [i for i, folder in self.scan_folders() if (folder / "scan.json").exists()]
+
+    def next_index(self) -> int:
+        return max((i for i, _ in self.scan_folders()), default=-1) + 1
 
     def read(self, index: int) -> Scan:
         return read_scan(self.root / f"scan_{index:04d}")
@@ -196,33 +200,50 @@ class ScanStore:
         return len(self.indices())
 
 
+def _read_image(path: Path, flags: int, what: str) -> np.ndarray:
+    if not path.exists():
+        raise MetadataError(f"{path}: {what} is missing", path=str(path))
+    data = np.fromfile(path, dtype=np.uint8) if path.stat().st_size else np.zeros(0, np.uint8)
+    image = cv2.imdecode(data, flags) if data.size else None
+    if image is None:
+        raise MetadataError(f"{path}: {what} cannot be decoded (truncated or not a PNG)", path=str(path),
+                            hint="re-record the scan or remove its folder")
+    return image
+
+
 def read_scan(folder: Path) -> Scan:
-    """Read one scan folder (from simulation or hardware)."""
+    """Read one scan folder (from simulation or hardware); a broken or inconsistent scan
+    raises a MetadataError that names the file and what is wrong with it."""
     folder = Path(folder)
-    meta_path = folder / "scan.json"
-    if not meta_path.exists():
-        raise FileError(f"{folder} is not a scan (no scan.json)", hint="point to a scan_NNNN folder")
-    try:
-        meta = json.loads(meta_path.read_text())
-    except json.JSONDecodeError as exc:
-        raise FileError(f"{meta_path}:{exc.lineno}: broken JSON ({exc.msg})") from None
-    depth_raw = cv2.imread(str(folder / "depth.png"), cv2.IMREAD_UNCHANGED)
-    if depth_raw is None:
-        raise FileError(f"{folder / 'depth.png'} is missing or unreadable")
+    meta = read_scan_meta(folder)
+    intr = meta["intrinsics"]
+    size = (int(intr["height"]), int(intr["width"]))
+    depth_raw = _read_image(folder / "depth.png", cv2.IMREAD_UNCHANGED, "depth image")
+    if depth_raw.ndim != 2 or depth_raw.dtype != np.uint16:
+        raise MetadataError(f"{folder / 'depth.png'}: depth image is {depth_raw.dtype} with "
+                            f"{1 if depth_raw.ndim == 2 else depth_raw.shape[2]} channels, not 16-bit grey",
+                            path=str(folder / "depth.png"), hint="store depth as uint16 PNG in depth_scale units")
+    if depth_raw.shape != size:
+        raise MetadataError(f"{folder / 'depth.png'}: depth image is {depth_raw.shape[1]} x {depth_raw.shape[0]}, "
+                            f"the intrinsics in scan.json say {size[1]} x {size[0]}", path=str(folder / "depth.png"))
     depth = depth_raw.astype(np.float64) / float(meta["depth_scale"])
     color = None
     if (folder / "color.png").exists():
-        bgr = cv2.imread(str(folder / "color.png"), cv2.IMREAD_COLOR)
-        color = None if bgr is None else cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        bgr = _read_image(folder / "color.png", cv2.IMREAD_COLOR, "colour image")
+        if bgr.shape[:2] != size:
+            raise MetadataError(f"{folder / 'color.png'}: colour image is {bgr.shape[1]} x {bgr.shape[0]}, the "
+                                f"depth image {size[1]} x {size[0]}", path=str(folder / "color.png"),
+                                hint="register colour to depth before storing the scan")
+        color = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
     gt = None
     if (folder / "ground_truth.json").exists():
-        gt = json.loads((folder / "ground_truth.json").read_text())
+        gt = load_json(folder / "ground_truth.json", "ground_truth.json")
     marker = meta.get("marker_T_camera")
     known = {"format", "index", "intrinsics", "depth_scale", "depth_unit", "joints",
              "world_T_camera_fk", "marker_T_camera"}
     return Scan(
         index=int(meta["index"]), color=color, depth=depth,
-        intrinsics=Intrinsics.from_dict(meta["intrinsics"]),
+        intrinsics=Intrinsics.from_dict(intr),
         joints={k: float(v) for k, v in meta["joints"].items()},
         world_T_camera_fk=np.asarray(meta["world_T_camera_fk"], dtype=float),
         meta={k: v for k, v in meta.items() if k not in known},

@@ -4,23 +4,13 @@ density-based trimming of the surface Poisson extrapolated where no points were.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from recon_cli.errors import FileError
 from recon_cli.outputs import atomic_write
-
-
-@dataclass(frozen=True)
-class SurfaceOptions:
-    voxel: float = 0.001  # [m] voxel of the fused cloud
-    normal_radius: float = 0.004  # [m] neighbourhood of the normal estimation
-    outlier_neighbors: int = 50  # statistical outlier removal (thesis: 50 neighbours, 3 sigma)
-    outlier_std_ratio: float = 3.0
-    poisson_depth: int = 9  # octree depth (thesis: 8)
-    density_quantile: float = 0.02  # drop mesh vertices below this quantile of Poisson density
+from recon_cli.reconstruction.options import SurfaceOptions  # noqa: F401 (re-exported)
 
 
 def oriented_cloud(cloud, camera_position: np.ndarray, options: SurfaceOptions):

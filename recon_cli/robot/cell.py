@@ -44,6 +44,12 @@ class Cell:
         """``world_T_camera`` of a view given in the world or the marker frame."""
         return world_T_camera(view, self.world_T_marker)
 
+    @property
+    def table_surface_z(self) -> float:
+        """[m] world height of the table top surface (from the description, lift included)."""
+        top = next(s for s in self.collision.env_shapes if s.name == "table_top")
+        return float(top.joint_T_shape[2, 3] + top.dims[2] / 2.0 - self.config.safety_distance)
+
     def check_camera_position(self, world_T_cam: np.ndarray, what: str = "view") -> None:
         """Refuse a camera pose whose origin lies inside an obstacle (table, frame, object)."""
         p = world_T_cam[:3, 3]

@@ -109,7 +109,7 @@ def test_poorly_reprojecting_board_poses_give_way_to_kinematics(session):
 
     folder, _ = session
     store = ScanStore(folder)
-    world_T_marker = np.asarray(store.session()["world_T_marker"])
+    world_T_marker = np.asarray(store.session().world_T_marker)
     scan = store.read(0)
     good = global_pose(scan, thesis_board(), world_T_marker)
     assert good.source.value == "charuco" and good.reprojection_px < 1.0
@@ -129,7 +129,7 @@ def test_board_never_found_and_no_joint_data(session, tmp_path):
     del info["world_T_marker"]
     info["crop_box"]["frame"] = "marker"
     (copy / "session.json").write_text(json.dumps(info))
-    with pytest.raises(InputError, match="no scan .* can be used"):
+    with pytest.raises(InputError, match="none of the 6 scans .* can be used"):
         run_register(copy, tmp_path / "r", RegisterOptions())
 
 

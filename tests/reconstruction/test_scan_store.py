@@ -29,7 +29,7 @@ def _scan(index: int, rng) -> Scan:
 
 def test_round_trip(tmp_path):
     rng = np.random.default_rng(0)
-    store = ScanStore.create(tmp_path / "s", {"backend": "test"})
+    store = ScanStore.create(tmp_path / "s", {"backend": "hardware"})
     original = _scan(store.next_index(), rng)
     store.write(original, depth_scale=20000.0)
     back = store.read(0)
@@ -39,7 +39,7 @@ def test_round_trip(tmp_path):
     assert back.joints == original.joints
     assert back.meta["planned_view"] == {"radius": 0.6}
     assert back.ground_truth["world_T_camera"] == np.eye(4).tolist()
-    assert store.session()["backend"] == "test"
+    assert store.session().backend == "hardware"
     assert len(back.points_camera()) == np.count_nonzero(original.depth)
     cloud = back.to_open3d_cloud(np.eye(4))
     assert len(cloud.points) == np.count_nonzero(original.depth)
@@ -55,7 +55,7 @@ def test_existing_scan_is_not_overwritten(tmp_path):
 
 
 def test_not_a_scan(tmp_path):
-    with pytest.raises(FileError, match="not a scan"):
+    with pytest.raises(FileError, match="without scan.json"):
         read_scan(tmp_path)
 
 

@@ -1,0 +1,66 @@
+"""The ``recon`` command line. Commands only parse options, call the library and print.
+
+    app.py       the typer applications
+    options.py   options shared by several commands, their parsers; defaults from the configuration
+    cell.py      recon cell, recon ik, recon objects
+    scans.py     recon capture, recon register, recon evaluate
+    scripts.py   recon validate, recon run
+    autoscan.py  recon autoscan
+    bench.py     recon bench ...
+
+Heavy libraries (pinocchio, coal, Open3D, MuJoCo, OMPL) are imported inside the commands
+so that ``recon --help`` is instant. User errors (``ReconError`` and malformed options)
+end as one line on stderr and a non-zero exit code, without a traceback (:func:`main`).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import typer
+
+from recon_cli.cli import autoscan, bench, cell, scans, scripts  # noqa: F401 (registers the commands)
+from recon_cli.cli.app import app, bench_app
+from recon_cli.cli.options import parse_vector
+from recon_cli.errors import ReconError
+
+__all__ = ["app", "bench_app", "entry", "main", "parse_vector"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the app and return the exit code; user errors become one line on stderr."""
+    from recon_cli.console import err_console
+
+    command = typer.main.get_command(app)
+    try:
+        result = command.main(args=argv, prog_name="recon", standalone_mode=False)
+    except ReconError as exc:
+        err_console.print(f"{exc.label}: {exc.one_line()}", markup=False, soft_wrap=True)
+        return exc.exit_code
+    except typer.Exit as exc:
+        return exc.exit_code
+    except (typer.Abort, KeyboardInterrupt):
+        err_console.print("interrupted", markup=False)
+        return 130
+    except typer.TyperException as exc:  # usage errors: bad option values, unknown options
+        ctx = getattr(exc, "ctx", None)
+        if type(exc).__name__ == "NoArgsIsHelpError":  # typer has printed the help already
+            return 0
+        where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
+        message = exc.format_message() if hasattr(exc, "format_message") else str(exc)
+        err_console.print(f"error: {message}{where}", markup=False, soft_wrap=True)
+        return int(getattr(exc, "exit_code", 2))
+    return result if isinstance(result, int) else 0
+
+
+def entry() -> None:
+    """Console-script entry point."""
+    code = main()
+    if "ompl" in sys.modules:
+        # the OMPL wheel's nanobind bindings print spurious "leaked" reports at interpreter
+        # teardown; everything is written and flushed by now, so leave without a teardown
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)

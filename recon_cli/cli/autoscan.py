@@ -1,0 +1,70 @@
+"""``recon autoscan``: scan an unknown object with the thesis' ellipsoid view planner."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from recon_cli.cli.app import app
+from recon_cli.cli.options import CellOpt, D, ResolutionOpt, SafetyOpt, SeedOpt, make_view, parse_vector
+
+_V = D.viewplan
+
+
+@app.command()
+def autoscan(
+    dc: Annotated[float, typer.Option("--dc", min=0.2, max=1.5, help="Camera distance to the ellipsoid [m].")]
+    = _V.d_c,
+    n: Annotated[int, typer.Option("--n", min=2, max=200, help="Scans in total (the initial one included).")] = _V.n,
+    object_name: Annotated[str, typer.Option("--object", help="Object to scan (built-in, YCB or mesh file).")]
+    = "bottle",
+    scale: Annotated[float, typer.Option(help="Scale of a mesh file.")] = D.scene.object_scale,
+    m: Annotated[int, typer.Option("--m", min=1, help="Preliminary samples per view (eq. 2.7).")] = _V.m,
+    sigma: Annotated[float, typer.Option(min=1e-12, help="Potential-field regularization (eq. 2.6).")] = _V.sigma,
+    initial: Annotated[str | None, typer.Option(help="Initial view 'theta,phi' in degrees around the object's box "
+                                                     "centre at r = dc + 0.1 (default 45,0).")] = None,
+    cell: CellOpt = D.cell.kind.value,
+    safety: SafetyOpt = D.cell.safety_distance,
+    resolution: ResolutionOpt = D.sensor.resolution,
+    pictures: Annotated[bool, typer.Option("--pictures/--no-pictures", help="A PNG per iteration.")] = True,
+    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/autoscan-<time>).")] = None,
+    seed: SeedOpt = D.seed,
+) -> None:
+    """Scan an unknown object autonomously: the ellipsoid view planner of the thesis."""
+    from dataclasses import replace
+
+    from recon_cli.config import SceneConfig
+    from recon_cli.console import console, progress_bar, run_folder
+    from recon_cli.robot.description import CellConfig, CellKind
+    from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions
+
+    config = D.replace(
+        cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
+        scene=SceneConfig(object_name, scale), sensor=replace(D.sensor, resolution=resolution), seed=seed,
+        viewplan=replace(_V, n=n, d_c=dc, m=m, sigma=sigma))
+    folder = run_folder(out, "autoscan")
+    view = None
+    if initial is not None:
+        theta, phi = parse_vector(initial, 2, "--initial", "degrees")
+        from recon_cli.objects import load_object
+
+        center, _ = load_object(object_name, scale).crop_box(config.scene.box_margin)
+        view = make_view(",".join(map(str, center)), dc + 0.1, theta, phi, 0.0, "world")
+    opts = AutoscanOptions(folder, config, view, pictures=pictures, run={"command": "autoscan"})
+    with progress_bar() as update:
+        result = Autoscan(opts, update).run()
+    if result.interrupted:
+        console.print(f"interrupted after {result.scans} scans; they are in {folder} "
+                      f"(recon register {folder} works on them)")
+        raise typer.Exit(130)
+    console.print(f"{result.scans} scans of the {object_name} ({result.infeasible} infeasible views sampled, "
+                  f"{result.requests} planning requests, {result.trajectory_s:.1f} s of trajectories) "
+                  f"in {result.seconds:.1f} s")
+    if result.coverage is not None:
+        console.print(f"ground truth: coverage {result.coverage * 100:.2f} % of the surface (1 mm), signed distance "
+                      f"mean {result.accuracy.mean_mm:+.3f} mm, std {result.accuracy.std_mm:.3f} mm")
+    console.print(f"mesh: {result.mesh}\ncloud: {result.cloud}\nreport: {result.report}")
+    if result.pictures:
+        console.print(f"pictures: {result.pictures[0].parent}")

@@ -1,0 +1,204 @@
+"""``recon bench ...``: the thesis' benchmarks (and ours), each writing JSON, a table and a figure.
+
+The tables are drawn by :mod:`recon_cli.bench.render`; this module parses and calls.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from recon_cli.cli.app import bench_app
+from recon_cli.cli.options import CellOpt, D, ResolutionOpt, SafetyOpt, SeedOpt, choices, make_cell, one_of
+
+OutOpt = Annotated[Path | None, typer.Option(help="Output folder (default runs/bench-<name>-<time>).")]
+
+
+@bench_app.command("ik")
+def bench_ik(
+    n: Annotated[int, typer.Option("--n", min=1, help="Number of camera poses.")] = 500,
+    solutions: Annotated[int, typer.Option(min=1, max=32, help="Solutions asked per pose in the second run.")]
+    = D.planner.ik_solutions,
+    cell: CellOpt = D.cell.kind.value,
+    safety: SafetyOpt = D.cell.safety_distance,
+    seed: SeedOpt = D.seed,
+    out: OutOpt = None,
+) -> None:
+    """IK success rate and time on random reachable camera poses around the table."""
+    from recon_cli.bench import render
+    from recon_cli.bench.ik import IKBenchConfig, run_ik_bench
+    from recon_cli.console import console, progress_bar, run_folder, write_json
+
+    folder = run_folder(out, "bench-ik")
+    c = make_cell(cell, safety)
+    cfg = IKBenchConfig(n_poses=n, solutions=solutions, seed=seed)
+    with progress_bar() as update:
+        result = run_ik_bench(c, cfg, update)
+    write_json(folder / "bench_ik.json", {"config": cfg.__dict__, "safety_distance": safety,
+                                          "result": result.to_dict()})
+    for item in render.ik_report(result, c.config.kind.value, solutions):
+        console.print(item)
+    console.print(f"results: {folder / 'bench_ik.json'}")
+
+
+@bench_app.command("sim")
+def bench_sim(
+    object_name: Annotated[str, typer.Option("--object", help="Object on the board.")] = "drill",
+    seed: SeedOpt = D.seed,
+    out: OutOpt = None,
+) -> None:
+    """Board detection in the 24 views of eq. 4.1, capture time, execution precision."""
+    from dataclasses import asdict
+
+    from recon_cli.bench import render
+    from recon_cli.bench.sim import run_sim_bench
+    from recon_cli.console import console, progress_bar, run_folder, write_json
+
+    folder = run_folder(out, "bench-sim")
+    with progress_bar() as update:
+        result = run_sim_bench(folder, object_name, seed, update)
+    write_json(folder / "bench_sim.json", {"object": result.object_name, "views": [asdict(r) for r in result.rows],
+                                           "move": result.move})
+    for item in render.sim_report(result):
+        console.print(item)
+    console.print(f"results: {folder / 'bench_sim.json'}, picture: {folder / 'eq_4_1_views.png'}")
+
+
+@bench_app.command("registration")
+def bench_registration(
+    object_name: Annotated[str, typer.Option("--object", help="Object ('auto': the drill if the YCB data is "
+                                                              "here, else the bottle).")] = D.scene.object_name,
+    resolution: Annotated[float, typer.Option(min=0.1, max=1.0, help="Image size relative to 1600 x 1200.")]
+    = D.sensor.resolution,
+    seed: SeedOpt = D.seed,
+    out: OutOpt = None,
+) -> None:
+    """Thesis 4.2: ChArUco pose errors (Table 4.2) and global vs local registration accuracy."""
+    from recon_cli.bench import render
+    from recon_cli.bench.registration import run_registration_bench
+    from recon_cli.console import console, progress_bar, run_folder, write_json
+
+    folder = run_folder(out, "bench-registration")
+    with progress_bar() as update:
+        data = run_registration_bench(folder, object_name, seed, resolution, update)
+    write_json(folder / "bench_registration.json", data)
+    for item in render.registration_report(data):
+        console.print(item)
+    console.print(f"results: {folder / 'bench_registration.json'}, histogram: {folder / 'distances.png'}, "
+                  f"mesh: {data['mesh']}")
+
+
+@bench_app.command("sequence")
+def bench_sequence(
+    runs: Annotated[int, typer.Option("--runs", min=1, help="Runs per case.")] = 500,
+    quick: Annotated[bool, typer.Option("--quick", help="CI mode: 3 runs per case.")] = False,
+    cases: Annotated[str, typer.Option(help="Comma-separated cases: A, B, C, D (ours), A0 (recon run's "
+                                            "default order).")] = "A,B,C,D,A0",
+    seed: SeedOpt = D.seed,
+    out: OutOpt = None,
+) -> None:
+    """Thesis 4.3: total trajectory time and planning requests of the 24 views of eq. 4.1."""
+    from dataclasses import asdict
+
+    from recon_cli.bench import render
+    from recon_cli.bench.sequence import CASES, ecdf_png, run_sequence_bench, summarize
+    from recon_cli.console import console, progress_bar, run_folder, write_json
+
+    chosen = choices(cases, CASES, "case")
+    folder = run_folder(out, "bench-sequence")
+    n = 3 if quick else runs
+    plan = D.planner
+    with progress_bar() as update:
+        rows = run_sequence_bench(n, seed, chosen, update, plan)
+    summary = summarize(rows)
+    write_json(folder / "bench_sequence.json", {"runs_per_case": n, "seed": seed, "planner": plan,
+                                                "velocity_scale": plan.velocity_scale,
+                                                "acceleration_scale": plan.acceleration_scale, "summary": summary,
+                                                "runs": [asdict(r) for r in rows]})
+    ecdf_png(folder / "t_p_ecdf.png", rows)
+    for item in render.sequence_report(summary, n, plan.velocity_scale, plan.acceleration_scale):
+        console.print(item)
+    console.print(f"results: {folder / 'bench_sequence.json'}, plot: {folder / 't_p_ecdf.png'}")
+
+
+@bench_app.command("viewplan")
+def bench_viewplan(
+    objects: Annotated[str, typer.Option(help="Comma-separated objects (default: the built-ins).")]
+    = "wood_block,toy_blocks,bottle,mug",
+    methods: Annotated[str, typer.Option(help="Comma-separated: ellipsoid, sphere, random.")] \
+        = "ellipsoid,sphere,random",
+    n: Annotated[int, typer.Option("--n", min=2, help="Scans per run.")] = D.viewplan.n,
+    dc: Annotated[float, typer.Option("--dc", help="Camera distance to the ellipsoid [m].")] = D.viewplan.d_c,
+    cell: CellOpt = D.cell.kind.value,
+    resolution: ResolutionOpt = D.sensor.resolution,
+    seed: SeedOpt = D.seed,
+    out: OutOpt = None,
+) -> None:
+    """Thesis 4.4: ellipsoid view planner vs evenly spread and random views, every object."""
+    from dataclasses import asdict
+
+    from recon_cli.bench import render
+    from recon_cli.bench.viewplan import coverage_png, run_viewplan_bench
+    from recon_cli.console import console, progress_bar, run_folder, write_json
+    from recon_cli.robot.description import CellConfig, CellKind
+    from recon_cli.workflows.autoscan import METHODS
+
+    chosen = choices(methods, METHODS, "method")
+    folder = run_folder(out, "bench-viewplan")
+    with progress_bar() as update:
+        rows = run_viewplan_bench(folder, [o.strip() for o in objects.split(",") if o.strip()], chosen, n, dc, seed,
+                                  resolution, CellConfig(kind=CellKind.parse(cell)), update)
+    write_json(folder / "bench_viewplan.json", {"n": n, "d_c": dc, "cell": cell, "rows": [asdict(r) for r in rows]})
+    coverage_png(folder / "coverage.png", rows)
+    for item in render.viewplan_report(rows, n, dc, cell):
+        console.print(item)
+    console.print(f"results: {folder / 'bench_viewplan.json'}, plot: {folder / 'coverage.png'}")
+
+
+@bench_app.command("planners")
+def bench_planners(
+    n: Annotated[int, typer.Option("--n", min=1, help="Requests per planner.")] = 1000,
+    planners: Annotated[str, typer.Option(help="Comma-separated OMPL planners, or 'default'.")] = "default",
+    time_limit: Annotated[float, typer.Option(min=0.1, help="Time limit per request [s].")] = D.planner.time_limit,
+    quick: Annotated[bool, typer.Option(help="CI mode: 10 requests of RRTConnect and RRT.")] = False,
+    peer: Annotated[str, typer.Option(help="Also run a peer on the same problem: 'mplib' or 'none'.")] = "none",
+    peer_n: Annotated[int, typer.Option(min=1, help="Requests for the peer (per RRT range tried).")] = 200,
+    simplify: Annotated[str, typer.Option(help="Path simplification: shortcut, reduce, full or none.")]
+    = D.planner.simplify,
+    shortcut_rounds: Annotated[int, typer.Option(min=1, help="Rounds of per-joint shortcuts (shortcut).")]
+    = D.planner.shortcut_rounds,
+    seed: SeedOpt = D.seed,
+    out: OutOpt = None,
+) -> None:
+    """The Table 4.1 planning benchmark (thesis 4.1): success, plan times, path lengths."""
+    from dataclasses import replace
+
+    from recon_cli.bench import render
+    from recon_cli.bench.planners import DEFAULT_PLANNERS, run_planner_bench, thesis_times, write_results
+    from recon_cli.console import console, progress_bar, run_folder
+    from recon_cli.planning.options import PLANNERS
+
+    one_of(peer, ("none", "mplib"), "peer")
+    options = replace(D.planner, simplify=simplify, shortcut_rounds=shortcut_rounds)
+    names = list(DEFAULT_PLANNERS) if planners == "default" else choices(planners, PLANNERS, "planner")
+    if quick:
+        names, n = ["RRTConnect", "RRT"], min(n, 10)
+    folder = run_folder(out, "bench-planners")
+    with progress_bar() as update:
+        rows = run_planner_bench(names, n, time_limit, seed, update, options)
+    peer_summary = None
+    if peer == "mplib":
+        from recon_cli.bench.mplib_peer import run_mplib
+
+        with console.status("mplib 0.2.1 on the same problem ..."):
+            peer_summary = run_mplib(folder, peer_n, time_limit)
+    meta = {"n": n, "time_limit": time_limit, "seed": seed, "planners": names, "problem": "Table 4.1",
+            "simplify": simplify, "shortcut_rounds": shortcut_rounds,
+            "plan_time": "search + simplification, one core"}
+    summary = write_results(folder, rows, meta, peer_summary)
+    for item in render.planners_report(summary, n, time_limit, thesis_times(), peer_summary):
+        console.print(item)
+    console.print(f"results: {folder / 'bench_planners.json'}, {folder / 'requests.csv'}, "
+                  f"plot: {folder / 'plan_times.png'}")

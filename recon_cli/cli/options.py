@@ -1,0 +1,110 @@
+"""Options shared by several commands and the parsers of their values.
+
+Defaults come from :data:`recon_cli.config.DEFAULTS` (a light import: no planner, no
+Open3D), so ``recon --help`` shows the same numbers a run uses.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from typing import Annotated
+
+import typer
+
+from recon_cli.config import DEFAULTS
+from recon_cli.errors import InputError, UnknownNameError
+
+D = DEFAULTS
+
+CellOpt = Annotated[str, typer.Option("--cell", help="gantry (9 DoF, linear axes) or ceiling (7 DoF).")]
+SafetyOpt = Annotated[float, typer.Option("--safety", help="Safety distance [m] that inflates every collision shape.")]
+SeedOpt = Annotated[int, typer.Option("--seed", min=0, max=2**32 - 1,
+                                      help="Seed of the random number generator (0 ... 2^32-1).")]
+FocusOpt = Annotated[str, typer.Option("--focus", help="Focus point f as x,y,z [m].")]
+RadiusOpt = Annotated[float, typer.Option("--radius", "-r", help="Camera distance r from f [m].")]
+ThetaOpt = Annotated[float, typer.Option("--theta", help="Polar angle from the vertical [deg].")]
+PhiOpt = Annotated[float, typer.Option("--phi", help="Azimuth [deg].")]
+AlphaOpt = Annotated[float, typer.Option("--alpha", help="Camera roll about its viewing axis [deg].")]
+FrameOpt = Annotated[str, typer.Option("--frame", help="Frame of f and the angles: world or marker.")]
+ResolutionOpt = Annotated[float, typer.Option(min=0.05, max=1.0, help="Image size relative to 1600 x 1200.")]
+
+#: the example view of ``recon ik`` and ``recon capture``: the thesis' focus point above the board
+FOCUS = "0,0,0.78"
+RADIUS = 0.6  # [m]
+THETA = 70.0  # [deg]
+
+
+def parse_vector(text: str, n: int, option: str, unit: str) -> tuple[float, ...]:
+    """Parse 'x,y,z' into n finite floats, or raise a one-line InputError."""
+    parts = [p for p in text.replace(";", ",").split(",") if p.strip()]
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != n or not all(math.isfinite(v) for v in values):
+        example = ",".join(["0"] * (n - 1) + ["0.3"])
+        raise InputError(f"{option} '{text}' is not {n} numbers",
+                         hint=f"write {n} comma-separated values in {unit}, e.g. {example}")
+    return values
+
+
+def make_cell(cell: str, safety: float, object_box: str | None = None):
+    """The cell of ``--cell`` / ``--safety`` with an optional box 'sx,sy,sz' on the table centre."""
+    from recon_cli.robot.cell import Cell
+    from recon_cli.robot.collision import ObjectBox
+    from recon_cli.robot.description import CellConfig, CellKind
+
+    c = Cell(CellConfig(kind=CellKind.parse(cell), safety_distance=safety))
+    if object_box:
+        size = parse_vector(object_box, 3, "--object-box", "metres")
+        if min(size) <= 0:
+            raise InputError(f"--object-box '{object_box}' has a non-positive edge",
+                             hint="give the box edges in metres, e.g. 0.3,0.3,0.3")
+        c.set_object_box(ObjectBox.on_table(size, table_top_z=c.table_surface_z))
+    return c
+
+
+def make_view(focus: str, radius: float, theta: float, phi: float, alpha: float, frame: str):
+    """A camera view from the view options (angles in degrees)."""
+    from recon_cli.geometry.view import Frame, View
+
+    try:
+        ref = Frame(frame.lower())
+    except ValueError:
+        raise UnknownNameError("frame", frame, [f.value for f in Frame]) from None
+    return View.from_degrees(parse_vector(focus, 3, "--focus", "metres"), radius, theta, phi, alpha, ref)
+
+
+def choices(text: str, allowed: Iterable[str], what: str) -> list[str]:
+    """Parse 'a,b' into names, each one of ``allowed`` (else a one-line error)."""
+    allowed = tuple(allowed)
+    chosen = [x.strip() for x in text.split(",") if x.strip()]
+    for x in chosen:
+        if x not in allowed:
+            raise UnknownNameError(what, x, allowed)
+    return chosen
+
+
+def one_of(value: str, allowed: Iterable[str], what: str) -> str:
+    """``value`` if it is one of ``allowed``, else a one-line error naming the choices."""
+    allowed = tuple(allowed)
+    if value not in allowed:
+        raise UnknownNameError(what, value, allowed)
+    return value
+
+
+def index_list(text: str, option: str, n: int) -> list[int]:
+    """Parse '3,7' into [3, 7] (1-based indices up to n)."""
+    out = []
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        if not part.isdigit() or not 1 <= int(part) <= n:
+            raise InputError(f"{option} {text!r}: {part!r} is not a view number 1..{n}", hint="e.g. 3,7")
+        out.append(int(part))
+    return out
+
+
+def positive(value: float, option: str, hint: str) -> float:
+    if not math.isfinite(value) or value <= 0:
+        raise InputError(f"{option} {value} is not a positive number", hint=hint)
+    return value

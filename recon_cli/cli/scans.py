@@ -1,0 +1,216 @@
+"""``recon capture``, ``recon register``, ``recon evaluate``: scans, their registration and
+the assessment of what came out."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from recon_cli.cli.app import app
+from recon_cli.cli.options import (
+    FOCUS,
+    RADIUS,
+    THETA,
+    AlphaOpt,
+    CellOpt,
+    D,
+    FocusOpt,
+    FrameOpt,
+    PhiOpt,
+    RadiusOpt,
+    ResolutionOpt,
+    SafetyOpt,
+    SeedOpt,
+    ThetaOpt,
+    index_list,
+    make_view,
+    one_of,
+    parse_vector,
+    positive,
+)
+from recon_cli.errors import InputError
+
+VIEW_SETS = ("single", "eq-4.1")
+
+
+@app.command()
+def capture(
+    object_name: Annotated[
+        str, typer.Option("--object", help="Built-in object, YCB object or mesh file; 'auto': the drill if the "
+                                           "YCB data is here, else the built-in bottle.")] = D.scene.object_name,
+    scale: Annotated[float, typer.Option(help="Scale of a mesh file (0.001 for millimetres).")]
+    = D.scene.object_scale,
+    focus: FocusOpt = FOCUS,
+    radius: RadiusOpt = RADIUS,
+    theta: ThetaOpt = THETA,
+    phi: PhiOpt = 0.0,
+    alpha: AlphaOpt = 0.0,
+    frame: FrameOpt = "world",
+    out: Annotated[Path | None, typer.Option(help="Session folder (default runs/capture-<time>).")] = None,
+    noise: Annotated[bool, typer.Option("--noise/--no-noise", help="Depth noise model on or off.")] = D.sensor.noise,
+    resolution: ResolutionOpt = D.sensor.resolution,
+    planner: Annotated[str, typer.Option(help="OMPL planner.")] = D.planner.planner,
+    planning_time: Annotated[float, typer.Option(min=0.1, help="Planning time limit [s].")] = D.planner.time_limit,
+    cell: CellOpt = D.cell.kind.value,
+    safety: SafetyOpt = D.cell.safety_distance,
+    seed: SeedOpt = D.seed,
+    views: Annotated[str, typer.Option(help="'single' (the view given by --focus ... --alpha) or 'eq-4.1' "
+                                            "(the thesis' 24 views around f = (0, 0, 0.78) m, r = 0.6 m).")] = "single",
+    cover_board: Annotated[str, typer.Option(help="Views (1-based, comma-separated) with a sheet over the "
+                                                  "ChArUco board, e.g. '3,7'.")] = "",
+) -> None:
+    """Move the simulated robot through views and write one scan per view into a scan store."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from recon_cli.config import SceneConfig, SensorConfig
+    from recon_cli.console import console, progress_bar, run_folder, styled
+    from recon_cli.robot.description import CellConfig, CellKind
+    from recon_cli.session import resolve_object_name
+    from recon_cli.workflows.capture import CaptureOptions, run_capture
+
+    object_name = resolve_object_name(object_name)
+    if one_of(views, VIEW_SETS, "view set") == "single":
+        view_list = (make_view(focus, radius, theta, phi, alpha, frame),)
+    else:
+        from recon_cli.bench.scenarios import eq_4_1_views
+
+        view_list = tuple(eq_4_1_views())
+    covered = index_list(cover_board, "--cover-board", len(view_list))
+    positive(scale, "--scale", "e.g. 0.001 for millimetres")
+    config = D.replace(
+        cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
+        scene=SceneConfig(object_name, scale), sensor=SensorConfig(noise, resolution), seed=seed,
+        planner=replace(D.planner, planner=planner, time_limit=planning_time))
+    folder = run_folder(out, "capture")
+    options = CaptureOptions(views=view_list, out=folder, config=config, cover_board=frozenset(covered),
+                             run={"command": "capture", "views": views})
+    with progress_bar() as update:
+        result = run_capture(options, update)
+    for m, scan, n_points, t_cap in zip(result.moves, result.scans, result.points, result.capture_seconds,
+                                        strict=True):
+        console.print(f"scan {scan.index}: planned with {m.plan.planner} in {m.plan.total_time:.2f} s "
+                      f"({len(m.plan.path)} waypoints), trajectory {m.execution.duration:.2f} s, settled after "
+                      f"{m.execution.settle_time:.3f} s (camera pose error from tracking "
+                      f"{m.camera_position_error * 1e3:.4f} mm / {np.degrees(m.camera_rotation_error):.5f}°); "
+                      f"{n_points} points in {t_cap:.2f} s")
+    for f in result.failures:
+        console.print(styled(f"view {f.view} skipped:", "yellow", f" {f.message}"))
+    console.print(f"{len(result.scans)} of {len(view_list)} views scanned in {result.total_seconds:.1f} s; "
+                  f"scan store: {folder}")
+    if not result.scans:
+        raise typer.Exit(1)
+
+
+_R = D.registration
+
+
+@app.command()
+def register(
+    folder: Annotated[Path, typer.Argument(help="Scan store folder (simulated or recorded).")],
+    out: Annotated[Path | None, typer.Option(help="Output folder (default <folder>/reconstruction).")] = None,
+    box: Annotated[str | None, typer.Option(help="Crop box cx,cy,cz,sx,sy,sz [m] (default: the session's "
+                                                 "object box).")] = None,
+    box_frame: Annotated[str, typer.Option(help="Frame of --box: world or marker.")] = _R.box_frame,
+    board: Annotated[bool, typer.Option("--board/--no-board", help="Use the ChArUco board (else kinematics "
+                                                                   "for every scan).")] = _R.use_board,
+    local: Annotated[bool, typer.Option("--local/--global-only", help="Pose-graph local registration.")]
+    = _R.local,
+    loop_closures: Annotated[str, typer.Option(help="Initialize loop closures by 'icp' or with the 'global' "
+                                                    "alignment (the thesis).")] = _R.multiway.loop_closure_init,
+    voxel: Annotated[float, typer.Option(min=0.0001, help="Voxel of the fused cloud [m].")] = _R.surface.voxel,
+    depth: Annotated[int, typer.Option(min=5, max=12, help="Poisson octree depth.")] = _R.surface.poisson_depth,
+    trim: Annotated[float, typer.Option(min=0.0, max=0.5, help="Poisson density quantile trimmed.")]
+    = _R.surface.density_quantile,
+) -> None:
+    """Register all scans of a folder (ChArUco or kinematics, pose-graph ICP), fuse, mesh.
+
+    Scans that cannot be read are skipped with their reason; the run fails only when no scan
+    is usable."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from recon_cli.console import console, progress_bar, styled
+    from recon_cli.reconstruction.crop import CropBox
+    from recon_cli.reconstruction.pipeline import run_register
+
+    one_of(box_frame, ("world", "marker"), "box frame")
+    one_of(loop_closures, ("icp", "global"), "loop closure initialization")
+    crop = None
+    if box is not None:
+        v = parse_vector(box, 6, "--box", "metres")
+        if min(v[3:]) <= 0:
+            raise InputError(f"--box {box}: sizes must be positive", hint="cx,cy,cz,sx,sy,sz in metres")
+        T = np.eye(4)
+        T[:3, 3] = v[:3]
+        crop = CropBox(T, tuple(v[3:]))
+    options = replace(_R, box=crop, box_frame=box_frame, use_board=board, local=local,
+                      multiway=replace(_R.multiway, loop_closure_init=loop_closures),
+                      surface=replace(_R.surface, voxel=voxel, poisson_depth=depth, density_quantile=trim))
+    with progress_bar() as update:
+        result = run_register(folder, out or Path(folder) / "reconstruction", options, update)
+    sources = {k: v for k, v in result.pose_sources.items() if v}
+    skipped = len(result.scans) - len(result.used)
+    console.print(f"{len(result.used)} of {len(result.scans)} scans registered"
+                  + (f" ({skipped} skipped)" if skipped else "") + " (pose sources: "
+                  + ", ".join(f"{k} {v}" for k, v in sources.items()) + ")")
+    for r in result.scans:
+        if r.skipped:
+            console.print(styled(f"{r.name} skipped:", "yellow", f" {r.skipped}"))
+        elif r.pose.source.value == "kinematics":
+            console.print(f"{r.name}: kinematics ({r.pose.reason})")
+    errors = [r.charuco_error for r in result.scans if r.charuco_error is not None]
+    if errors:
+        console.print(f"ChArUco pose error vs ground truth: mean {np.mean([e[0] for e in errors]) * 1e3:.3f} mm / "
+                      f"{np.degrees(np.mean([e[1] for e in errors])):.4f}° over {len(errors)} scans")
+    if result.multiway is not None:
+        e = result.multiway.edges
+        console.print(f"pose graph: {sum(x.kind == 'odometry' for x in e)} odometry edges, "
+                      f"{sum(x.kind == 'loop_closure' for x in e)} loop closures "
+                      f"({result.multiway.pruned} pruned, {sum(x.rejected for x in e)} ICP results rejected)")
+    console.print(f"done in {result.timings['total_s']:.1f} s; frame: {result.frame}")
+    console.print(f"cloud: {result.cloud}\nmesh: {result.mesh}\nreport: {result.report}")
+
+
+ALIGNMENTS = ("none", "icp")
+
+
+@app.command()
+def evaluate(
+    reconstruction: Annotated[Path, typer.Argument(help="Reconstructed cloud or mesh (PLY, ...).")],
+    reference: Annotated[Path, typer.Option(help="Reference mesh (ground truth).")],
+    tolerance: Annotated[float, typer.Option(min=1e-5, help="Coverage tolerance [m].")] = 0.001,
+    views: Annotated[Path | None, typer.Option(help="Scan store whose camera poses define the visible "
+                                                    "surface (coverage of what could be seen).")] = None,
+    align: Annotated[str, typer.Option(help="'none' (frames agree) or 'icp' (register the reconstruction "
+                                            "to the reference first, reported).")] = "none",
+    samples: Annotated[int, typer.Option(min=1000, help="Reference surface samples.")] = 200_000,
+    out: Annotated[Path | None, typer.Option(help="Output folder (default: beside the reconstruction).")] = None,
+) -> None:
+    """Signed distances to a reference mesh, their statistics and histogram, and coverage."""
+    import numpy as np
+
+    from recon_cli.console import console
+    from recon_cli.reconstruction.assessment import run_evaluate
+
+    one_of(align, ALIGNMENTS, "alignment")
+    result = run_evaluate(reconstruction, reference, tolerance, views, align, samples,
+                          out or reconstruction.parent)
+    e = result.evaluation
+    console.print(f"{e.points} points: signed distance mean {e.mean * 1e3:+.4f} mm, std {e.std * 1e3:.4f} mm, "
+                  f"RMS {e.rms * 1e3:.4f} mm; " + ", ".join(f"{k}: {v * 100:.1f} %" for k, v in e.within.items()))
+    line = f"coverage (tolerance {e.tolerance * 1e3:g} mm): {e.coverage * 100:.2f} % of the reference surface"
+    if e.coverage_visible is not None:
+        line += (f", {e.coverage_visible * 100:.2f} % of the part the cameras could see "
+                 f"({e.visible_share * 100:.1f} % of the surface)")
+    console.print(line)
+    if result.alignment is not None:
+        console.print(f"aligned to the reference by ICP: moved {result.alignment[0] * 1e3:.3f} mm / "
+                      f"{np.degrees(result.alignment[1]):.4f}°")
+    console.print(f"report: {result.report}\nhistogram: {result.histogram}")
+
+

@@ -1,0 +1,96 @@
+"""``recon validate`` and ``recon run``: automation scripts."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from recon_cli.cli.app import app
+from recon_cli.cli.options import D, SeedOpt, one_of
+
+BACKENDS = ("sim", "hardware")
+SEQUENCE_METHODS = ("ours", "thesis")
+
+
+@app.command()
+def validate(
+    script: Annotated[Path, typer.Argument(help="Automation script (recon or thesis dialect).")],
+) -> None:
+    """Expand xacro, validate against the XSD and list the commands a script would run."""
+    from recon_cli.console import console
+    from recon_cli.scripts.checks import check_script
+    from recon_cli.scripts.loader import load_script
+
+    s = load_script(script)
+    check_script(s)
+    dialect = "recon (schemas/recon_script.xsd)" if s.dialect == "recon" else \
+        "thesis system (schemas/thesis_script.xsd)"
+    console.print(f"{script}: valid, dialect {dialect}, script {s.name!r}, {len(s.commands)} commands, "
+                  f"on failure: {s.on_failure}" + (", sequence optimization requested" if s.optimize else ""))
+    for k, cmd in enumerate(s.commands, start=1):
+        console.print(f"{k:4d}  {cmd.source}  {cmd.describe()}")
+
+
+RUN_EPILOG = ("Exit codes: 0 every command done; 1 error before or outside the commands (bad script, option or "
+              "file); 2 usage error; 3 some commands failed (their scans skipped; --allow-failures gives 0); "
+              "4 aborted by a failed command (on_failure=\"abort\"); 130 interrupted by Ctrl-C, 143 by SIGTERM "
+              "(completed scans kept, the report says what was interrupted).")
+
+
+@app.command("run", epilog=RUN_EPILOG)
+def run_script(
+    script: Annotated[Path, typer.Argument(help="Automation script (recon or thesis dialect).")],
+    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/run-<time>).")] = None,
+    backend: Annotated[str | None, typer.Option(help="'sim' or 'hardware' (overrides the script).")] = None,
+    dry_run: Annotated[bool, typer.Option("--dry-run", help="Plan every move, move nothing, scan nothing.")] = False,
+    object_name: Annotated[str | None, typer.Option("--object", help="Simulated object (overrides the script; "
+                                                                     "default: the drill if present).")] = None,
+    optimize: Annotated[bool | None, typer.Option("--optimize/--no-optimize", help="Reorder independent moves "
+                                                  "and scans (default: as the script says).")] = None,
+    sequence_method: Annotated[str, typer.Option(help="'ours' (local search) or 'thesis' (Tables 2.2/2.3).")]
+    = "ours",
+    seed: SeedOpt = D.seed,
+    append: Annotated[bool, typer.Option("--append", help="Add this run's scans to the scan store already in "
+                                                          "--out (same cell and object); without it --out must "
+                                                          "be new or empty.")] = False,
+    allow_failures: Annotated[bool, typer.Option("--allow-failures", help="Exit 0 even when some commands "
+                                                                          "failed (default: exit 3).")] = False,
+) -> None:
+    """Run an automation script: moves, scans, registration, reconstruction, exports."""
+    from recon_cli.console import console, progress_bar, run_folder, styled
+    from recon_cli.interrupts import stop_signals
+    from recon_cli.scripts.checks import check_script
+    from recon_cli.scripts.loader import load_script
+    from recon_cli.scripts.state import RunOptions, SequenceMethod
+    from recon_cli.session import Backend
+    from recon_cli.workflows.script_run import ScriptRunner
+
+    if backend is not None:
+        one_of(backend, BACKENDS, "backend")
+    one_of(sequence_method, SEQUENCE_METHODS, "sequence method")
+    s = load_script(script)
+    check_script(s, object_override=object_name)  # before the output folder is made
+    folder = run_folder(out, "run", fresh=not append)
+    options = RunOptions(folder, None if backend is None else Backend(backend), seed, dry_run, object_name, optimize,
+                         SequenceMethod(sequence_method), append)
+    with stop_signals(), progress_bar() as update:
+        result = ScriptRunner(s, options, update).run()
+    counts: dict[str, int] = {}
+    for r in result.reports:
+        counts[r.status.value] = counts.get(r.status.value, 0) + 1
+    console.print(f"{s.name}: {len(result.reports)} commands (" + ", ".join(f"{v} {k}" for k, v in counts.items())
+                  + f"), {result.scans} scans, {result.seconds:.1f} s")
+    for r in result.reports:
+        if r.status in ("failed", "skipped") and r.message != "dry run":
+            console.print(styled(r.status.value, "yellow", f" {r.source} {r.command}: {r.message}"))
+    for seq in result.sequences:
+        console.print(f"sequence of {seq.moves} moves ({seq.method.value}): planned trajectory time "
+                      f"{seq.planned_duration_s:.1f} s with {seq.planning_requests} planning requests "
+                      f"({seq.seconds:.1f} s)")
+    for k, v in result.outputs.items():
+        console.print(f"{k}: {v}")
+    console.print(f"report: {folder / 'run_report.json'}")
+    if result.exit_code and not allow_failures:
+        raise typer.Exit(result.exit_code)

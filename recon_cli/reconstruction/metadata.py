@@ -1,0 +1,173 @@
+"""The metadata of a scan store, read back and checked: ``session.json`` as a typed
+:class:`SessionInfo`, ``scan.json`` against its schema.
+
+Both files are versioned (``format``) and described by JSON Schemas in ``schemas/``
+(``session.schema.json``, ``scan.schema.json``); every violation is one
+:class:`~recon_cli.errors.MetadataError` naming the file and the line (broken JSON) or the
+key (a missing key, a value of the wrong type), so a reader can skip a bad scan with its
+reason instead of stopping.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from recon_cli.errors import MetadataError
+
+SESSION_FORMAT = 1
+SCAN_FORMAT = 1
+
+
+def load_json(path: Path, what: str) -> Any:
+    """The content of a JSON file, or a MetadataError with file:line:column."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise MetadataError(f"{path}: {what} is missing", path=str(path)) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = getattr(exc, "strerror", None) or "not UTF-8 text"
+        raise MetadataError(f"{path}: {what} cannot be read ({reason})", path=str(path)) from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise MetadataError(f"{path}:{exc.lineno}:{exc.colno}: {what} is broken JSON ({exc.msg})",
+                            path=str(path), where=f"line {exc.lineno}") from None
+
+
+@functools.cache
+def _validator(name: str):
+    import jsonschema
+
+    from recon_cli.paths import SCHEMA_DIR
+
+    schema = json.loads((SCHEMA_DIR / name).read_text())
+    cls = jsonschema.validators.validator_for(schema)
+    cls.check_schema(schema)
+    return cls(schema)
+
+
+def check(data: Any, schema: str, path: Path, what: str, hint: str | None = None) -> None:
+    """Raise a MetadataError naming the key of the first (most relevant) schema violation."""
+    import jsonschema
+
+    if not isinstance(data, dict):
+        kind = {list: "a list", str: "a string", int: "a number", float: "a number", bool: "a boolean",
+                type(None): "null"}.get(type(data), type(data).__name__)
+        raise MetadataError(f"{path}: {what} holds {kind}, not a JSON object", path=str(path),
+                            hint=hint or f"see schemas/{schema} for what {what} holds")
+    fmt = data.get("format")
+    newest = _validator(schema).schema["properties"]["format"]["maximum"]
+    if isinstance(fmt, int) and not isinstance(fmt, bool) and fmt > newest:
+        raise MetadataError(f"{path}: {what} has format {fmt}, this recon reads format {newest} and older",
+                            path=str(path), where="format", hint="update recon to read this scan store")
+    error = jsonschema.exceptions.best_match(_validator(schema).iter_errors(data))
+    if error is None:
+        return
+    where = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in error.absolute_path).lstrip(".")
+    message = error.message if len(error.message) <= 160 else error.message[:157] + "..."
+    raise MetadataError(f"{path}: {what} " + (f"key '{where}': " if where else "") + message,
+                        path=str(path), where=where or None,
+                        hint=hint or f"see schemas/{schema} for what {what} holds")
+
+
+# --------------------------------------------------------------------- session.json
+@dataclass(frozen=True)
+class BoxInfo:
+    """An axis-aligned box: centre and edge lengths [m] in ``frame`` (world or marker)."""
+
+    center: tuple[float, float, float]
+    size: tuple[float, float, float]
+    frame: str = "world"
+
+    def to_dict(self) -> dict:
+        return {"frame": self.frame, "center": list(self.center), "size": list(self.size)}
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> BoxInfo | None:
+        if d is None:
+            return None
+        return cls(tuple(map(float, d["center"])), tuple(map(float, d["size"])), d.get("frame", "world"))
+
+
+def _pose(value) -> np.ndarray | None:
+    return None if value is None else np.asarray(value, dtype=float)
+
+
+@dataclass(frozen=True)
+class SessionInfo:
+    """What produced a scan store (``session.json``). Written by every acquisition session,
+    read back by ``recon register``; a recorded store may leave any of it unknown (None)."""
+
+    backend: str | None = None
+    mode: str | None = None
+    cell_kind: str | None = None
+    safety_distance: float | None = None
+    table_lift: float | None = None
+    sensor: str | None = None
+    noise: bool | None = None
+    seed: int | None = None
+    object_name: str | None = None
+    world_T_object: np.ndarray | None = None
+    object_box: BoxInfo | None = None
+    crop_box: BoxInfo | None = None
+    world_T_marker: np.ndarray | None = None
+    script: str | None = None
+    created: float = field(default_factory=time.time)
+    format: int = SESSION_FORMAT
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "format": self.format, "created": self.created, "backend": self.backend, "mode": self.mode,
+            "cell": {"kind": self.cell_kind, "safety_distance": self.safety_distance, "table_lift": self.table_lift},
+            "sensor": self.sensor, "noise": self.noise, "seed": self.seed, "script": self.script,
+            "object": None if self.object_name is None else {"name": self.object_name,
+                                                             "world_T_object": self.world_T_object},
+            "object_box": None if self.object_box is None else self.object_box.to_dict(),
+            "crop_box": None if self.crop_box is None else self.crop_box.to_dict(),
+            "world_T_marker": self.world_T_marker,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> SessionInfo:
+        """From a dict that passed ``schemas/session.schema.json``."""
+        cell = d.get("cell") or {}
+        obj = d.get("object") or {}
+        return cls(
+            backend=d.get("backend"), mode=d.get("mode"), cell_kind=cell.get("kind"),
+            safety_distance=cell.get("safety_distance"), table_lift=cell.get("table_lift"),
+            sensor=d.get("sensor"), noise=d.get("noise"), seed=d.get("seed"),
+            object_name=obj.get("name"), world_T_object=_pose(obj.get("world_T_object")),
+            object_box=BoxInfo.from_dict(d.get("object_box")), crop_box=BoxInfo.from_dict(d.get("crop_box")),
+            world_T_marker=_pose(d.get("world_T_marker")), script=d.get("script"),
+            created=float(d.get("created", 0.0)), format=int(d.get("format", SESSION_FORMAT)))
+
+
+def read_session(root: Path) -> SessionInfo:
+    """``root/session.json`` checked and typed; an empty SessionInfo when there is none."""
+    path = Path(root) / "session.json"
+    if not path.exists():
+        return SessionInfo(created=0.0)
+    data = load_json(path, "session.json")
+    check(data, "session.schema.json", path, "session.json",
+          hint="repair or remove session.json (without it, pass the crop box with --box)")
+    return SessionInfo.from_dict(data)
+
+
+# --------------------------------------------------------------------- scan.json
+def read_scan_meta(folder: Path) -> dict[str, Any]:
+    """``folder/scan.json`` checked against ``schemas/scan.schema.json``."""
+    path = Path(folder) / "scan.json"
+    if not path.exists():
+        raise MetadataError(f"{folder}: scan folder without scan.json", path=str(path),
+                            hint="a scan needs scan.json beside its depth.png")
+    data = load_json(path, "scan.json")
+    check(data, "scan.schema.json", path, "scan.json")
+    return data

@@ -1,0 +1,88 @@
+"""Options of registration and surface reconstruction: board, pose graph, surface.
+
+A light module (numpy only) so that the configuration and the command line can take their
+defaults from it without loading Open3D or OpenCV.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from recon_cli.perception.charuco import BoardSpec
+    from recon_cli.reconstruction.crop import CropBox
+
+#: [px] a board pose whose corners reproject worse than this is not trusted (a grazing view
+#: of the board: in simulation such a pose was 2.85 mm off at 2.7 px, the good ones < 0.4 px)
+MAX_REPROJECTION_PX = 1.0
+
+
+@dataclass(frozen=True)
+class SurfaceOptions:
+    voxel: float = 0.001  # [m] voxel of the fused cloud
+    normal_radius: float = 0.004  # [m] neighbourhood of the normal estimation
+    outlier_neighbors: int = 50  # statistical outlier removal (thesis: 50 neighbours, 3 sigma)
+    outlier_std_ratio: float = 3.0
+    poisson_depth: int = 9  # octree depth (thesis: 8)
+    density_quantile: float = 0.02  # drop mesh vertices below this quantile of Poisson density
+
+
+@dataclass(frozen=True)
+class MultiwayOptions:
+    voxel: float = 0.0015  # [m] down-sampling of the clouds used for registration
+    # [m] finest ICP correspondence distance: larger ones let partly overlapping scans pull
+    # each other along their borders (biased by tenths of a millimetre)
+    max_correspondence: float = 0.0015
+    scales: tuple[float, ...] = (4.0, 2.0, 1.0)  # ICP runs at these multiples of it, in order
+    icp_iterations: int = 50  # per scale
+    min_overlap: float = 0.3  # pair overlaps: correspondences / smaller cloud above this
+    loop_closure_init: str = "icp"  # "icp" or "global" (identity, the thesis' choice)
+    edge_prune_threshold: float = 0.25
+    reference: int = 0  # node kept fixed during the optimization ("reference" anchor)
+    # how the graph is tied to the global registration:
+    # "prior": every scan keeps an edge to the common frame weighted by the global
+    #   registration's uncertainty (prior_sigma); directions the scans' overlaps do not fix
+    #   (a rotationally symmetric object turning about its axis) stay where the board put
+    #   them, and the set as a whole averages the global poses;
+    # "mean": no prior, afterwards the set is moved to agree best with the global poses on
+    #   average; "reference": no prior, the reference node keeps its global pose
+    anchor: str = "prior"
+    prior_sigma: tuple[float, float] = (0.002, 0.1)  # [m, deg] per global pose
+    point_sigma: float = 0.0002  # [m] floor of the ICP residual that weights ICP edges
+    # a pairwise ICP result that moves the source farther from the global alignment than the
+    # global registration's own uncertainty allows (3 sigma of the relative pose of two
+    # scans, prior_sigma x sqrt(2)) slid along a symmetry of the overlap and is rejected
+    gate: float = 3.0
+    normal_agreement: float = 0.99  # cosine: correspondences with normals further apart are dropped
+    effective_samples: int = 200  # independent measurements a pairwise overlap is worth
+    normal_radius: float = 2.5  # [voxels] neighbourhood of the normals
+    rounds: int = 1  # graph built and optimized this many times
+    method: str = "point_to_plane"  # pairwise ICP: point_to_plane | point_to_point | colored
+
+    def __post_init__(self) -> None:
+        if self.loop_closure_init not in ("icp", "global"):
+            raise ValueError(f"loop_closure_init must be 'icp' or 'global', not {self.loop_closure_init!r}")
+        if self.method not in ("point_to_plane", "point_to_point", "colored"):
+            raise ValueError(f"method must be point_to_plane, point_to_point or colored, not {self.method!r}")
+        if self.anchor not in ("prior", "mean", "reference"):
+            raise ValueError(f"anchor must be 'prior', 'mean' or 'reference', not {self.anchor!r}")
+
+
+@dataclass(frozen=True)
+class RegisterOptions:
+    box: CropBox | None = None  # in the world frame (default: the session's object box)
+    box_frame: str = "world"  # frame of ``box``: world | marker
+    use_board: bool = True  # False: every pose from kinematics
+    min_corners: int = 6
+    max_reprojection_px: float = MAX_REPROJECTION_PX  # board poses reprojecting worse: kinematics
+    local: bool = True  # pose-graph local registration
+    mesh: bool = True
+    multiway: MultiwayOptions = field(default_factory=MultiwayOptions)
+    surface: SurfaceOptions = field(default_factory=SurfaceOptions)
+    board: BoardSpec | None = None
+    # evaluation aid: move every global pose by this translation [m] and rotation [rad] in
+    # random directions (seeded), e.g. the thesis' ChArUco errors on a simulated camera whose
+    # poses are otherwise nearly exact; recorded in the report
+    perturb: tuple[float, float] | None = None
+    seed: int = 0

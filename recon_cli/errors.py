@@ -115,6 +115,27 @@ class HardwareUnavailable(ReconError):
     """The hardware backend was asked for, but no station adapters are configured here."""
 
 
+class RobotFault(ReconError):
+    """The robot was stopped by recon or reported a fault: the run cannot go on safely.
+
+    kind: "connection" (lost or refused), "plc_fault" (the PLC's error flag, ``code`` its
+    error id), "timeout" (no completion within the time bound), "tracking" (measured joints
+    too far from the setpoints, ``joint``/``value``/``bound``), "limit" (a setpoint outside
+    a joint or velocity limit, refused before anything was sent), "start" (the robot is not
+    where the trajectory starts). ``stopped``: the stop command reached the robot.
+    """
+
+    exit_code = 4
+    label = "robot stopped"
+
+    def __init__(self, message: str, *, kind: str, hint: str | None = None, code: int | None = None,
+                 joint: str | None = None, value: float | None = None, bound: float | None = None,
+                 stopped: bool = True) -> None:
+        self.kind, self.code, self.joint = kind, code, joint
+        self.value, self.bound, self.stopped = value, bound, stopped
+        super().__init__(message, hint=hint)
+
+
 class ScriptAborted(ReconError):
     """A failed command under on_failure="abort"; ``source`` is its file:line."""
 

@@ -67,13 +67,15 @@ class SessionSpec:
     append: bool = False  # add to the scan store in ``out`` (same cell, object and backend)
     run_folder: Path | None = None  # where config.yaml goes (default: ``out``)
     run: dict = field(default_factory=dict)  # what else config.yaml records (command, options)
+    station: Path | None = None  # a station file: the robot and camera adapters (and the cell) to use
 
 
 class Session:
     """An open session: use as a context manager (closing stops the robot and frees the
     station)."""
 
-    def __init__(self, spec: SessionSpec, rng: np.random.Generator, plan_only: bool = False) -> None:
+    def __init__(self, spec: SessionSpec, rng: np.random.Generator, plan_only: bool = False,
+                 station_file=None) -> None:
         from recon_cli.objects import load_object
         from recon_cli.robot.cell import Cell
         from recon_cli.robot.poses import named_configuration
@@ -81,6 +83,7 @@ class Session:
         cfg = spec.config
         self.spec = spec
         self.rng = rng
+        self.station_file = station_file
         self.scene_object = load_object(resolve_object_name(cfg.scene.object_name), cfg.scene.object_scale)
         self.object_box = self._object_box()
         self.cell = Cell(cfg.cell, object_box=self.object_box)
@@ -121,7 +124,8 @@ class Session:
             world_T_object=self.scene_object.world_T_object,
             object_box=BoxInfo(tuple(box.center), tuple(box.size)), crop_box=crop,
             world_T_marker=self.cell.world_T_marker, script=spec.script)
-        self.station = open_station(spec.backend, self.cell, self.scene_object, self.start, self.rng, cfg)
+        self.station = open_station(spec.backend, self.cell, self.scene_object, self.start, self.rng, cfg,
+                                    self.station_file)
         self.store = self._open_store()
         write_config(spec.run_folder or spec.out, cfg, mode=spec.mode.value, backend=spec.backend.value,
                      script=spec.script, object=self.scene_object.name, **spec.run)
@@ -168,18 +172,31 @@ def open_session(spec: SessionSpec, rng: np.random.Generator | None = None, *, p
     if not (math.isfinite(cfg.scene.object_scale) and cfg.scene.object_scale > 0):
         raise InputError(f"object scale {cfg.scene.object_scale} is not a positive number",
                          hint="e.g. 0.001 for millimetres")
-    seed_ompl(cfg.seed)
-    return Session(spec, rng if rng is not None else np.random.default_rng(cfg.seed), plan_only)
+    station_file = None
+    if spec.station is not None:
+        from dataclasses import replace
+
+        from recon_cli.backends.station_file import load_station
+
+        station_file = load_station(spec.station)
+        spec = replace(spec, config=cfg.replace(cell=station_file.cell),
+                       backend=Backend.HARDWARE if station_file.hardware else Backend.SIM)
+    seed_ompl(spec.config.seed)
+    return Session(spec, rng if rng is not None else np.random.default_rng(spec.config.seed), plan_only,
+                   station_file)
 
 
 def open_station(backend: Backend, cell, scene_object, start: np.ndarray, rng: np.random.Generator,
-                 cfg: Config) -> Station:
-    """The station of a backend: the MuJoCo simulation of the cell, or hardware adapters."""
+                 cfg: Config, station_file=None) -> Station:
+    """The station of a backend: the adapters of a station file, or the MuJoCo simulation."""
+    if station_file is not None:
+        from recon_cli.backends.hardware.station import HardwareStation
+
+        return HardwareStation(station_file, cell, scene_object, start, rng)
     if backend is Backend.HARDWARE:
         raise HardwareUnavailable(
-            "no hardware adapter is configured on this machine (robot and camera drivers)",
-            hint="run with the simulation (backend sim) here; on the cell, install the adapters for "
-                 "RobotBackend/CameraBackend (recon_cli/backends/base.py)")
+            "the hardware backend needs a station file (which robot and camera adapters, how to reach them)",
+            hint="pass --station cell.yaml (docs/hardware.md has a complete example)")
     from recon_cli.backends.sim.station import SimStation
 
     return SimStation(cell, scene_object, start, rng, noise=cfg.sensor.noise, resolution=cfg.sensor.resolution)

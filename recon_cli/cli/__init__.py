@@ -7,6 +7,7 @@
     scripts.py   recon validate, recon run
     autoscan.py  recon autoscan
     bench.py     recon bench ...
+    station.py   recon station check
 
 Heavy libraries (pinocchio, coal, Open3D, MuJoCo, OMPL) are imported inside the commands
 so that ``recon --help`` is instant. User errors (``ReconError`` and malformed options)
@@ -20,7 +21,7 @@ import sys
 
 import typer
 
-from recon_cli.cli import autoscan, bench, cell, scans, scripts  # noqa: F401 (registers the commands)
+from recon_cli.cli import autoscan, bench, cell, scans, scripts, station  # noqa: F401 (registers the commands)
 from recon_cli.cli.app import app, bench_app
 from recon_cli.cli.options import parse_vector
 from recon_cli.errors import ReconError

@@ -6,7 +6,7 @@ import typer
 from typer.core import TyperGroup
 
 #: the order of the commands in ``recon --help``: from looking at the cell to benchmarks
-ORDER = ("cell", "ik", "objects", "capture", "register", "evaluate", "validate", "run", "autoscan", "bench")
+ORDER = ("cell", "ik", "objects", "capture", "register", "evaluate", "validate", "run", "autoscan", "station", "bench")
 
 
 class _Ordered(TyperGroup):

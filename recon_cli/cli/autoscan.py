@@ -31,6 +31,8 @@ def autoscan(
     pictures: Annotated[bool, typer.Option("--pictures/--no-pictures", help="A PNG per iteration.")] = True,
     out: Annotated[Path | None, typer.Option(help="Output folder (default runs/autoscan-<time>).")] = None,
     seed: SeedOpt = D.seed,
+    station: Annotated[Path | None, typer.Option(help="Station file: run on the robot and camera adapters it names "
+                                                      "(docs/hardware.md); default: the simulation.")] = None,
 ) -> None:
     """Scan an unknown object autonomously: the ellipsoid view planner of the thesis."""
     from dataclasses import replace
@@ -52,7 +54,7 @@ def autoscan(
 
         center, _ = load_object(object_name, scale).crop_box(config.scene.box_margin)
         view = make_view(",".join(map(str, center)), dc + 0.1, theta, phi, 0.0, "world")
-    opts = AutoscanOptions(folder, config, view, pictures=pictures, run={"command": "autoscan"})
+    opts = AutoscanOptions(folder, config, view, pictures=pictures, run={"command": "autoscan"}, station=station)
     with progress_bar() as update:
         result = Autoscan(opts, update).run()
     if result.interrupted:

@@ -60,6 +60,8 @@ def capture(
                                             "(the thesis' 24 views around f = (0, 0, 0.78) m, r = 0.6 m).")] = "single",
     cover_board: Annotated[str, typer.Option(help="Views (1-based, comma-separated) with a sheet over the "
                                                   "ChArUco board, e.g. '3,7'.")] = "",
+    station: Annotated[Path | None, typer.Option(help="Station file: run on the robot and camera adapters it names "
+                                                      "(docs/hardware.md); default: the simulation.")] = None,
 ) -> None:
     """Move the simulated robot through views and write one scan per view into a scan store."""
     from dataclasses import replace
@@ -87,7 +89,7 @@ def capture(
         planner=replace(D.planner, planner=planner, time_limit=planning_time))
     folder = run_folder(out, "capture")
     options = CaptureOptions(views=view_list, out=folder, config=config, cover_board=frozenset(covered),
-                             run={"command": "capture", "views": views})
+                             run={"command": "capture", "views": views}, station=station)
     with progress_bar() as update:
         result = run_capture(options, update)
     for m, scan, n_points, t_cap in zip(result.moves, result.scans, result.points, result.capture_seconds,

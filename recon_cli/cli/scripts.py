@@ -57,11 +57,13 @@ def run_script(
                                                           "be new or empty.")] = False,
     allow_failures: Annotated[bool, typer.Option("--allow-failures", help="Exit 0 even when some commands "
                                                                           "failed (default: exit 3).")] = False,
+    station: Annotated[Path | None, typer.Option(help="Station file: run on the robot and camera adapters it names "
+                                                      "(docs/hardware.md); default: the simulation.")] = None,
 ) -> None:
     """Run an automation script: moves, scans, registration, reconstruction, exports."""
     from recon_cli.console import console, progress_bar, run_folder, styled
     from recon_cli.interrupts import stop_signals
-    from recon_cli.scripts.checks import check_script
+    from recon_cli.scripts.checks import check_backend, check_script
     from recon_cli.scripts.loader import load_script
     from recon_cli.scripts.state import RunOptions, SequenceMethod
     from recon_cli.session import Backend
@@ -72,9 +74,10 @@ def run_script(
     one_of(sequence_method, SEQUENCE_METHODS, "sequence method")
     s = load_script(script)
     check_script(s, object_override=object_name)  # before the output folder is made
+    check_backend(s, backend, station, dry_run)
     folder = run_folder(out, "run", fresh=not append)
     options = RunOptions(folder, None if backend is None else Backend(backend), seed, dry_run, object_name, optimize,
-                         SequenceMethod(sequence_method), append)
+                         SequenceMethod(sequence_method), append, station)
     with stop_signals(), progress_bar() as update:
         result = ScriptRunner(s, options, update).run()
     counts: dict[str, int] = {}

@@ -22,6 +22,8 @@ CELL_XACRO = ROBOT_DIR / "cell.urdf.xacro"
 
 #: the thesis planned with a 3 cm safety distance (MoveIt planning context, CELL_FACTS 3.4)
 DEFAULT_SAFETY_DISTANCE = 0.03
+#: [m] the camera bracket frame camera_link_0 above the flange (robot/parts/camera.xacro)
+BRACKET_HEIGHT = 0.0723
 
 
 class CellKind(StrEnum):
@@ -52,14 +54,30 @@ class CellConfig:
     safety_distance: inflation of every collision shape [m] (thesis 2.2.4)
     table_lift: extension of the telescoping table [m]
     ceiling_xy: base position of the ceiling cell in the world [m]
+    flange_T_camera: hand-eye transform, the camera's optical frame in the flange (arm_link_7)
+        frame, 16 numbers row by row [m]; None: the thesis' calibration in the description
     """
 
     kind: CellKind = CellKind.GANTRY
     safety_distance: float = DEFAULT_SAFETY_DISTANCE
     table_lift: float = 0.0
     ceiling_xy: tuple[float, float] = (0.0, 0.0)
+    flange_T_camera: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
+        if self.flange_T_camera is not None:
+            m = [float(v) for v in self.flange_T_camera]
+            R = [m[0:3], m[4:7], m[8:11]]
+            ok = len(m) == 16 and all(math.isfinite(v) for v in m) and m[12:] == [0.0, 0.0, 0.0, 1.0]
+            if ok:  # orthonormal rotation
+                for i in range(3):
+                    for j in range(3):
+                        dot = sum(R[k][i] * R[k][j] for k in range(3))
+                        ok = ok and abs(dot - (1.0 if i == j else 0.0)) < 1e-6
+            if not ok:
+                raise InputError("the hand-eye transform flange_T_camera is not a rigid 4 x 4 transform",
+                                 hint="give 16 numbers row by row with an orthonormal rotation and 0 0 0 1 last")
+            object.__setattr__(self, "flange_T_camera", tuple(m))
         if not isinstance(self.kind, CellKind):
             object.__setattr__(self, "kind", CellKind.parse(self.kind))
         if not (math.isfinite(self.safety_distance) and 0.0 <= self.safety_distance <= 0.2):
@@ -80,7 +98,21 @@ class CellConfig:
             "table_lift": repr(float(self.table_lift)),
             "ceiling_x": repr(float(self.ceiling_xy[0])),
             "ceiling_y": repr(float(self.ceiling_xy[1])),
+            **self._camera_args(),
         }
+
+    def _camera_args(self) -> dict[str, str]:
+        """The optical frame in the camera bracket frame (BRACKET_HEIGHT above the flange)."""
+        if self.flange_T_camera is None:
+            return {}
+        from scipy.spatial.transform import Rotation
+
+        m = self.flange_T_camera
+        R = [m[0:3], m[4:7], m[8:11]]
+        xyz = (m[3], m[7], m[11] - BRACKET_HEIGHT)
+        rpy = Rotation.from_matrix(R).as_euler("xyz")  # fixed axes x, y, z: URDF's rpy
+        return {"camera_xyz": " ".join(repr(float(v)) for v in xyz),
+                "camera_rpy": " ".join(repr(float(v)) for v in rpy)}
 
 
 def _robot_dir_digest() -> str:

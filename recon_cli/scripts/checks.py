@@ -186,3 +186,16 @@ def check_script(script: C.Script, *, object_override: str | None = None) -> Non
             elif isinstance(cmd, C.DeleteFragment):
                 fragments.discard(cmd.fragment)
 
+
+
+def check_backend(script: C.Script, backend: str | None, station: Path | None, dry_run: bool = False) -> None:
+    """A run on the hardware backend needs a station file; refuse before anything is written."""
+    cells = [c for c in script.commands if isinstance(c, C.SetCell)]
+    wanted = backend or (cells[-1].backend if cells else "sim")
+    if wanted == "hardware" and station is None and not dry_run:
+        from recon_cli.errors import HardwareUnavailable
+
+        where = f"{cells[-1].source}: " if backend is None and cells else ""
+        raise HardwareUnavailable(
+            f"{where}the hardware backend needs a station file (which robot and camera adapters, how to reach them)",
+            hint="pass --station cell.yaml (docs/hardware.md has a complete example), or --backend sim")

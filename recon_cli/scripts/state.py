@@ -66,6 +66,7 @@ class RunOptions:
     optimize: bool | None = None  # sequence optimization (None: as the script says)
     sequence_method: SequenceMethod = SequenceMethod.OURS
     append: bool = False  # add scans to the scan store already in ``out``
+    station: Path | None = None  # a station file: robot and camera adapters (and the cell)
 
 
 @dataclass
@@ -158,7 +159,8 @@ class RunState:
             return
         spec = SessionSpec(self.out / "scans", self.config, Mode.SCRIPT, self.backend, box=self._explicit_box(),
                            script=self.script.path, append=self.options.append, run_folder=self.out,
-                           run={"command": "run", "dialect": self.script.dialect, "dry_run": self.dry_run})
+                           run={"command": "run", "dialect": self.script.dialect, "dry_run": self.dry_run},
+                           station=self.options.station)
         self.session = open_session(spec, self.rng, plan_only=self.dry_run)
         self.cell = self.session.cell
         self.q_planned = self.session.start

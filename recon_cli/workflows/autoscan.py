@@ -38,6 +38,7 @@ class AutoscanOptions:
     pictures: bool = True
     mesh: bool = True
     run: dict = field(default_factory=dict)  # recorded in config.yaml
+    station: Path | None = None  # a station file (robot and camera adapters)
 
 
 @dataclass
@@ -100,7 +101,8 @@ class Autoscan:
         from recon_cli.reconstruction.crop import CropBox
 
         opt, cfg = self.opt, self.opt.config
-        spec = SessionSpec(opt.out, cfg, Mode.AUTOSCAN, opt.backend, run={"method": self.method.value, **opt.run})
+        spec = SessionSpec(opt.out, cfg, Mode.AUTOSCAN, opt.backend, run={"method": self.method.value, **opt.run},
+                           station=opt.station)
         self.session = open_session(spec, self.rng)
         self.obj, self.cell, self.store = self.session.scene_object, self.session.cell, self.session.store
         self.station, self.acq = self.session.station, self.session.acquisition

@@ -31,6 +31,7 @@ class CaptureOptions:
     backend: Backend = Backend.SIM
     cover_board: frozenset[int] = frozenset()  # 1-based views with the board covered (simulation)
     run: dict = field(default_factory=dict)  # recorded in config.yaml
+    station: Path | None = None  # a station file (robot and camera adapters)
 
 
 @dataclass(frozen=True)
@@ -60,7 +61,7 @@ def run_capture(opt: CaptureOptions, progress: Callable[[str, int, int], None] |
     n = len(opt.views)
     step = (lambda k: progress("capture", k, n)) if progress else (lambda k: None)
     scans, moves, failures, capture_seconds = [], [], [], []
-    spec = SessionSpec(opt.out, opt.config, Mode.CAPTURE, opt.backend, run=opt.run)
+    spec = SessionSpec(opt.out, opt.config, Mode.CAPTURE, opt.backend, run=opt.run, station=opt.station)
     with open_session(spec) as session:
         cell, acq = session.cell, session.acquisition
         for k, view in enumerate(opt.views, start=1):

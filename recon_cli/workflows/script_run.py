@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from recon_cli.config import DEFAULTS, SceneConfig
-from recon_cli.errors import ReconError, RunInterrupted, ScriptAborted
+from recon_cli.errors import ReconError, RobotFault, RunInterrupted, ScriptAborted
 from recon_cli.interrupts import exit_code, signal_name
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.checks import ACTIONS, check_script
@@ -173,11 +173,13 @@ class ScriptRunner:
             report.status, report.message = CommandStatus.FAILED, exc.one_line()
             if isinstance(cmd, ACTIONS) and not isinstance(cmd, C.Scan):
                 self.state.move_failed = True
-            if self.on_failure is OnFailure.ABORT:
+            if self.on_failure is OnFailure.ABORT or isinstance(exc, RobotFault):
                 report.seconds = time.perf_counter() - t
                 self.reports.append(report)
+                why = ("the robot was stopped" if isinstance(exc, RobotFault)
+                       else "the script says on_failure=\"abort\"")
                 raise ScriptAborted(f"{cmd.source}: {exc.one_line()}", source=str(cmd.source),
-                                    hint="the script says on_failure=\"abort\"; earlier scans are kept") from None
+                                    hint=f"{why}; earlier scans are kept") from None
         report.seconds = time.perf_counter() - t
         self.reports.append(report)
         self.current = None

@@ -73,9 +73,10 @@ def test_abort_keeps_earlier_scans(tmp_path, capsys):
 
 def test_hardware_backend_is_a_clear_error(tmp_path, capsys):
     p = _script(tmp_path, GOOD.format(phi=0))
-    assert main(["run", str(p), "--out", str(tmp_path / "hw"), "--backend", "hardware"]) == 3
-    report = json.loads((tmp_path / "hw" / "run_report.json").read_text())
-    assert "no hardware adapter" in report["commands"][3]["message"]
+    assert main(["run", str(p), "--out", str(tmp_path / "hw"), "--backend", "hardware"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the hardware backend needs a station file" in err and "--station" in err
+    assert not (tmp_path / "hw").exists()  # refused before anything was written
 
 
 def test_thesis_dialect_runs_unchanged(tmp_path):

@@ -1,0 +1,39 @@
+"""``recon station check``: connect to a cell's robot and camera, read the joints, grab a frame."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from recon_cli.cli.app import app
+
+station_app = typer.Typer(help="Station files: the robot and camera adapters of a real cell.", no_args_is_help=True,
+                          rich_markup_mode=None)
+app.add_typer(station_app, name="station")
+
+
+@station_app.command("check")
+def check(
+    station: Annotated[Path, typer.Argument(help="Station file (YAML; docs/hardware.md).")],
+) -> None:
+    """Connect to the robot and the camera of a station file, print the joints and one frame's size."""
+    import numpy as np
+
+    from recon_cli.backends.hardware.station import check_station
+    from recon_cli.backends.station_file import load_station
+    from recon_cli.console import console
+
+    sf = load_station(station)
+    console.print(f"station {sf.name!r} ({station}): robot {sf.robot_adapter}, camera {sf.camera_adapter}, "
+                  f"cell {sf.cell.kind.value}")
+    result = check_station(sf)
+    console.print("joints: " + ", ".join(f"{k} {v:.4f} m" if result.prismatic[k] else f"{k} {np.degrees(v):.3f}°"
+                                         for k, v in result.joints.items())
+                  + ("" if result.within_limits else "  (outside the soft limits!)"))
+    rng = "no depth" if result.depth_range is None else \
+        f"depth {result.depth_range[0]:.3f} ... {result.depth_range[1]:.3f} m"
+    console.print(f"frame: {result.width} x {result.height} px, {result.valid_depth * 100:.1f} % with depth, {rng}; "
+                  f"fx {result.intrinsics['fx']:.1f} px, fy {result.intrinsics['fy']:.1f} px")
+    console.print(f"station ok in {result.seconds:.2f} s")

@@ -1,0 +1,139 @@
+"""Station files and `recon run --station` end to end: the robot over ADS (pyads' test
+server with the stand-in PLC program) and the simulated sensor rendered at the joints the
+PLC measures; a PLC fault in the middle of a run stops it and keeps the completed scans."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pyads", reason="the ADS adapter needs pyads (pip install recon-cli[ads])")
+
+from recon_cli.backends.station_file import load_station  # noqa: E402
+from recon_cli.cli import main  # noqa: E402
+from recon_cli.errors import InputError  # noqa: E402
+from recon_cli.robot.cell import Cell  # noqa: E402
+from recon_cli.robot.description import CellConfig  # noqa: E402
+from recon_cli.robot.poses import named_configuration  # noqa: E402
+
+from .plc_standin import NC_FOLLOWING_ERROR, PLCStandIn  # noqa: E402
+
+STATION = """\
+format: 1
+name: stand-in cell
+cell: {kind: gantry, safety_distance: 0.03}
+robot:
+  adapter: ads
+  ads: {ams_net_id: 127.0.0.1.1.1, ip: 127.0.0.1, port: 851, poll: 0.005, timeout: 1.0, watchdog: 2.0,
+        time_margin: 2.0}
+camera:
+  adapter: sim
+  sim: {noise: true, resolution: 0.25}
+"""
+
+SCRIPT = """\
+<?xml version="1.0"?>
+<recon name="station" on_failure="skip">
+  <cell kind="gantry" backend="hardware"/>
+  <object name="bottle"/>
+  <move focus="0 0 0.8" radius="0.6" theta="60" phi="0"/>
+  <scan name="a"/>
+  <move focus="0 0 0.8" radius="0.6" theta="60" phi="120"/>
+  <scan name="b"/>
+  <move focus="0 0 0.8" radius="0.6" theta="45" phi="240"/>
+  <scan name="c"/>
+  <register/>
+  <reconstruct voxel="0.002" depth="7"/>
+  <export mesh="mesh.ply"/>
+</recon>
+"""
+
+
+@pytest.fixture()
+def plc():
+    cell = Cell(CellConfig())
+    start = named_configuration(cell.config.kind, "home", cell.joint_names)
+    stand_in = PLCStandIn(len(cell.joint_names), start, speedup=10.0).start()
+    yield stand_in
+    stand_in.close()
+    assert stand_in.crash is None, stand_in.crash
+
+
+@pytest.fixture()
+def files(tmp_path):
+    (tmp_path / "cell.yaml").write_text(STATION)
+    (tmp_path / "scan.xml").write_text(SCRIPT)
+    return tmp_path / "cell.yaml", tmp_path / "scan.xml"
+
+
+def test_station_check(plc, files, capsys):
+    station, _ = files
+    assert main(["station", "check", str(station)]) == 0
+    out = capsys.readouterr().out
+    assert "robot ads, camera sim" in out and "base_joint_1 -1.0000 m" in out
+    assert "frame: 400 x 300 px" in out and "station ok" in out
+
+
+def test_run_with_station_end_to_end(plc, files, tmp_path, capsys):
+    station, script = files
+    out = tmp_path / "run"
+    code = main(["run", str(script), "--out", str(out), "--station", str(station)])
+    text = capsys.readouterr()
+    assert code == 0, text.out + text.err + str(plc.crash)
+    assert plc.started == 3  # three moves through the PLC
+    scans = sorted((out / "scans").glob("scan_*/scan.json"))
+    assert [json.loads(s.read_text())["name"] for s in scans] == ["a", "b", "c"]
+    session = json.loads((out / "scans" / "session.json").read_text())
+    assert session["backend"] == "hardware" and not (out / "scans" / "ground_truth").exists()
+    assert (out / "mesh.ply").stat().st_size > 10_000
+    report = json.loads((out / "run_report.json").read_text())
+    assert report["status"] == "done" and report["backend"] == "hardware", report
+    # the last scan was taken where the PLC says the robot is
+    assert np.allclose(plc.measured, np.array(list(json.loads(scans[-1].read_text())["joints"].values())),
+                       atol=1e-3)
+
+
+def test_plc_fault_mid_run_stops_and_keeps_scans(plc, files, tmp_path, capsys):
+    station, script = files
+    plc.faults.fault_at, plc.faults.motion = 0.5, 2
+    out = tmp_path / "run"
+    code = main(["run", str(script), "--out", str(out), "--station", str(station)])
+    err = capsys.readouterr().err
+    assert code == 4 and err.count("\n") == 1 and "Traceback" not in err
+    assert f"the PLC reports fault {NC_FOLLOWING_ERROR}" in err and "the robot was stopped" in err
+    assert len(list((out / "scans").glob("scan_*/scan.json"))) == 1  # the scan before the fault is kept
+    report = json.loads((out / "run_report.json").read_text())
+    assert report["status"] == "aborted" and "PLC reports fault" in report["aborted"]
+    assert plc.get("stop", "B")[0] == 1
+
+
+@pytest.mark.parametrize("text, message", [
+    ("format: 1\nrobot: {adapter: ads}\n", "no camera section"),
+    ("format: 1\nrobot: {adapter: kuka}\ncamera: {adapter: sim}\n", "unknown robot adapter 'kuka'"),
+    ("format: 1\nrobot: {adapter: sim}\ncamera: {adapter: sim}\nspeed: 3\n", "speed is not a known key"),
+    ("format: 1\nrobot: {adapter: ads, ads: {poll: -1}}\ncamera: {adapter: sim}\n", "robot.ads.poll = -1.0"),
+    ("format: 1\nrobot: [adapter\n", r"station.yaml:3: not valid YAML \(expected ',' or ']'"),
+    ("format: 1\nhand_eye: [[1, 0], [0, 1]]\nrobot: {adapter: sim}\ncamera: {adapter: sim}\n",
+     "hand_eye is not 4 rows of 4 numbers"),
+    ("format: 1\nhand_eye: [[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]\nrobot: {adapter: sim}\n"
+     "camera: {adapter: sim}\n", "not a rigid 4 x 4 transform"),
+])
+def test_station_file_errors_are_one_line(text, message, tmp_path, capsys):
+    path = tmp_path / "station.yaml"
+    path.write_text(textwrap.dedent(text))
+    with pytest.raises(InputError, match=message):
+        load_station(path)
+    assert main(["station", "check", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_hardware_without_station_says_what_to_do(files, tmp_path, capsys):
+    _, script = files
+    assert main(["run", str(script), "--out", str(tmp_path / "r")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "scan.xml:3: the hardware backend needs a station file" in err
+    assert "--station" in err and not (tmp_path / "r").exists()

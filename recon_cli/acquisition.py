@@ -71,7 +71,15 @@ class Acquisition:
 
     def move_to_pose(self, world_T_camera: np.ndarray, what: str = "view") -> MoveReport:
         q0 = self.robot.measured_joints()
-        plan = self.planner.plan_to_pose(q0, world_T_camera, self.rng, what=what)
+        return self._execute(self.planner.plan_to_pose(q0, world_T_camera, self.rng, what=what), what)
+
+    def move_to_joints(self, goals: np.ndarray | list[np.ndarray], what: str = "view") -> MoveReport:
+        """Plan to a joint goal (n,) or to whichever of several is reached first, execute it
+        and wait for the settled robot."""
+        q0 = self.robot.measured_joints()
+        return self._execute(self.planner.plan_to_joints(q0, goals, seed=int(self.rng.integers(1 << 30))), what)
+
+    def _execute(self, plan: PlanResult, what: str) -> MoveReport:
         if not plan.ok:
             raise PlanningError(f"cannot move to the {what}: {plan.status.value} ({plan.message})",
                                 hint="try another view, a longer planning time or another planner", status=plan.status)
@@ -102,6 +110,7 @@ class Acquisition:
                 "capture_seconds": t1 - t0,
             },
             ground_truth=self.ground_truth() if self.ground_truth else None,
+            distortion=frame.distortion,
         )
         self.store.write(scan, self.depth_scale)
         return scan

@@ -6,6 +6,7 @@
     planner       planner, time limit, scalings, checks        (planning.planner.PlanOptions)
     registration  board, pose graph, surface                   (reconstruction.pipeline.RegisterOptions)
     viewplan      N, d_c, potential field, our additions       (ViewPlanConfig)
+    realism       how the simulated cell differs from the model (realism.RealismProfile)
 
 Each section is the typed options object its module already takes, so the defaults live in
 one place (the section's dataclass); CLI options and script elements take their defaults
@@ -23,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from recon_cli.planning.options import PlanOptions
+from recon_cli.realism import IDEAL, RealismProfile
 from recon_cli.reconstruction.options import RegisterOptions
 from recon_cli.robot.description import CellConfig
 
@@ -67,6 +69,7 @@ class Config:
     registration: RegisterOptions = field(default_factory=RegisterOptions)
     viewplan: ViewPlanConfig = field(default_factory=ViewPlanConfig)
     seed: int = 0
+    realism: RealismProfile = IDEAL  # the simulation only (a hardware station is as real as it is)
 
     def replace(self, **sections) -> Config:
         return dataclasses.replace(self, **sections)

@@ -136,6 +136,18 @@ class RobotFault(ReconError):
         super().__init__(message, hint=hint)
 
 
+class CameraFault(ReconError):
+    """The camera gave no usable frame: not found, time-out, lost, data it cannot convert, or
+    a replay with no frame left. ``adapter`` names the camera adapter (genicam, realsense,
+    replay)."""
+
+    label = "camera"
+
+    def __init__(self, message: str, *, adapter: str, hint: str | None = None) -> None:
+        self.adapter = adapter
+        super().__init__(message, hint=hint)
+
+
 class ScriptAborted(ReconError):
     """A failed command under on_failure="abort"; ``source`` is its file:line."""
 

@@ -2,7 +2,7 @@
 
 Every object keeps its exact ground-truth triangle mesh (object frame: base on z = 0,
 centred on the z-axis) and its pose in the world: it stands on the ChArUco board centre
-like the thesis' power drill (CELL_FACTS section 7). Built-in objects are unions of
+like the thesis' power drill (the thesis cell, object placement). Built-in objects are unions of
 primitives; their ground-truth surface samples leave out the faces hidden inside the union
 (contact faces between blocks), so coverage counts only surface a camera can see.
 """
@@ -19,7 +19,7 @@ from recon_cli.errors import FileError, InputError, UnknownNameError
 from recon_cli.geometry.transforms import pose, rot_x, rpy_to_matrix, transform_points
 from recon_cli.paths import SHARED_DATA_DIR
 
-#: the board centre on the table top (world) where objects stand (CELL_FACTS 6, 7)
+#: the board centre on the table top (world) where objects stand (thesis cell: board and objects)
 BOARD_CENTRE = np.array([0.0, 0.0, 0.683])
 
 
@@ -186,7 +186,7 @@ def _mug() -> SceneObject:
 
 
 # YCB objects of the thesis (../shared/data/ycb): mesh offsets of the thesis cell
-# (CELL_FACTS 7) make them stand as in the thesis; the object link is at the board centre.
+# (thesis cell: objects) make them stand as in the thesis; the object link is at the board centre.
 _YCB = {
     "drill": ("035_power_drill", (91.5, 1.5, 88.0), (-0.023, 0.045, 0.082), (0.2, 0.2, 0.2, 1.0),
               "YCB 035 power drill, upright (thesis 4.2)"),

@@ -41,6 +41,7 @@ class Mode(StrEnum):
     AUTOSCAN = "autoscan"
     SCRIPT = "script"
     BENCHMARK = "benchmark"
+    CALIBRATION = "calibration"  # board views without an object (recon calibrate)
 
 
 def resolve_object_name(name: str) -> str:
@@ -68,6 +69,7 @@ class SessionSpec:
     run_folder: Path | None = None  # where config.yaml goes (default: ``out``)
     run: dict = field(default_factory=dict)  # what else config.yaml records (command, options)
     station: Path | None = None  # a station file: the robot and camera adapters (and the cell) to use
+    board_only: bool = False  # nothing on the table but the ChArUco board (calibration views)
 
 
 class Session:
@@ -84,8 +86,9 @@ class Session:
         self.spec = spec
         self.rng = rng
         self.station_file = station_file
-        self.scene_object = load_object(resolve_object_name(cfg.scene.object_name), cfg.scene.object_scale)
-        self.object_box = self._object_box()
+        self.scene_object = None if spec.board_only else load_object(resolve_object_name(cfg.scene.object_name),
+                                                                     cfg.scene.object_scale)
+        self.object_box = None if spec.board_only else self._object_box()
         self.cell = Cell(cfg.cell, object_box=self.object_box)
         self.start = named_configuration(cfg.cell.kind, "home", self.cell.joint_names)
         self.station = self.store = self.acquisition = None
@@ -111,26 +114,32 @@ class Session:
 
         spec, cfg = self.spec, self.spec.config
         sensor = motioncam_3d_m()
-        box = self.object_box
-        if spec.box is not None:
+        box, obj = self.object_box, self.scene_object
+        if box is None:
+            crop = None
+        elif spec.box is not None:
             crop = BoxInfo(tuple(box.center), tuple(box.size))
         else:
-            c, s = self.scene_object.crop_box(cfg.scene.box_margin)
+            c, s = obj.crop_box(cfg.scene.box_margin)
             crop = BoxInfo(tuple(c), tuple(s))
         self.info = SessionInfo(
             backend=spec.backend.value, mode=spec.mode.value, cell_kind=cfg.cell.kind.value,
             safety_distance=cfg.cell.safety_distance, table_lift=cfg.cell.table_lift, sensor=sensor.name,
-            noise=cfg.sensor.noise, seed=cfg.seed, object_name=self.scene_object.name,
-            world_T_object=self.scene_object.world_T_object,
-            object_box=BoxInfo(tuple(box.center), tuple(box.size)), crop_box=crop,
-            world_T_marker=self.cell.world_T_marker, script=spec.script)
+            noise=cfg.sensor.noise, seed=cfg.seed, object_name=None if obj is None else obj.name,
+            world_T_object=None if obj is None else obj.world_T_object,
+            object_box=None if box is None else BoxInfo(tuple(box.center), tuple(box.size)), crop_box=crop,
+            world_T_marker=self.cell.world_T_marker, script=spec.script,
+            realism=cfg.realism.summary() if spec.backend is Backend.SIM and self.station_file is None else None)
         self.station = open_station(spec.backend, self.cell, self.scene_object, self.start, self.rng, cfg,
                                     self.station_file)
         self.store = self._open_store()
         write_config(spec.run_folder or spec.out, cfg, mode=spec.mode.value, backend=spec.backend.value,
-                     script=spec.script, object=self.scene_object.name, **spec.run)
+                     script=spec.script, object=None if obj is None else obj.name, **spec.run)
         if spec.backend is Backend.SIM:
-            write_ground_truth_mesh(spec.out, self.scene_object)
+            if obj is not None:
+                write_ground_truth_mesh(spec.out, obj)
+            if self.station_file is None and not cfg.realism.is_ideal:  # the SimStation of open_station
+                write_realism_record(spec.out, self.station.realism_record())
         self.acquisition = Acquisition(self.cell, self.station.robot, self.station.camera, self.store, self.rng,
                                        cfg.planner, depth_scale=sensor.depth_scale,
                                        ground_truth=self.station.ground_truth)
@@ -199,7 +208,20 @@ def open_station(backend: Backend, cell, scene_object, start: np.ndarray, rng: n
             hint="pass --station cell.yaml (docs/hardware.md has a complete example)")
     from recon_cli.backends.sim.station import SimStation
 
-    return SimStation(cell, scene_object, start, rng, noise=cfg.sensor.noise, resolution=cfg.sensor.resolution)
+    return SimStation(cell, scene_object, start, rng, noise=cfg.sensor.noise, resolution=cfg.sensor.resolution,
+                      realism=cfg.realism)
+
+
+def write_realism_record(folder: Path, record: dict) -> Path:
+    """What the realism profile drew for a simulated session (encoder offsets, base and
+    hand-eye errors, the actual camera) as ``ground_truth/realism.json``, beside the scans
+    and never read by any algorithm (evaluation only)."""
+    from recon_cli.console import write_json
+
+    gt = Path(folder) / "ground_truth"
+    gt.mkdir(exist_ok=True)
+    write_json(gt / "realism.json", record)
+    return gt / "realism.json"
 
 
 def write_ground_truth_mesh(folder: Path, obj) -> Path:

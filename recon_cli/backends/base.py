@@ -36,12 +36,15 @@ class ExecutionReport:
 
 @dataclass(frozen=True)
 class RGBDFrame:
-    """One capture. color: (H, W, 3) uint8 RGB; depth: (H, W) float64 [m], 0 = no return."""
+    """One capture. color: (H, W, 3) uint8 RGB; depth: (H, W) float64 [m], 0 = no return;
+    distortion: the lens distortion (OpenCV k1, k2, p1, p2, k3) that goes with the
+    intrinsics, None for a pinhole camera (or images already undistorted)."""
 
     color: np.ndarray
     depth: np.ndarray
     intrinsics: Intrinsics
     timestamp: float  # [s] backend clock
+    distortion: tuple[float, ...] | None = None
 
 
 @runtime_checkable

@@ -2,7 +2,9 @@
 
 The problem of Table 4.1: 9-DoF gantry cell, start and goal as given, the 0.3 m cube on the
 table (inflated by the 3 cm safety distance like every other shape), 5 s per request. Every
-request is independent (a fresh search from the start state). Measured per request: success,
+request is independent (a fresh search from the start state) with a seed of its own, the
+k-th drawn from --seed; every planner gets the same N seeds, and a request gives the same
+path again with its seed (``plan_to_joints``). Measured per request: success,
 plan time (search + simplification, the figure MoveIt's benchmark reports as "time"),
 post-processing time (toppra timing + the dense final check), path length (sum of absolute
 joint differences, rad and m mixed, as MoveIt) and trajectory duration (velocity and
@@ -22,7 +24,7 @@ import numpy as np
 
 from recon_cli.bench.scenarios import BENCH_CUBE, TABLE_4_1_GOAL, TABLE_4_1_START
 from recon_cli.paths import SHARED_DATA_DIR
-from recon_cli.planning.planner import MotionPlanner, PlanOptions, seed_ompl
+from recon_cli.planning.planner import MotionPlanner, PlanOptions
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.description import CellConfig
 
@@ -45,6 +47,7 @@ class RequestRow:
     post_time: float  # toppra + final check [s]
     path_length: float
     trajectory_duration: float
+    seed: int  # of the request (MotionPlanner.plan_to_joints: the same seed gives the same path)
 
 
 def summarize(rows: list[RequestRow]) -> dict:
@@ -63,25 +66,30 @@ def summarize(rows: list[RequestRow]) -> dict:
     }
 
 
+def request_seeds(seed: int, n: int) -> list[int]:
+    """The seeds of the N requests of a benchmark run with ``seed``."""
+    return [int(s) for s in np.random.default_rng(seed).integers(1 << 30, size=n)]
+
+
 def run_planner_bench(planners: list[str], n: int, time_limit: float, seed: int,
                       progress: Callable[[str, int, int], None] | None = None,
                       options: PlanOptions = PlanOptions()) -> list[RequestRow]:  # noqa: B008
     """N requests of the Table 4.1 problem per planner; ``options`` gives everything but the
     planner and the time limit (simplification, scaling)."""
-    seed_ompl(seed)
     cell = Cell(CellConfig(), object_box=BENCH_CUBE)
+    seeds = request_seeds(seed, n)
     rows: list[RequestRow] = []
     for name in planners:
         planner = MotionPlanner(cell, replace(options, planner=name, time_limit=time_limit))
-        for k in range(n):
+        for k, request_seed in enumerate(seeds):
             t0 = time.perf_counter()
-            r = planner.plan_to_joints(TABLE_4_1_START, TABLE_4_1_GOAL, seed=seed)
+            r = planner.plan_to_joints(TABLE_4_1_START, TABLE_4_1_GOAL, seed=request_seed)
             total = time.perf_counter() - t0
             plan_time = r.plan_time + r.simplify_time
             rows.append(RequestRow(
                 name, k, r.ok, r.status.value, plan_time, r.plan_time, r.simplify_time,
                 max(total - plan_time, 0.0) if r.ok else 0.0, r.path_length if r.ok else float("nan"),
-                r.trajectory.duration if r.ok else float("nan")))
+                r.trajectory.duration if r.ok else float("nan"), request_seed))
             if progress:
                 progress(name, k + 1, n)
     return rows

@@ -7,10 +7,13 @@ covered in two views (kinematic fallback). Then, on the same scans:
 - Table 4.2: translation and rotation error of every ChArUco camera pose;
 - the fused cloud against the ground-truth mesh for global registration only and after the
   pose graph (loop closures by ICP, ours; and by the global alignment, the thesis' choice);
-- the same with every global pose moved by the thesis' mean ChArUco errors (1.532 mm,
-  0.0853 deg) in random directions: our simulated camera has exact intrinsics, so its board
-  poses are far better than the thesis' calibrated Gazebo camera, and only this case shows
-  what local registration must repair on real hardware.
+- the poses of forward kinematics alone (every scan, board ignored), global registration;
+- with the ``ideal`` realism profile: the same with every global pose moved by the thesis'
+  mean ChArUco errors (1.532 mm, 0.0853 deg) in random directions: the ideal camera has
+  exact intrinsics, so its board poses are far better than the thesis' calibrated Gazebo
+  camera. Other profiles (``--realism thesis``) make the errors themselves, with a camera
+  that differs from the one recon is told about and a robot that differs from its model,
+  and skip these cases.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import numpy as np
 from recon_cli.bench.scenarios import eq_4_1_views
 from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig
 from recon_cli.perception.sensor import motioncam_3d_m
+from recon_cli.realism import IDEAL, RealismProfile
 from recon_cli.reconstruction.assessment import run_evaluate
 from recon_cli.reconstruction.evaluation import histogram_png, signed_distances
 from recon_cli.reconstruction.pipeline import RegisterOptions, RegisterResult, run_register
@@ -57,22 +61,26 @@ CASES = (  # name, perturbed, local registration
     ("perturbed, global only", True, "none"), ("perturbed, pose graph (ICP loop closures)", True, "icp"),
     ("perturbed, pose graph (thesis)", True, "global"),
 )
+KINEMATICS_CASE = "kinematics only, global only"  # every pose from forward kinematics
 
 
 def run_registration_bench(out: Path, object_name: str = "auto", seed: int = 0, resolution: float = 1.0,
-                           progress: Callable[[str, int, int], None] | None = None) -> dict:
+                           progress: Callable[[str, int, int], None] | None = None,
+                           realism: RealismProfile = IDEAL) -> dict:
     object_name = resolve_object_name(object_name)
     scans = out / "scans"
     config = DEFAULTS.replace(scene=SceneConfig(object_name), seed=seed,
-                              sensor=SensorConfig(DEFAULTS.sensor.noise, resolution))
+                              sensor=SensorConfig(DEFAULTS.sensor.noise, resolution), realism=realism)
+    cases = [c for c in CASES if realism.is_ideal or not c[1]] + [(KINEMATICS_CASE, False, "none")]
     capture = run_capture(CaptureOptions(views=tuple(eq_4_1_views()), out=scans, config=config,
                                          cover_board=COVERED_VIEWS, run={"command": "bench registration"}),
                           progress)
     reference = scans / "ground_truth" / f"{capture.scene_object.name}.ply"
     rows, results = [], {}
-    for k, (name, perturbed, local) in enumerate(CASES):
+    for k, (name, perturbed, local) in enumerate(cases):
         base = RegisterOptions(local=local != "none", mesh=local == "icp" and not perturbed, seed=seed,
-                               perturb=THESIS_CHARUCO_ERROR if perturbed else None)
+                               perturb=THESIS_CHARUCO_ERROR if perturbed else None,
+                               use_board=name != KINEMATICS_CASE)
         opts = replace(base, multiway=replace(base.multiway, loop_closure_init=local if local != "none" else "icp"))
         result = run_register(scans, out / f"case_{k}", opts)
         ev = run_evaluate(result.cloud, reference, 0.001, scans, samples=200_000, out=out / f"case_{k}").evaluation
@@ -86,18 +94,23 @@ def run_registration_bench(out: Path, object_name: str = "auto", seed: int = 0, 
                             result.timings["total_s"]))
         results[name] = result
         if progress:
-            progress("registration cases", k + 1, len(CASES))
+            progress("registration cases", k + 1, len(cases))
     first: RegisterResult = results[CASES[0][0]]
+    kinematic = _kinematic_errors(scans)
     table_4_2 = [{"scan": r.index + 1, "source": r.pose.source.value, "corners": r.pose.corners,
                   "translation_mm": None if r.charuco_error is None else r.charuco_error[0] * 1e3,
-                  "rotation_deg": None if r.charuco_error is None else float(np.degrees(r.charuco_error[1]))}
+                  "rotation_deg": None if r.charuco_error is None else float(np.degrees(r.charuco_error[1])),
+                  "kinematics_translation_mm": kinematic.get(r.index, (None, None))[0],
+                  "kinematics_rotation_deg": kinematic.get(r.index, (None, None))[1]}
                  for r in first.scans]
     import open3d as o3d
 
     mesh = o3d.io.read_triangle_mesh(str(reference))
     curves = {}
     for name in ("global only", "pose graph (ICP loop closures)", "perturbed, global only",
-                 "perturbed, pose graph (ICP loop closures)"):
+                 "perturbed, pose graph (ICP loop closures)", KINEMATICS_CASE):
+        if name not in results:
+            continue
         pts = np.asarray(o3d.io.read_point_cloud(str(results[name].cloud)).points)
         curves[name] = signed_distances(pts, mesh)
     histogram_png(out / "distances.png", curves, f"eq. 4.1, 24 views of the {capture.scene_object.name}: "
@@ -105,11 +118,28 @@ def run_registration_bench(out: Path, object_name: str = "auto", seed: int = 0, 
     found = [t for t in table_4_2 if t["translation_mm"] is not None]
     return {
         "object": capture.scene_object.name, "views": len(capture.scans), "resolution": resolution,
+        "realism": realism.summary(),
         "covered_views": sorted(COVERED_VIEWS), "capture_s": capture.total_seconds,
         "noise_sigma_at_0.6m_mm": float(motioncam_3d_m().sigma(0.6) * 1e3),
         "table_4_2": table_4_2,
         "charuco_mean": {"translation_mm": float(np.mean([t["translation_mm"] for t in found])),
                          "rotation_deg": float(np.mean([t["rotation_deg"] for t in found]))},
+        "kinematics_mean": {"translation_mm": float(np.mean([v[0] for v in kinematic.values()])),
+                            "rotation_deg": float(np.mean([v[1] for v in kinematic.values()]))},
         "thesis_charuco_mean": {"translation_mm": 1.532, "rotation_deg": 0.0853},
         "cases": rows, "mesh": str(results["pose graph (ICP loop closures)"].mesh),
     }
+
+
+def _kinematic_errors(scans: Path) -> dict[int, tuple[float, float]]:
+    """Per scan index: camera pose from forward kinematics of the measured joints against
+    the true camera pose [mm, deg] (simulation ground truth)."""
+    from recon_cli.geometry.transforms import pose_error
+    from recon_cli.reconstruction.scan_store import ScanStore
+
+    out = {}
+    for scan in ScanStore(scans):
+        if scan.ground_truth:
+            dp, dr = pose_error(scan.world_T_camera_fk, np.asarray(scan.ground_truth["world_T_camera"], float))
+            out[scan.index] = (dp * 1e3, float(np.degrees(dr)))
+    return out

@@ -60,8 +60,11 @@ def sim_report(result) -> Iterator:
 def registration_report(data: dict) -> Iterator:
     m = data["charuco_mean"]
     covered = ", ".join(map(str, data["covered_views"]))
-    yield (f"{data['views']} views of the {data['object']} (board covered in views {covered}): ChArUco pose error "
-           f"mean {m['translation_mm']:.3f} mm, {m['rotation_deg']:.4f}° ({THESIS_TABLE_4_2})")
+    k = data.get("kinematics_mean")
+    realism = (data.get("realism") or {}).get("name", "ideal")
+    yield (f"{data['views']} views of the {data['object']} (board covered in views {covered}; realism {realism}): "
+           f"ChArUco pose error mean {m['translation_mm']:.3f} mm, {m['rotation_deg']:.4f}° ({THESIS_TABLE_4_2})"
+           + ("" if k is None else f"; forward kinematics {k['translation_mm']:.3f} mm, {k['rotation_deg']:.4f}°"))
     table = _table(f"fused cloud vs ground truth (noise sigma at 0.6 m: {data['noise_sigma_at_0.6m_mm']:.3f} mm)",
                    ("case", "mean", "std", "±0.5 mm", "coverage (visible)", "pose error", "relative", "time"))
     for r in data["cases"]:

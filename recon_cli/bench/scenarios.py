@@ -1,7 +1,7 @@
 """Problem data of the thesis benchmarks (chapter 4), in SI units and joint-vector order.
 
 Table 4.1 rounds the goal to whole degrees and centimetres; the exact values below are the
-ones of the thesis' benchmark logs (../shared/CELL_FACTS.md 11.1).
+ones of the thesis' benchmark logs (the thesis cell facts, benchmark logs).
 """
 
 from __future__ import annotations

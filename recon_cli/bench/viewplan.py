@@ -14,6 +14,7 @@ from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig
 from recon_cli.errors import ReconError
 from recon_cli.geometry.view import View
 from recon_cli.objects import load_object
+from recon_cli.realism import IDEAL, RealismProfile
 from recon_cli.robot.description import CellConfig
 from recon_cli.viewplan.policy import Method
 from recon_cli.workflows.autoscan import METHODS, Autoscan, AutoscanOptions
@@ -48,7 +49,8 @@ def face_on_view(name: str, d_c: float) -> View:
 
 def run_viewplan_bench(out: Path, objects=BUILT_IN, methods=METHODS, n: int = 16, d_c: float = 0.55,
                        seed: int = 0, resolution: float = 1.0, cell: CellConfig | None = None,
-                       progress: Callable[[str, int, int], None] | None = None) -> list[ViewplanRow]:
+                       progress: Callable[[str, int, int], None] | None = None,
+                       realism: RealismProfile = IDEAL) -> list[ViewplanRow]:
     rows = []
     runs = [(o, m, "default") for o in objects for m in methods]
     if "wood_block" in objects and "ellipsoid" in methods:
@@ -57,7 +59,7 @@ def run_viewplan_bench(out: Path, objects=BUILT_IN, methods=METHODS, n: int = 16
         folder = out / (f"{name}_{method}" + ("_face_on" if initial == "face-on" else ""))
         config = DEFAULTS.replace(cell=cell or DEFAULTS.cell, scene=SceneConfig(name), seed=seed,
                                   sensor=SensorConfig(DEFAULTS.sensor.noise, resolution),
-                                  viewplan=replace(DEFAULTS.viewplan, n=n, d_c=d_c))
+                                  viewplan=replace(DEFAULTS.viewplan, n=n, d_c=d_c), realism=realism)
         opts = AutoscanOptions(folder, config, face_on_view(name, d_c) if initial == "face-on" else None,
                                Method(method), pictures=method == "ellipsoid", run={"command": "bench viewplan"})
         try:

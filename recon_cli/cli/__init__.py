@@ -8,6 +8,9 @@
     autoscan.py  recon autoscan
     bench.py     recon bench ...
     station.py   recon station check
+    replay.py    recon replay
+    batch.py     recon batch
+    calibrate.py recon calibrate handeye, recon calibrate intrinsics
 
 Heavy libraries (pinocchio, coal, Open3D, MuJoCo, OMPL) are imported inside the commands
 so that ``recon --help`` is instant. User errors (``ReconError`` and malformed options)
@@ -21,7 +24,17 @@ import sys
 
 import typer
 
-from recon_cli.cli import autoscan, bench, cell, scans, scripts, station  # noqa: F401 (registers the commands)
+from recon_cli.cli import (  # noqa: F401 (registers the commands)
+    autoscan,
+    batch,
+    bench,
+    calibrate,
+    cell,
+    replay,
+    scans,
+    scripts,
+    station,
+)
 from recon_cli.cli.app import app, bench_app
 from recon_cli.cli.options import parse_vector
 from recon_cli.errors import ReconError

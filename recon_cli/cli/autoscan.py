@@ -8,7 +8,17 @@ from typing import Annotated
 import typer
 
 from recon_cli.cli.app import app
-from recon_cli.cli.options import CellOpt, D, ResolutionOpt, SafetyOpt, SeedOpt, make_view, parse_vector
+from recon_cli.cli.options import (
+    CellOpt,
+    D,
+    RealismOpt,
+    ResolutionOpt,
+    SafetyOpt,
+    SeedOpt,
+    make_view,
+    parse_vector,
+    realism_profile,
+)
 
 _V = D.viewplan
 
@@ -33,6 +43,7 @@ def autoscan(
     seed: SeedOpt = D.seed,
     station: Annotated[Path | None, typer.Option(help="Station file: run on the robot and camera adapters it names "
                                                       "(docs/hardware.md); default: the simulation.")] = None,
+    realism: RealismOpt = D.realism.name,
 ) -> None:
     """Scan an unknown object autonomously: the ellipsoid view planner of the thesis."""
     from dataclasses import replace
@@ -45,7 +56,7 @@ def autoscan(
     config = D.replace(
         cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
         scene=SceneConfig(object_name, scale), sensor=replace(D.sensor, resolution=resolution), seed=seed,
-        viewplan=replace(_V, n=n, d_c=dc, m=m, sigma=sigma))
+        viewplan=replace(_V, n=n, d_c=dc, m=m, sigma=sigma), realism=realism_profile(realism))
     folder = run_folder(out, "autoscan")
     view = None
     if initial is not None:

@@ -11,7 +11,18 @@ from typing import Annotated
 import typer
 
 from recon_cli.cli.app import bench_app
-from recon_cli.cli.options import CellOpt, D, ResolutionOpt, SafetyOpt, SeedOpt, choices, make_cell, one_of
+from recon_cli.cli.options import (
+    CellOpt,
+    D,
+    RealismOpt,
+    ResolutionOpt,
+    SafetyOpt,
+    SeedOpt,
+    choices,
+    make_cell,
+    one_of,
+    realism_profile,
+)
 
 OutOpt = Annotated[Path | None, typer.Option(help="Output folder (default runs/bench-<name>-<time>).")]
 
@@ -73,6 +84,7 @@ def bench_registration(
     resolution: Annotated[float, typer.Option(min=0.1, max=1.0, help="Image size relative to 1600 x 1200.")]
     = D.sensor.resolution,
     seed: SeedOpt = D.seed,
+    realism: RealismOpt = D.realism.name,
     out: OutOpt = None,
 ) -> None:
     """Thesis 4.2: ChArUco pose errors (Table 4.2) and global vs local registration accuracy."""
@@ -80,9 +92,10 @@ def bench_registration(
     from recon_cli.bench.registration import run_registration_bench
     from recon_cli.console import console, progress_bar, run_folder, write_json
 
+    profile = realism_profile(realism)
     folder = run_folder(out, "bench-registration")
     with progress_bar() as update:
-        data = run_registration_bench(folder, object_name, seed, resolution, update)
+        data = run_registration_bench(folder, object_name, seed, resolution, update, profile)
     write_json(folder / "bench_registration.json", data)
     for item in render.registration_report(data):
         console.print(item)
@@ -134,6 +147,7 @@ def bench_viewplan(
     cell: CellOpt = D.cell.kind.value,
     resolution: ResolutionOpt = D.sensor.resolution,
     seed: SeedOpt = D.seed,
+    realism: RealismOpt = D.realism.name,
     out: OutOpt = None,
 ) -> None:
     """Thesis 4.4: ellipsoid view planner vs evenly spread and random views, every object."""
@@ -146,11 +160,13 @@ def bench_viewplan(
     from recon_cli.workflows.autoscan import METHODS
 
     chosen = choices(methods, METHODS, "method")
+    profile = realism_profile(realism)
     folder = run_folder(out, "bench-viewplan")
     with progress_bar() as update:
         rows = run_viewplan_bench(folder, [o.strip() for o in objects.split(",") if o.strip()], chosen, n, dc, seed,
-                                  resolution, CellConfig(kind=CellKind.parse(cell)), update)
-    write_json(folder / "bench_viewplan.json", {"n": n, "d_c": dc, "cell": cell, "rows": [asdict(r) for r in rows]})
+                                  resolution, CellConfig(kind=CellKind.parse(cell)), update, profile)
+    write_json(folder / "bench_viewplan.json", {"n": n, "d_c": dc, "cell": cell, "realism": profile.summary(),
+                                                "resolution": resolution, "rows": [asdict(r) for r in rows]})
     coverage_png(folder / "coverage.png", rows)
     for item in render.viewplan_report(rows, n, dc, cell):
         console.print(item)

@@ -28,6 +28,9 @@ PhiOpt = Annotated[float, typer.Option("--phi", help="Azimuth [deg].")]
 AlphaOpt = Annotated[float, typer.Option("--alpha", help="Camera roll about its viewing axis [deg].")]
 FrameOpt = Annotated[str, typer.Option("--frame", help="Frame of f and the angles: world or marker.")]
 ResolutionOpt = Annotated[float, typer.Option(min=0.05, max=1.0, help="Image size relative to 1600 x 1200.")]
+RealismOpt = Annotated[str, typer.Option("--realism", help="How real the simulated cell is: 'ideal' (the model "
+                                                           "itself), 'thesis' (errors of the thesis' cell) or a "
+                                                           "profile FILE.yaml (docs/simulation.md).")]
 
 #: the example view of ``recon ik`` and ``recon capture``: the thesis' focus point above the board
 FOCUS = "0,0,0.78"
@@ -47,6 +50,13 @@ def parse_vector(text: str, n: int, option: str, unit: str) -> tuple[float, ...]
         raise InputError(f"{option} '{text}' is not {n} numbers",
                          hint=f"write {n} comma-separated values in {unit}, e.g. {example}")
     return values
+
+
+def realism_profile(text: str):
+    """The realism profile of ``--realism`` (a built-in name or a YAML file)."""
+    from recon_cli.realism import load_profile
+
+    return load_profile(text)
 
 
 def make_cell(cell: str, safety: float, object_box: str | None = None):

@@ -20,6 +20,7 @@ from recon_cli.cli.options import (
     FrameOpt,
     PhiOpt,
     RadiusOpt,
+    RealismOpt,
     ResolutionOpt,
     SafetyOpt,
     SeedOpt,
@@ -29,6 +30,7 @@ from recon_cli.cli.options import (
     one_of,
     parse_vector,
     positive,
+    realism_profile,
 )
 from recon_cli.errors import InputError
 
@@ -62,6 +64,7 @@ def capture(
                                                   "ChArUco board, e.g. '3,7'.")] = "",
     station: Annotated[Path | None, typer.Option(help="Station file: run on the robot and camera adapters it names "
                                                       "(docs/hardware.md); default: the simulation.")] = None,
+    realism: RealismOpt = D.realism.name,
 ) -> None:
     """Move the simulated robot through views and write one scan per view into a scan store."""
     from dataclasses import replace
@@ -86,7 +89,7 @@ def capture(
     config = D.replace(
         cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
         scene=SceneConfig(object_name, scale), sensor=SensorConfig(noise, resolution), seed=seed,
-        planner=replace(D.planner, planner=planner, time_limit=planning_time))
+        planner=replace(D.planner, planner=planner, time_limit=planning_time), realism=realism_profile(realism))
     folder = run_folder(out, "capture")
     options = CaptureOptions(views=view_list, out=folder, config=config, cover_board=frozenset(covered),
                              run={"command": "capture", "views": views}, station=station)

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from recon_cli.cli.app import app
-from recon_cli.cli.options import D, SeedOpt, one_of
+from recon_cli.cli.options import D, SeedOpt, one_of, realism_profile
 
 BACKENDS = ("sim", "hardware")
 SEQUENCE_METHODS = ("ours", "thesis")
@@ -59,6 +59,10 @@ def run_script(
                                                                           "failed (default: exit 3).")] = False,
     station: Annotated[Path | None, typer.Option(help="Station file: run on the robot and camera adapters it names "
                                                       "(docs/hardware.md); default: the simulation.")] = None,
+    realism: Annotated[str | None, typer.Option("--realism", help="How real the simulated cell is: 'ideal', "
+                                                                  "'thesis' or a profile FILE.yaml (overrides the "
+                                                                  "script's <cell realism=...>; docs/simulation.md)."
+                                                )] = None,
 ) -> None:
     """Run an automation script: moves, scans, registration, reconstruction, exports."""
     from recon_cli.console import console, progress_bar, run_folder, styled
@@ -75,9 +79,10 @@ def run_script(
     s = load_script(script)
     check_script(s, object_override=object_name)  # before the output folder is made
     check_backend(s, backend, station, dry_run)
+    profile = None if realism is None else realism_profile(realism)
     folder = run_folder(out, "run", fresh=not append)
     options = RunOptions(folder, None if backend is None else Backend(backend), seed, dry_run, object_name, optimize,
-                         SequenceMethod(sequence_method), append, station)
+                         SequenceMethod(sequence_method), append, station, profile)
     with stop_signals(), progress_bar() as update:
         result = ScriptRunner(s, options, update).run()
     counts: dict[str, int] = {}

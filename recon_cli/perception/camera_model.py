@@ -86,3 +86,51 @@ def backproject(depth: np.ndarray, K: Intrinsics) -> np.ndarray:
     x = (u - K.cx) / K.fx * z
     y = (v - K.cy) / K.fy * z
     return np.stack([x, y, z], axis=1)
+
+
+# --------------------------------------------------------------------- lens distortion
+def undistort_normalized(x0: np.ndarray, y0: np.ndarray, distortion, iterations: int = 20
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Ideal normalized image coordinates of distorted ones (OpenCV's model with k1, k2, p1,
+    p2[, k3]; the same fixed-point iteration as cv2.undistortPoints, run to convergence)."""
+    k1, k2, p1, p2, k3 = (list(distortion) + [0.0] * 5)[:5]
+    x, y = x0.copy(), y0.copy()
+    for _ in range(iterations):
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+        dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        x, y = (x0 - dx) / radial, (y0 - dy) / radial
+    return x, y
+
+
+def distorted_pixel_maps(K_distorted: Intrinsics, distortion, K_pinhole: Intrinsics
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """For every pixel of a camera with lens distortion (OpenCV model, coefficients
+    k1, k2, p1, p2[, k3]), the position (float32 maps for ``cv2.remap``) where its ray meets
+    the image of a distortion-free pinhole camera at the same centre and orientation."""
+    u = (np.arange(K_distorted.width, dtype=np.float64) - K_distorted.cx) / K_distorted.fx
+    v = (np.arange(K_distorted.height, dtype=np.float64) - K_distorted.cy) / K_distorted.fy
+    x0, y0 = np.meshgrid(u, v)
+    x, y = undistort_normalized(x0, y0, distortion)
+    return ((K_pinhole.fx * x + K_pinhole.cx).astype(np.float32),
+            (K_pinhole.fy * y + K_pinhole.cy).astype(np.float32))
+
+
+def undistort_depth(depth: np.ndarray, K: Intrinsics, distortion) -> np.ndarray:
+    """A depth image [m] of a camera with lens distortion resampled (nearest pixel) into the
+    pinhole camera with the same K: back-project the result with K alone."""
+    import cv2
+
+    map_x, map_y = cv2.initUndistortRectifyMap(K.matrix(), np.asarray(distortion, dtype=np.float64), None,
+                                               K.matrix(), (K.width, K.height), cv2.CV_32FC1)
+    return cv2.remap(depth, map_x, map_y, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+
+def undistort_color(color: np.ndarray, K: Intrinsics, distortion) -> np.ndarray:
+    """The colour image of a camera with lens distortion in the pinhole camera with the same K."""
+    import cv2
+
+    map_x, map_y = cv2.initUndistortRectifyMap(K.matrix(), np.asarray(distortion, dtype=np.float64), None,
+                                               K.matrix(), (K.width, K.height), cv2.CV_32FC1)
+    return cv2.remap(color, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)

@@ -71,6 +71,15 @@ class SensorModel:
 
 def _incidence_ok(depth: np.ndarray, K: Intrinsics, max_incidence: float) -> np.ndarray:
     """Pixels whose surface normal (from the depth image) is within max_incidence of the ray."""
+    cos, edge = _incidence_cos(depth, K)
+    ok = cos >= math.cos(max_incidence)
+    # neighbours across a depth edge (or without depth) make no normal: keep those pixels
+    return ok | edge
+
+
+def _incidence_cos(depth: np.ndarray, K: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
+    """|cos| of the angle between each pixel's ray and its surface normal (from the depth
+    image), and the pixels where no normal can be made (neighbours missing or degenerate)."""
     h, w = depth.shape
     u = (np.arange(w) - K.cx) / K.fx
     v = (np.arange(h) - K.cy) / K.fy
@@ -86,10 +95,8 @@ def _incidence_ok(depth: np.ndarray, K: Intrinsics, max_incidence: float) -> np.
     ray = np.stack([np.broadcast_to(u[None, :], (h, w)), np.broadcast_to(v[:, None], (h, w)),
                     np.ones((h, w))], axis=-1)
     cos = np.abs(np.sum(n * ray, axis=-1)) / (norm * np.linalg.norm(ray, axis=-1) + 1e-300)
-    ok = cos >= math.cos(max_incidence)
-    # neighbours across a depth edge (or without depth) make no normal: keep those pixels
     edge = (norm == 0) | ~np.isfinite(cos)
-    return ok | edge
+    return cos, edge
 
 
 @functools.lru_cache(maxsize=1)
@@ -103,3 +110,103 @@ def motioncam_3d_m() -> SensorModel:
         max_incidence=math.radians(float(d["max_incidence_deg"])),
         depth_scale=float(d["depth_scale"]), color_noise_std=float(d.get("color_noise_std", 0.0)),
     )
+
+
+# --------------------------------------------------------------------- realism profiles
+# Structured-light artefacts and image effects of a realism profile (recon_cli/realism.py).
+# Simple models, each documented in docs/simulation.md ("Realism profiles"); every random
+# draw comes from the generator passed in.
+
+def _grey(color: np.ndarray) -> np.ndarray:
+    """Luminance (ITU-R BT.601) of an RGB image, float [0, 255]."""
+    c = color.astype(np.float64)
+    return 0.299 * c[..., 0] + 0.587 * c[..., 1] + 0.114 * c[..., 2]
+
+
+def flying_pixels(depth: np.ndarray, share: float, edge_jump: float, rng: np.random.Generator) -> np.ndarray:
+    """Mixed pixels at depth edges: a pixel whose 3 x 3 neighbourhood spans more than
+    ``edge_jump`` [m] (between valid depths) gets, with probability ``share``, a depth drawn
+    uniformly between the nearest and the farthest of its neighbours (the sensor saw both
+    surfaces in one pixel)."""
+    import cv2
+
+    if share <= 0:
+        return depth
+    valid = depth > 0
+    kernel = np.ones((3, 3), np.uint8)
+    zmax = cv2.dilate(depth, kernel)
+    zmin = cv2.erode(np.where(valid, depth, np.inf), kernel)
+    edge = valid & np.isfinite(zmin) & (zmax - zmin > edge_jump)
+    pick = edge & (rng.random(depth.shape) < share)
+    out = depth.copy()
+    t = rng.random(int(pick.sum()))
+    out[pick] = zmin[pick] + t * (zmax[pick] - zmin[pick])
+    return out
+
+
+def dropouts(depth: np.ndarray, color: np.ndarray, K: Intrinsics, grazing: tuple[float, float] | None,
+             dark_level: float, saturated_level: float, rng: np.random.Generator,
+             dark_dropout: float = 1.0) -> np.ndarray:
+    """Pixels that return no depth (0): at grazing incidence with a probability rising
+    linearly from 0 at ``grazing[0]`` to 1 at ``grazing[1]`` [rad]; on dark surfaces (grey
+    level of the colour image below ``dark_level``, probability rising linearly to
+    ``dark_dropout`` at black); on saturated (specular) pixels at or above
+    ``saturated_level``."""
+    p = np.zeros(depth.shape)
+    if grazing is not None:
+        cos, edge = _incidence_cos(depth, K)
+        angle = np.arccos(np.clip(np.nan_to_num(cos, nan=1.0), 0.0, 1.0))
+        ramp = np.clip((angle - grazing[0]) / (grazing[1] - grazing[0]), 0.0, 1.0)
+        p = np.maximum(p, np.where(edge, 0.0, ramp))
+    if dark_level > 0 or saturated_level <= 255:
+        grey = _grey(color)
+        if dark_level > 0:
+            p = np.maximum(p, dark_dropout * np.clip((dark_level - grey) / dark_level, 0.0, 1.0))
+        p[grey >= saturated_level] = 1.0
+    drop = (depth > 0) & (rng.random(depth.shape) < p)
+    out = depth.copy()
+    out[drop] = 0.0
+    return out
+
+
+def multipath(depth: np.ndarray, K: Intrinsics, gain: float, window: float) -> np.ndarray:
+    """Multipath-like bias in concave corners: light reflected off a neighbouring surface
+    lengthens the measured path where a surface lies behind its surroundings. A pixel whose
+    depth exceeds the mean depth of its neighbourhood (``window`` [m] wide at the scene's
+    median depth) by d reads gain * min(d, window) farther; flat and convex surfaces read
+    true."""
+    import cv2
+
+    valid = depth > 0
+    if gain <= 0 or not valid.any():
+        return depth
+    z_typ = float(np.median(depth[valid]))
+    size = max(3, int(round(window * K.fx / z_typ)) | 1)
+    s = cv2.boxFilter(np.where(valid, depth, 0.0), -1, (size, size), normalize=False)
+    n = cv2.boxFilter(valid.astype(np.float64), -1, (size, size), normalize=False)
+    mean = np.divide(s, n, out=np.zeros_like(s), where=n > 0)
+    behind = np.clip(depth - mean, 0.0, window)
+    return np.where(valid & (n >= 0.5 * size * size), depth + gain * behind, depth)
+
+
+def quantize_depth(depth: np.ndarray, step_ref: float, z_ref: float) -> np.ndarray:
+    """Depth rounded to the sensor's resolution, as a triangulating sensor resolves it: in
+    steps of inverse depth (disparity, phase), ``step_ref`` [m] apart at ``z_ref`` [m] and
+    so growing with z^2 (1 / z is a multiple of step_ref / z_ref^2)."""
+    if step_ref <= 0:
+        return depth
+    valid = depth > 0
+    unit = step_ref / z_ref ** 2  # [1/m]
+    out = depth.copy()
+    out[valid] = 1.0 / (np.round(1.0 / depth[valid] / unit) * unit)
+    return out
+
+
+def image_effects(color: np.ndarray, exposure: float, blur_sigma: float) -> np.ndarray:
+    """Exposure gain and Gaussian blur (sigma [px] of this image) of an RGB image (uint8)."""
+    import cv2
+
+    out = color.astype(np.float32) * np.float32(exposure)
+    if blur_sigma > 0:
+        out = cv2.GaussianBlur(out, (0, 0), blur_sigma)
+    return np.clip(np.rint(out), 0, 255).astype(np.uint8)

@@ -1,1 +1,1 @@
-"""Motion planning: trajectories, time parameterization, (OMPL planning in issue #4)."""
+"""Motion planning: OMPL planners, time parameterization (toppra), dense trajectory checks."""

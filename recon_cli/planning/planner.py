@@ -10,12 +10,23 @@ near; batched in C++).
 After the search the path is simplified (shortcutting, smoothing), time-
 parameterized with toppra and checked once more along its dense course. Failures are
 results (``PlanStatus``), never exceptions.
+
+Repeatability: a request's ``seed`` decides its path. OMPL gives every random generator it
+creates (planner, state sampler, nearest-neighbour structure, path simplifier) the next
+number of one process-wide seed sequence; each search restarts that sequence from the
+request's seed (:func:`restart_ompl_seeds`) before it creates them, and the simplification
+from a second seed derived from it. The planners stop at their first solution and the
+simplifications are bounded by iteration counts, so the time limits are only safety
+stops: the same request with the same seed gives the same path, in any process and after
+any other requests. Exceptions: PRM and PRM* look for a solution in a second thread while
+the roadmap grows, so where they stop (and then the path) can depend on timing.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import threading
 import time
 from dataclasses import dataclass, replace
 from enum import StrEnum
@@ -65,17 +76,43 @@ class PlanResult:
         return float(np.sum(np.abs(np.diff(self.path, axis=0))))
 
 
-_OMPL_SEEDED: list[int] = []
+#: OMPL's seed sequence is process-wide: one search at a time creates its generators
+_OMPL_SEEDS = threading.Lock()
+#: seed stream of the state space's set-up (requests use their attempt numbers, from 1)
+SETUP_STREAM = 0
+
+
+def ompl_seed(seed: int, *stream: int) -> int:
+    """A seed for OMPL (a positive 31-bit number) from a request's seed (a non-negative
+    integer) and stream indices (search attempt, search or simplification): independent
+    streams for different indices, the same numbers for the same arguments."""
+    if int(seed) < 0:
+        raise ValueError(f"seed {seed} is negative")
+    state = np.random.SeedSequence([int(seed), *(int(k) for k in stream)]).generate_state(1)[0]
+    return int(state) % (2**31 - 2) + 1
+
+
+def restart_ompl_seeds(seed: int) -> None:
+    """Restart OMPL's process-wide seed sequence at ``seed`` (> 0): every random generator
+    OMPL creates from now on (each takes the next number of that sequence) draws the same
+    numbers as after any other restart at ``seed``. Generators that exist already keep
+    their state. OMPL logs "Changing seed now will not lead to deterministic sampling" when
+    generators exist already, which holds for those only; that message is silenced."""
+    from ompl import util as ou
+
+    level = ou.getLogLevel()
+    ou.setLogLevel(ou.LOG_NONE)
+    try:
+        ou.RNG.setSeed(int(seed))
+    finally:
+        ou.setLogLevel(level)
 
 
 def seed_ompl(seed: int) -> None:
-    """Seed OMPL's process-wide random generator. OMPL accepts a seed only before its first
-    random number, so every command seeds it once, up front, from its --seed."""
-    from ompl import util as ou
-
-    if not _OMPL_SEEDED:
-        ou.RNG.setSeed(int(seed) % (2**31 - 2) + 1)
-        _OMPL_SEEDED.append(int(seed))
+    """Restart OMPL's seed sequence from a command's --seed. Not needed for repeatable
+    planning (every request restarts it from its own seed); kept for callers that seeded
+    OMPL once per command."""
+    restart_ompl_seeds(ompl_seed(seed))
 
 
 @contextlib.contextmanager
@@ -119,6 +156,12 @@ class MotionPlanner:
 
         self._validator = _SegmentValidator(self.si)
         self.si.setMotionValidator(self._validator)
+        with _OMPL_SEEDS, _quiet_ompl():
+            # the space's set-up draws its default projection (a random linear map, used by
+            # KPIECE and the like) from a fixed seed: the same in every planner and process,
+            # and done before the first request, which then consumes its seeds as any other
+            restart_ompl_seeds(ompl_seed(0, SETUP_STREAM))
+            self.si.setup()
         self.stats = {"states": 0, "motions": 0}
         self._known_free: set[bytes] = set()  # configurations found free in this search
 
@@ -169,7 +212,9 @@ class MotionPlanner:
 
     def plan_to_joints(self, q_start: np.ndarray, q_goal: np.ndarray | list[np.ndarray],
                        seed: int = 0) -> PlanResult:
-        """Plan from q_start to a joint goal (or to whichever of several goals is reached)."""
+        """Plan from q_start to a joint goal (or to whichever of several goals is reached).
+        ``seed`` (a non-negative integer) decides the random choices of the search and the
+        simplification: the same request with the same seed gives the same path."""
         t0 = time.perf_counter()
         opt = self.options
         goals = [np.asarray(q_goal, float)] if np.ndim(q_goal) == 1 else [np.asarray(g, float) for g in q_goal]
@@ -187,7 +232,6 @@ class MotionPlanner:
         if not valid_goals:
             return PlanResult(PlanStatus.INVALID_GOAL, opt.planner, 0.0, 0.0, time.perf_counter() - t0,
                               message=f"goal configuration {self._config_problem(goals[0])}")
-        seed_ompl(seed)
         plan_time = simplify_time = 0.0
         attempts = 0
         last: PlanResult | None = None
@@ -198,7 +242,7 @@ class MotionPlanner:
             remaining = opt.time_limit - plan_time - simplify_time
             if remaining <= 0.0:
                 break
-            found = self._search(q_start, valid_goals, remaining)
+            found = self._search(q_start, valid_goals, remaining, seed, attempts)
             plan_time += found[1]
             simplify_time += found[2]
             if found[0] is None:
@@ -219,35 +263,47 @@ class MotionPlanner:
         return PlanResult(PlanStatus.TIMEOUT, opt.planner, plan_time, simplify_time, time.perf_counter() - t0,
                           message=f"{opt.planner} found no path within {opt.time_limit:g} s", attempts=attempts)
 
-    def _search(self, q_start: np.ndarray, goals: list[np.ndarray], time_limit: float
-                ) -> tuple[np.ndarray | None, float, float]:
-        """One OMPL search + simplification: (path (K, n) or None, search s, simplify s)."""
+    def _search(self, q_start: np.ndarray, goals: list[np.ndarray], time_limit: float, seed: int,
+                attempt: int) -> tuple[np.ndarray | None, float, float]:
+        """One OMPL search + simplification: (path (K, n) or None, search s, simplify s).
+        The search's random generators are created after a restart of OMPL's seed sequence
+        at (seed, attempt, 0), the simplifier's after one at (seed, attempt, 1)."""
         opt = self.options
         self._known_free = {np.asarray(q_start, float).tobytes()} | {np.asarray(g, float).tobytes() for g in goals}
-        with _quiet_ompl():
-            self.setup.clear()
+        ob = self._ob
+        with _OMPL_SEEDS, _quiet_ompl():
+            self.setup.clear()  # the previous planner's clear() may create generators: before the restart
             self.setup.clearStartStates()
             self.setup.setStartState(self._state(q_start))
             if len(goals) == 1:
                 self.setup.setGoalState(self._state(goals[0]))
             else:
-                goal = self._ob.GoalStates(self.si)
+                goal = ob.GoalStates(self.si)
                 for g in goals:
                     goal.addState(self._state(g))
                 self.setup.setGoal(goal)
+            restart_ompl_seeds(ompl_seed(seed, attempt, 0))
             planner = getattr(self._og, opt.planner)(self.si)
             if opt.range > 0 and hasattr(planner, "setRange"):
                 planner.setRange(opt.range)
             self.setup.setPlanner(planner)
             self.setup.setOptimizationObjective(self._first_solution_objective())
             self.setup.setup()
+            # stop at the first exact solution (also planners that would go on improving it,
+            # such as AORRTC); the time limit is a safety stop
+            ptc = ob.plannerOrTerminationCondition(
+                ob.timedPlannerTerminationCondition(time_limit),
+                ob.exactSolnPlannerTerminationCondition(self.setup.getProblemDefinition()))
             t1 = time.perf_counter()
-            status = self.setup.solve(time_limit)
+            status = self.setup.solve(ptc)
             search = time.perf_counter() - t1
             if not (bool(status) and self.setup.haveExactSolutionPath()):
                 return None, search, 0.0
             t2 = time.perf_counter()
             path_geo = self.setup.getSolutionPath()
+            # every step below is bounded by iteration counts (OMPL's defaults: as many
+            # tries as the path has vertices), none by the clock
+            restart_ompl_seeds(ompl_seed(seed, attempt, 1))
             if opt.simplify in ("reduce", "shortcut"):
                 simplifier = self._og.PathSimplifier(self.si)
                 simplifier.reduceVertices(path_geo)
@@ -255,8 +311,12 @@ class MotionPlanner:
                     simplifier.partialShortcutPath(path_geo)
                     simplifier.reduceVertices(path_geo)
             elif opt.simplify == "full":
-                self.setup.simplifySolution(opt.simplify_time)
-                path_geo = self.setup.getSolutionPath()
+                # OMPL's simplifySolution with a simplifier of its own (goal and objective of
+                # the request); it runs every step at least once, simplify_time only stops
+                # the search for a better goal state early
+                simplifier = self._og.PathSimplifier(self.si, self.setup.getGoal(),
+                                                     self.setup.getOptimizationObjective())
+                simplifier.simplify(path_geo, opt.simplify_time)
             simplify = time.perf_counter() - t2
             path = np.array([[path_geo.getState(k)[i] for i in range(self.n)]
                              for k in range(path_geo.getStateCount())])

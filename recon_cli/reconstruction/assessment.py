@@ -27,8 +27,9 @@ class EvaluateResult:
     histogram: Path
 
 
-def load_points(path: Path, samples: int = 500_000) -> np.ndarray:
-    """Points of a cloud file, or uniform samples of a mesh file's surface."""
+def load_points(path: Path, samples: int = 500_000, seed: int = 0) -> np.ndarray:
+    """Points of a cloud file, or uniform samples of a mesh file's surface (Open3D's
+    generator seeded with ``seed``)."""
     import open3d as o3d
 
     path = Path(path)
@@ -39,6 +40,7 @@ def load_points(path: Path, samples: int = 500_000) -> np.ndarray:
         with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
             mesh = o3d.io.read_triangle_mesh(str(path))
     if len(mesh.triangles):
+        o3d.utility.random.seed(seed)
         return np.asarray(mesh.sample_points_uniformly(number_of_points=samples).points)
     cloud = o3d.io.read_point_cloud(str(path))
     if len(cloud.points) == 0:
@@ -71,12 +73,14 @@ def camera_views(folder: Path) -> list[CameraView]:
             for s in store]
 
 
-def align_icp(points: np.ndarray, reference, distance: float = 0.005) -> np.ndarray:
-    """Rigid transform taking the points onto the reference surface (point-to-plane ICP)."""
+def align_icp(points: np.ndarray, reference, distance: float = 0.005, seed: int = 0) -> np.ndarray:
+    """Rigid transform taking the points onto the reference surface (point-to-plane ICP;
+    the reference sampled with Open3D's generator seeded with ``seed``)."""
     import open3d as o3d
 
     reg = o3d.pipelines.registration
     src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)).voxel_down_sample(0.001)
+    o3d.utility.random.seed(seed)
     tgt = reference.sample_points_uniformly(number_of_points=200_000)
     tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.004, max_nn=30))
     T = np.eye(4)
@@ -87,19 +91,21 @@ def align_icp(points: np.ndarray, reference, distance: float = 0.005) -> np.ndar
 
 
 def run_evaluate(reconstruction: Path, reference: Path, tolerance: float = 0.001, views: Path | None = None,
-                 align: str = "none", samples: int = 200_000, out: Path | None = None) -> EvaluateResult:
+                 align: str = "none", samples: int = 200_000, out: Path | None = None,
+                 seed: int = 0) -> EvaluateResult:
+    """``seed``: of every sampling (the reconstruction when it is a mesh, the reference)."""
     from recon_cli.console import write_json
 
-    points = load_points(reconstruction)
+    points = load_points(reconstruction, seed=seed)
     mesh = load_mesh(reference)
     alignment = None
     T = np.eye(4)
     if align == "icp":
-        T = align_icp(points, mesh)
+        T = align_icp(points, mesh, seed=seed)
         points = points @ T[:3, :3].T + T[:3, 3]
         alignment = pose_error(T, np.eye(4))
     cams = camera_views(views) if views is not None else None
-    result = evaluate(points, mesh, tolerance, samples, cams)
+    result = evaluate(points, mesh, tolerance, samples, cams, seed=seed)
     out = Path(out or Path(reconstruction).parent)
     out.mkdir(parents=True, exist_ok=True)
     stem = Path(reconstruction).stem

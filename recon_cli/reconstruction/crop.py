@@ -32,7 +32,29 @@ class CropBox:
         return CropBox(new_T_frame @ self.frame_T_box, self.size, self.support_margin)
 
 
-def crop_cloud(cloud, box: CropBox, plane_slab: float = 0.006, plane_tolerance: float = 0.0015):
+PLANE_SLAB = 0.006  # [m] above the box's bottom face, where crop_cloud looks for the support plane
+
+
+def box_pixels(box: CropBox, camera_T_frame: np.ndarray, intrinsics,
+               plane_slab: float = PLANE_SLAB) -> tuple[int, int, int, int] | None:
+    """Image rectangle (u0, v0, u1, v1; u1, v1 exclusive) of a pinhole camera (``intrinsics``,
+    placed by ``camera_T_frame`` in the box's frame) outside which crop_cloud keeps no point:
+    the projection of the box grown by ``plane_slab`` in z, plus a pixel. None when the box
+    reaches behind the camera (no rectangle holds it)."""
+    half = np.asarray(box.size) / 2.0 + np.array([0.0, 0.0, plane_slab])
+    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+    corners = transform_points(camera_T_frame @ box.frame_T_box, signs * half)  # (8, 3) camera frame
+    if np.any(corners[:, 2] <= 1e-6):
+        return None
+    u = corners[:, 0] / corners[:, 2] * intrinsics.fx + intrinsics.cx
+    v = corners[:, 1] / corners[:, 2] * intrinsics.fy + intrinsics.cy
+    u0, v0 = (max(int(np.floor(a.min())) - 1, 0) for a in (u, v))
+    u1 = min(int(np.ceil(u.max())) + 2, intrinsics.width)
+    v1 = min(int(np.ceil(v.max())) + 2, intrinsics.height)
+    return u0, v0, max(u1, u0), max(v1, v0)
+
+
+def crop_cloud(cloud, box: CropBox, plane_slab: float = PLANE_SLAB, plane_tolerance: float = 0.0015):
     """The Open3D cloud's points inside the box (a new cloud), without the support surface.
 
     A scan placed with a slightly wrong pose (real global registration) lifts table points

@@ -120,6 +120,7 @@ class SessionInfo:
     crop_box: BoxInfo | None = None
     world_T_marker: np.ndarray | None = None
     script: str | None = None
+    realism: dict[str, Any] | None = None  # the simulation's realism profile (name, file, effects on)
     created: float = field(default_factory=time.time)
     format: int = SESSION_FORMAT
 
@@ -133,6 +134,7 @@ class SessionInfo:
             "object_box": None if self.object_box is None else self.object_box.to_dict(),
             "crop_box": None if self.crop_box is None else self.crop_box.to_dict(),
             "world_T_marker": self.world_T_marker,
+            **({} if self.realism is None else {"realism": self.realism}),
         }
 
     @classmethod
@@ -146,7 +148,7 @@ class SessionInfo:
             sensor=d.get("sensor"), noise=d.get("noise"), seed=d.get("seed"),
             object_name=obj.get("name"), world_T_object=_pose(obj.get("world_T_object")),
             object_box=BoxInfo.from_dict(d.get("object_box")), crop_box=BoxInfo.from_dict(d.get("crop_box")),
-            world_T_marker=_pose(d.get("world_T_marker")), script=d.get("script"),
+            world_T_marker=_pose(d.get("world_T_marker")), script=d.get("script"), realism=d.get("realism"),
             created=float(d.get("created", 0.0)), format=int(d.get("format", SESSION_FORMAT)))
 
 

@@ -36,7 +36,18 @@ class MultiwayOptions:
     max_correspondence: float = 0.0015
     scales: tuple[float, ...] = (4.0, 2.0, 1.0)  # ICP runs at these multiples of it, in order
     icp_iterations: int = 50  # per scale
+    # [rad, m] a Gauss-Newton step of the pairwise ICP smaller than this (rotation and
+    # translation) ends a scale (measured: the same poses as 1e-7 rad / 1e-8 m, in a third of
+    # the steps)
+    icp_tolerance: tuple[float, float] = (1e-5, 5e-6)
+    # source points at the coarser scales (a regular subset of the down-sampled cloud; the
+    # finest scale uses all: fewer there cost pose accuracy)
+    icp_points: int = 1500
+    workers: int = 0  # pairs registered at once (threads; 0: one per core)
     min_overlap: float = 0.3  # pair overlaps: correspondences / smaller cloud above this
+    overlap_voxel: float = 0.004  # [m] sparser copies on which the overlaps are counted
+    # loop closures kept per scan, those of largest overlap (0: every overlapping pair)
+    loop_closures_per_scan: int = 0
     loop_closure_init: str = "icp"  # "icp" or "global" (identity, the thesis' choice)
     edge_prune_threshold: float = 0.25
     reference: int = 0  # node kept fixed during the optimization ("reference" anchor)
@@ -56,7 +67,8 @@ class MultiwayOptions:
     gate: float = 3.0
     normal_agreement: float = 0.99  # cosine: correspondences with normals further apart are dropped
     effective_samples: int = 200  # independent measurements a pairwise overlap is worth
-    normal_radius: float = 2.5  # [voxels] neighbourhood of the normals
+    normal_radius: float = 2.5  # [voxels] neighbourhood of the normals (when estimated)
+    own_normals: bool = True  # the clouds' own normals averaged per voxel, estimated only where missing
     rounds: int = 1  # graph built and optimized this many times
     method: str = "point_to_plane"  # pairwise ICP: point_to_plane | point_to_point | colored
 
@@ -76,6 +88,14 @@ class RegisterOptions:
     use_board: bool = True  # False: every pose from kinematics
     min_corners: int = 6
     max_reprojection_px: float = MAX_REPROJECTION_PX  # board poses reprojecting worse: kinematics
+    # shift every global pose along the board normal so that the board in the scan's own
+    # depth image lies at z = 0 of the marker frame (the height from metric depth): a camera
+    # whose intrinsics are a little off puts its board poses millimetres off along the
+    # viewing ray, its depth does not (reconstruction/global_registration.py)
+    board_plane: bool = True
+    # kinematic (fallback) poses corrected by the session's board poses: a constant error on
+    # the world side (robot base) and on the flange side (hand-eye), fitted where both exist
+    correct_kinematics: bool = True
     local: bool = True  # pose-graph local registration
     mesh: bool = True
     multiway: MultiwayOptions = field(default_factory=MultiwayOptions)

@@ -21,8 +21,14 @@ import numpy as np
 from recon_cli.errors import FileError, InputError, MetadataError
 from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.perception.charuco import thesis_board
-from recon_cli.reconstruction.crop import CropBox, crop_cloud
-from recon_cli.reconstruction.global_registration import GlobalPose, PoseSource, global_pose
+from recon_cli.reconstruction.crop import CropBox, box_pixels, crop_cloud
+from recon_cli.reconstruction.global_registration import (
+    GlobalPose,
+    PoseSource,
+    corrected_pose,
+    global_pose,
+    kinematic_correction,
+)
 from recon_cli.reconstruction.metadata import SessionInfo
 from recon_cli.reconstruction.options import RegisterOptions  # noqa: F401 (re-exported)
 from recon_cli.reconstruction.pose_graph import MultiwayResult, register_multiway
@@ -156,10 +162,27 @@ def _crop_box(options: RegisterOptions, session: SessionInfo, world_T_marker: np
 def scan_cloud(scan, pose: GlobalPose, box: CropBox | None, surface: SurfaceOptions):
     """A scan's points in the marker frame (placed by its global pose), cropped to the box
     (when given), with normals turned toward its camera."""
+    if box is not None:
+        scan = in_box_pixels(scan, box, pose.marker_T_camera)
     cloud = scan.to_open3d_cloud(pose.marker_T_camera)
     if box is not None:
         cloud = crop_cloud(cloud, box)
     return oriented_cloud(cloud, pose.marker_T_camera[:3, 3], surface)
+
+
+def in_box_pixels(scan, box: CropBox, marker_T_camera: np.ndarray):
+    """The scan cut to the image rectangle where the box (marker frame) can appear: its
+    pinhole images (undistorted), the principal point moved with the cut. Cropping it gives
+    the same points as cropping the whole scan, from a fraction of the pixels."""
+    rect = box_pixels(box, invert(marker_T_camera), scan.intrinsics)
+    if rect is None or rect[2] <= rect[0] or rect[3] <= rect[1]:
+        return scan
+    u0, v0, u1, v1 = rect
+    color, depth = scan.pinhole_images()
+    K = scan.intrinsics
+    return replace(scan, color=None if color is None else color[v0:v1, u0:u1], depth=depth[v0:v1, u0:u1],
+                   intrinsics=replace(K, width=u1 - u0, height=v1 - v0, cx=K.cx - u0, cy=K.cy - v0),
+                   distortion=None)
 
 
 def crop_box_marker(options: RegisterOptions, session: SessionInfo) -> CropBox:
@@ -190,7 +213,21 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
 
     # 1. global registration, cropping, oriented normals (per scan)
     records: list[ScanRecord] = []
-    clouds = []
+    cloud_of: dict[int, object] = {}  # record position -> its cropped, oriented cloud
+
+    def add_cloud(pos: int, rec: ScanRecord, scan) -> None:
+        cloud = scan_cloud(scan, rec.pose, box, options.surface)
+        rec.points = len(cloud.points)
+        if rec.points < 100:
+            rec.skipped = f"{rec.points} points inside the crop box"
+        else:
+            cloud_of[pos] = cloud
+
+    # kinematic poses wait for the board poses of the session, which correct them
+    correct = options.correct_kinematics and options.use_board and options.perturb is None \
+        and world_T_marker is not None
+    fk: dict[int, np.ndarray] = {}  # record position -> forward-kinematics pose (marker frame)
+    deferred: list[tuple[int, Path]] = []
     for k, (index, scan_folder) in enumerate(scan_folders):
         try:
             scan = read_scan(scan_folder)
@@ -199,7 +236,7 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
             step("global registration", k + 1, len(scan_folders))
             continue
         pose = global_pose(scan, board, world_T_marker, options.min_corners, options.use_board,
-                           options.max_reprojection_px)
+                           options.max_reprojection_px, options.board_plane)
         if pose is not None and options.perturb is not None:
             pose = replace(pose, marker_T_camera=perturbed(pose.marker_T_camera, *options.perturb, rng))
         rec = ScanRecord(index, pose, folder=scan_folder.name)
@@ -210,15 +247,26 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
             if scan.ground_truth and world_T_marker is not None:
                 truth = invert(world_T_marker) @ np.asarray(scan.ground_truth["world_T_camera"], dtype=float)
                 rec.true_marker_T_camera = truth
-                if pose.source is PoseSource.CHARUCO:
-                    rec.charuco_error = pose_error(pose.marker_T_camera, truth)
-            cloud = scan_cloud(scan, pose, box, options.surface)
-            rec.points = len(cloud.points)
-            if rec.points < 100:
-                rec.skipped = f"{rec.points} points inside the crop box"
+                if pose.source is PoseSource.CHARUCO:  # the board's own pose (thesis Table 4.2)
+                    rec.charuco_error = pose_error(pose.source_pose, truth)
+            if correct:
+                fk[len(records) - 1] = invert(world_T_marker) @ scan.world_T_camera_fk
+            if correct and pose.source is PoseSource.KINEMATICS:
+                deferred.append((len(records) - 1, scan_folder))
             else:
-                clouds.append(cloud)
+                add_cloud(len(records) - 1, rec, scan)
         step("global registration", k + 1, len(scan_folders))
+    correction = None
+    if deferred:
+        pairs = [(records[i].pose.source_pose, fk[i]) for i in fk
+                 if records[i].pose.source is PoseSource.CHARUCO and not records[i].skipped]
+        correction = kinematic_correction([b for b, _ in pairs], [f for _, f in pairs])
+        for i, scan_folder in deferred:
+            rec, scan = records[i], read_scan(scan_folder)
+            if correction is not None:
+                rec.pose = corrected_pose(scan, rec.pose, correction.apply(fk[i]), board, options.board_plane)
+            add_cloud(i, rec, scan)
+    clouds = [cloud_of[i] for i, r in enumerate(records) if not r.skipped]
     used = [r for r in records if not r.skipped]
     if not used:
         reasons = sorted({r.skipped for r in records})
@@ -271,6 +319,7 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
                             "support_margin": box.support_margin},
         "scans": [r.to_dict() for r in records],
         "pose_sources": pose_source_counts(used),
+        "kinematic_correction": None if correction is None else correction.to_dict(),
         "charuco_error_mean": None if not errors else {
             "translation_mm": float(np.mean([e[0] for e in errors]) * 1e3),
             "rotation_deg": float(np.degrees(np.mean([e[1] for e in errors])))},
@@ -284,7 +333,9 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
             "loop_closures": sum(e.kind == "loop_closure" for e in multiway.edges),
             "rejected_edges": sum(e.rejected for e in multiway.edges)},
         "points": {"fused": len(fused.points)},
-        "options": {"use_board": options.use_board, "local": options.local, "perturb": options.perturb,
+        "options": {"use_board": options.use_board, "board_plane": options.board_plane,
+                    "correct_kinematics": options.correct_kinematics, "local": options.local,
+                    "perturb": options.perturb,
                     "multiway": options.multiway, "surface": options.surface},
         "timings": timings,
         "outputs": {"cloud": cloud_path.name, "cloud_global": cloud_global.name,

@@ -52,10 +52,21 @@ class Scan:
     marker_T_camera: np.ndarray | None = None  # from the ChArUco board, when found
     ground_truth: dict[str, Any] | None = None  # simulation only; evaluation only
     path: Path | None = None
+    distortion: tuple[float, ...] | None = None  # lens distortion of the intrinsics (OpenCV), None: pinhole
+
+    def pinhole_images(self) -> tuple[np.ndarray | None, np.ndarray]:
+        """Colour and depth in the pinhole camera of the intrinsics (undistorted when the
+        scan has a lens distortion; depth resampled nearest, never blended across edges)."""
+        if self.distortion is None:
+            return self.color, self.depth
+        from recon_cli.perception.camera_model import undistort_color, undistort_depth
+
+        color = None if self.color is None else undistort_color(self.color, self.intrinsics, self.distortion)
+        return color, undistort_depth(self.depth, self.intrinsics, self.distortion)
 
     def points_camera(self) -> np.ndarray:
         """Points (N, 3) in the camera frame [m]."""
-        return backproject(self.depth, self.intrinsics)
+        return backproject(self.pinhole_images()[1], self.intrinsics)
 
     def points_world_fk(self) -> np.ndarray:
         """Points (N, 3) in the world, placed with the forward-kinematics camera pose."""
@@ -65,10 +76,11 @@ class Scan:
         """An Open3D RGBDImage (colour kept as colour, depth in metres)."""
         import open3d as o3d
 
-        color = self.color if self.color is not None else np.zeros((*self.depth.shape, 3), np.uint8)
+        color, depth = self.pinhole_images()
+        color = color if color is not None else np.zeros((*depth.shape, 3), np.uint8)
         return o3d.geometry.RGBDImage.create_from_color_and_depth(
             o3d.geometry.Image(np.ascontiguousarray(color)),
-            o3d.geometry.Image(self.depth.astype(np.float32)),
+            o3d.geometry.Image(depth.astype(np.float32)),
             depth_scale=1.0, depth_trunc=depth_trunc, convert_rgb_to_intensity=False)
 
     def to_open3d_cloud(self, world_T_camera: np.ndarray | None = None):
@@ -148,6 +160,7 @@ class ScanStore:
                 "joints": scan.joints,
                 "world_T_camera_fk": scan.world_T_camera_fk,
                 "marker_T_camera": scan.marker_T_camera,
+                **({} if scan.distortion is None else {"distortion": list(scan.distortion)}),
                 **scan.meta,
             }
             _write_json(tmp / "scan.json", record)
@@ -240,7 +253,8 @@ def read_scan(folder: Path) -> Scan:
         gt = load_json(folder / "ground_truth.json", "ground_truth.json")
     marker = meta.get("marker_T_camera")
     known = {"format", "index", "intrinsics", "depth_scale", "depth_unit", "joints",
-             "world_T_camera_fk", "marker_T_camera"}
+             "world_T_camera_fk", "marker_T_camera", "distortion"}
+    dist = meta.get("distortion")
     return Scan(
         index=int(meta["index"]), color=color, depth=depth,
         intrinsics=Intrinsics.from_dict(intr),
@@ -249,4 +263,5 @@ def read_scan(folder: Path) -> Scan:
         meta={k: v for k, v in meta.items() if k not in known},
         marker_T_camera=None if marker is None else np.asarray(marker, dtype=float),
         ground_truth=gt, path=folder,
+        distortion=None if dist is None else tuple(float(v) for v in dist),
     )

@@ -1,6 +1,6 @@
 """The cell: one description expanded once, and everything built from it.
 
-``Cell`` bundles the pinocchio kinematics, the FCL collision model (with the optional
+``Cell`` bundles the pinocchio kinematics, the collision model (pinocchio/coal; with the optional
 object bounding box) and the IK solver of one ``CellConfig``; callers above this module
 ask it for camera poses, IK solutions and collision checks.
 """

@@ -56,6 +56,9 @@ class CellConfig:
     ceiling_xy: base position of the ceiling cell in the world [m]
     flange_T_camera: hand-eye transform, the camera's optical frame in the flange (arm_link_7)
         frame, 16 numbers row by row [m]; None: the thesis' calibration in the description
+    mount_T_base: the iiwa base (arm_link_0) in its mount (gantry carriage or ceiling plate),
+        16 numbers row by row [m]; None: the nominal mount of the description (a realism
+        profile gives the simulated robot another one: base pose error)
     """
 
     kind: CellKind = CellKind.GANTRY
@@ -63,8 +66,11 @@ class CellConfig:
     table_lift: float = 0.0
     ceiling_xy: tuple[float, float] = (0.0, 0.0)
     flange_T_camera: tuple[float, ...] | None = None
+    mount_T_base: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
+        if self.mount_T_base is not None:
+            object.__setattr__(self, "mount_T_base", _rigid(self.mount_T_base, "the robot base pose mount_T_base"))
         if self.flange_T_camera is not None:
             m = [float(v) for v in self.flange_T_camera]
             R = [m[0:3], m[4:7], m[8:11]]
@@ -99,7 +105,19 @@ class CellConfig:
             "ceiling_x": repr(float(self.ceiling_xy[0])),
             "ceiling_y": repr(float(self.ceiling_xy[1])),
             **self._camera_args(),
+            **self._base_args(),
         }
+
+    def _base_args(self) -> dict[str, str]:
+        """The iiwa base in its mount (only when it differs from the description's)."""
+        if self.mount_T_base is None:
+            return {}
+        from scipy.spatial.transform import Rotation
+
+        m = self.mount_T_base
+        rpy = Rotation.from_matrix([m[0:3], m[4:7], m[8:11]]).as_euler("xyz")
+        return {"base_xyz": " ".join(repr(float(v)) for v in (m[3], m[7], m[11])),
+                "base_rpy": " ".join(repr(float(v)) for v in rpy)}
 
     def _camera_args(self) -> dict[str, str]:
         """The optical frame in the camera bracket frame (BRACKET_HEIGHT above the flange)."""
@@ -113,6 +131,20 @@ class CellConfig:
         rpy = Rotation.from_matrix(R).as_euler("xyz")  # fixed axes x, y, z: URDF's rpy
         return {"camera_xyz": " ".join(repr(float(v)) for v in xyz),
                 "camera_rpy": " ".join(repr(float(v)) for v in rpy)}
+
+
+def _rigid(values, what: str) -> tuple[float, ...]:
+    """16 numbers of a rigid 4 x 4 transform (row by row), or a one-line InputError."""
+    m = [float(v) for v in values]
+    ok = len(m) == 16 and all(math.isfinite(v) for v in m) and m[12:] == [0.0, 0.0, 0.0, 1.0]
+    if ok:
+        R = [m[0:3], m[4:7], m[8:11]]
+        ok = all(abs(sum(R[k][i] * R[k][j] for k in range(3)) - (1.0 if i == j else 0.0)) < 1e-6
+                 for i in range(3) for j in range(3))
+    if not ok:
+        raise InputError(f"{what} is not a rigid 4 x 4 transform",
+                         hint="give 16 numbers row by row with an orthonormal rotation and 0 0 0 1 last")
+    return tuple(m)
 
 
 def _robot_dir_digest() -> str:

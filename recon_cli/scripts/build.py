@@ -93,7 +93,8 @@ def build_recon(el, src: C.Source) -> list[C.Command]:
     if tag == "cell":
         return [C.SetCell(src, a.get("kind", D.cell.kind.value),
                           float(a.get("safety_distance", D.cell.safety_distance)), a.get("backend", "sim"),
-                          float(a.get("resolution", D.sensor.resolution)), as_bool(a.get("noise"), D.sensor.noise))]
+                          float(a.get("resolution", D.sensor.resolution)), as_bool(a.get("noise"), D.sensor.noise),
+                          a.get("realism", D.realism.name))]
     if tag == "object":
         return [C.SetObject(src, a["name"], float(a.get("scale", D.scene.object_scale)))]
     if tag == "box":

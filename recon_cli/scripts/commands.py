@@ -45,10 +45,11 @@ class SetCell(Command):
     backend: str
     resolution: float
     noise: bool
+    realism: str  # realism profile of the simulation: a built-in name or a YAML file
 
     def describe(self) -> str:
         return (f"cell {self.kind}, safety distance {self.safety_distance:g} m, backend {self.backend}, "
-                f"image scale {self.resolution:g}, noise {'on' if self.noise else 'off'}")
+                f"image scale {self.resolution:g}, noise {'on' if self.noise else 'off'}, realism {self.realism}")
 
 
 @dataclass(frozen=True)

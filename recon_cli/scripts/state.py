@@ -23,6 +23,7 @@ import numpy as np
 from recon_cli.config import Config
 from recon_cli.errors import FileError
 from recon_cli.geometry.view import Frame
+from recon_cli.realism import RealismProfile
 from recon_cli.scripts import commands as C
 from recon_cli.session import Backend, Mode, Session, SessionSpec, open_session
 
@@ -67,6 +68,7 @@ class RunOptions:
     sequence_method: SequenceMethod = SequenceMethod.OURS
     append: bool = False  # add scans to the scan store already in ``out``
     station: Path | None = None  # a station file: robot and camera adapters (and the cell)
+    realism: RealismProfile | None = None  # overrides the script's <cell realism=...>
 
 
 @dataclass

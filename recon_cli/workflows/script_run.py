@@ -83,7 +83,8 @@ class ScriptRunner:
         self.options = options
         self.progress = progress or (lambda *a: None)
         config = replace(DEFAULTS, seed=options.seed,
-                         scene=SceneConfig(options.object_name or DEFAULTS.scene.object_name))
+                         scene=SceneConfig(options.object_name or DEFAULTS.scene.object_name),
+                         realism=options.realism or DEFAULTS.realism)
         self.state = RunState(script, options, config, np.random.default_rng(options.seed),
                               backend=options.backend or Backend.SIM)
         self.on_failure = OnFailure(script.on_failure)
@@ -99,10 +100,8 @@ class ScriptRunner:
     # ------------------------------------------------------------------ run
     def run(self) -> RunResult:
         from recon_cli.outputs import atomic_write_text, refuse_links
-        from recon_cli.planning.planner import seed_ompl
 
         t0 = time.perf_counter()
-        seed_ompl(self.options.seed)
         self.out.mkdir(parents=True, exist_ok=True)
         if self.options.append:
             refuse_links(self.out)

@@ -84,7 +84,7 @@ def test_bunny_multiway_registration_recovers_true_poses():
         print(f"{name:13s} before {before[0] * 1e3:5.2f} mm {np.degrees(before[1]):.3f} deg, "
               f"after {after[0] * 1e3:.3f} mm {np.degrees(after[1]):.4f} deg")
         if name != "bun000.ply":
-            # measured: 0.08-0.65 mm and 0.04-0.31 deg (issue target 0.5 mm / 0.1 deg, see README)
+            # measured: 0.08-0.65 mm and 0.04-0.31 deg (target 0.5 mm / 0.1 deg, see docs/benchmarks.md)
             assert after[0] < 0.7e-3 and np.degrees(after[1]) < 0.35
             assert after[0] < before[0] / 4 and after[1] < before[1] / 5
     # the registered set is at least as self-consistent as the published poses

@@ -3,15 +3,34 @@
 MuJoCo renders colour and linear depth (distance along the optical axis, metres) of its
 OpenGL camera; ``render_rgbd`` returns them in OpenCV pixel order (row 0 at the top).
 The sensor model (range, grazing-angle dropout, Gaussian depth noise) is applied on top.
+
+With a realism profile (recon_cli/realism.py) the pinhole render is first resampled into
+the actual camera (its intrinsics and lens distortion: colour bilinear, depth bilinear on
+smooth surfaces and nearest across depth edges; both cameras share centre and orientation,
+so the depth along the optical axis carries over), then the profile's depth artefacts and
+image effects are applied. The frame reports the camera recon is told about (the profile's
+assumed camera, nominal by default), not the actual one.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
 from recon_cli.backends.base import RGBDFrame
 from recon_cli.backends.sim.scene import SimScene, mujoco
-from recon_cli.perception.camera_model import Intrinsics, intrinsics_from_fovy, opencv_from_opengl
+from recon_cli.perception import sensor as sensor_effects
+from recon_cli.perception.camera_model import (
+    Intrinsics,
+    distorted_pixel_maps,
+    intrinsics_from_fovy,
+    opencv_from_opengl,
+)
+from recon_cli.realism import IDEAL, DepthArtefacts, RealismProfile
+
+#: [m] a 3 x 3 depth neighbourhood spanning less is a smooth surface (bilinear resampling)
+SMOOTH_DEPTH_RANGE = 0.003
 
 
 def camera_intrinsics(model: mujoco.MjModel, camera_id: int, width: int, height: int) -> Intrinsics:
@@ -43,11 +62,33 @@ def render_rgbd(renderer: mujoco.Renderer, data: mujoco.MjData, camera_id: int
     return color, depth
 
 
+def resample_rgbd(color: np.ndarray, depth: np.ndarray, map_x: np.ndarray, map_y: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Colour and depth of a pinhole render resampled at (map_x, map_y) (one position per
+    output pixel): colour bilinear, depth bilinear where the render's 3 x 3 neighbourhood is
+    smooth (spans < SMOOTH_DEPTH_RANGE) and nearest elsewhere; 0 outside the render."""
+    import cv2
+
+    border = {"borderMode": cv2.BORDER_CONSTANT, "borderValue": 0}
+    color_out = cv2.remap(color, map_x, map_y, cv2.INTER_LINEAR, **border)
+    kernel = np.ones((3, 3), np.uint8)
+    span = cv2.dilate(depth, kernel) - cv2.erode(np.where(depth > 0, depth, np.inf), kernel)
+    smooth = cv2.remap((span < SMOOTH_DEPTH_RANGE).astype(np.uint8), map_x, map_y, cv2.INTER_NEAREST, **border)
+    near = cv2.remap(depth, map_x, map_y, cv2.INTER_NEAREST, **border)
+    linear = cv2.remap(depth, map_x, map_y, cv2.INTER_LINEAR, **border)
+    return color_out, np.where(smooth > 0, linear, near)
+
+
 class SimCamera:
-    """CameraBackend of the simulation: renders the flange camera of a SimScene."""
+    """CameraBackend of the simulation: renders the flange camera of a SimScene.
+
+    realism: the profile's camera, depth and image effects; realism_rng: the generator of
+    their random draws (the depth and colour noise of the sensor model use ``rng``, as
+    without a profile)."""
 
     def __init__(self, scene: SimScene, data: mujoco.MjData, rng: np.random.Generator | None,
-                 noise: bool = True, scale: float = 1.0) -> None:
+                 noise: bool = True, scale: float = 1.0, realism: RealismProfile = IDEAL,
+                 realism_rng: np.random.Generator | None = None) -> None:
         self.scene = scene
         self.data = data
         self.rng = rng
@@ -55,6 +96,28 @@ class SimCamera:
         sensor = scene.sensor
         self.intrinsics = sensor.intrinsics(scale)
         self.renderer = mujoco.Renderer(scene.model, self.intrinsics.height, self.intrinsics.width)
+        self.distortion: tuple[float, ...] | None = None
+        self.realism = realism
+        self._ideal = realism.is_ideal
+        if not self._ideal:
+            self._set_up_realism(realism, realism_rng or np.random.default_rng(0))
+
+    def _set_up_realism(self, realism: RealismProfile, rng: np.random.Generator) -> None:
+        render = self.intrinsics  # the pinhole MuJoCo renders
+        w, h = render.width, render.height
+        cam = realism.camera
+        self.render_intrinsics = render
+        self.actual_intrinsics = cam.actual.intrinsics(w, h) if cam.actual is not None else render
+        self._maps = None if cam.actual is None else distorted_pixel_maps(self.actual_intrinsics,
+                                                                          cam.actual.distortion, render)
+        if cam.assumed is not None:  # what recon is told (scan.json)
+            self.intrinsics = cam.assumed.intrinsics(w, h)
+            self.distortion = cam.assumed.distortion if cam.assumed.distorted else None
+        self._realism_rng = rng
+        self._blur = realism.image.blur_sigma * w / self.scene.sensor.width
+        noise_std = realism.image.noise_std
+        self._sensor = (self.scene.sensor if noise_std is None
+                        else dataclasses.replace(self.scene.sensor, color_noise_std=noise_std))
 
     def close(self) -> None:
         self.renderer.close()
@@ -66,6 +129,26 @@ class SimCamera:
     def capture(self) -> RGBDFrame:
         mujoco.mj_forward(self.scene.model, self.data)
         color, depth = render_rgbd(self.renderer, self.data, self.scene.camera_id)
+        if not self._ideal:
+            color, depth = self._realism_effects(color, depth)
+            return RGBDFrame(color, depth, self.intrinsics, float(self.data.time), self.distortion)
         depth = self.scene.sensor.apply(depth, self.intrinsics, self.rng, self.noise)
         color = self.scene.sensor.apply_color(color, self.rng, self.noise)
         return RGBDFrame(color, depth, self.intrinsics, float(self.data.time))
+
+    def _realism_effects(self, color: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The actual camera's images: resampled into its intrinsics and distortion, depth
+        artefacts, the sensor model, quantization; exposure, blur and noise of the colour."""
+        if self._maps is not None:
+            color, depth = resample_rgbd(color, depth, *self._maps)
+        K, art, rng, fx = self.actual_intrinsics, self.realism.depth, self._realism_rng, sensor_effects
+        if art != DepthArtefacts():
+            depth = fx.multipath(depth, K, art.multipath_gain, art.multipath_window)
+            depth = fx.flying_pixels(depth, art.flying_pixel_share, art.edge_jump, rng)
+            depth = fx.dropouts(depth, color, K, art.grazing, art.dark_level, art.saturated_level, rng,
+                                art.dark_dropout)
+        depth = self._sensor.apply(depth, K, self.rng, self.noise)
+        depth = fx.quantize_depth(depth, art.quantization, self._sensor.noise_z_ref)
+        color = fx.image_effects(color, self.realism.image.exposure, self._blur)
+        color = self._sensor.apply_color(color, self.rng, self.noise)
+        return color, depth

@@ -19,6 +19,7 @@ import pinocchio as pin
 
 from recon_cli.backends.base import ExecutionReport
 from recon_cli.backends.sim.scene import SimScene, drives, mujoco
+from recon_cli.backends.sim.truth import JointSensor
 from recon_cli.planning.trajectory import Trajectory
 from recon_cli.robot.kinematics import Kinematics
 
@@ -51,7 +52,8 @@ class SimRobot:
     """RobotBackend of the simulation."""
 
     def __init__(self, scene: SimScene, data: mujoco.MjData, kin: Kinematics,
-                 gains: ControllerGains | None = None, settle: SettleCriterion | None = None) -> None:
+                 gains: ControllerGains | None = None, settle: SettleCriterion | None = None,
+                 joint_sensor: JointSensor | None = None) -> None:
         if tuple(kin.joint_names) != scene.joint_names:
             raise ValueError("the controller model and the plant have different joints")
         self.scene = scene
@@ -64,17 +66,28 @@ class SimRobot:
         arm = drives()["armature"]
         self._armature = np.array([float(arm.get(n, 0.0)) for n in self.joint_names])
         self._effort = kin.limits.effort
+        # the true robot's joint sensors (realism profile); None: they read the true angles
+        self.joint_sensor = joint_sensor
 
     # ------------------------------------------------------------------ state
     def measured_joints(self) -> np.ndarray:
+        q = self.data.qpos[self.scene.qpos_index].copy()
+        return q if self.joint_sensor is None else self.joint_sensor.read(q)
+
+    def true_joints(self) -> np.ndarray:
+        """The plant's true joint angles (simulation ground truth)."""
         return self.data.qpos[self.scene.qpos_index].copy()
+
+    def _sensed(self, q: np.ndarray) -> np.ndarray:
+        """What the controller reads at true joints q (noise-free)."""
+        return q if self.joint_sensor is None else self.joint_sensor.sense(q)
 
     def measured_velocities(self) -> np.ndarray:
         return self.data.qvel[self.scene.dof_index].copy()
 
     def reset(self, q: np.ndarray) -> None:
-        """Place the robot at rest at q (start of a session)."""
-        self.data.qpos[self.scene.qpos_index] = q
+        """Place the robot at rest where its joints read q (start of a session)."""
+        self.data.qpos[self.scene.qpos_index] = q if self.joint_sensor is None else self.joint_sensor.link_angles(q)
         self.data.qvel[:] = 0.0
         self.data.ctrl[:] = 0.0
         mujoco.mj_forward(self.scene.model, self.data)
@@ -101,7 +114,7 @@ class SimRobot:
         integral = np.zeros(len(qi))
         max_err = np.zeros(len(qi))
         for k in range(steps):
-            q, qd = data.qpos[qi], data.qvel[di]
+            q, qd = self._sensed(data.qpos[qi]), data.qvel[di]
             e = q - q_des[k]
             np.maximum(max_err, np.abs(e), out=max_err)
             integral += e * dt
@@ -116,7 +129,7 @@ class SimRobot:
         t = 0.0
         settled = False
         while t < s.timeout:
-            q, qd = data.qpos[qi], data.qvel[di]
+            q, qd = self._sensed(data.qpos[qi]), data.qvel[di]
             e = q - goal
             np.maximum(max_err, np.abs(e), out=max_err)
             if np.all(np.abs(qd) < s.velocity) and self._camera_close(goal_inv, q):
@@ -131,5 +144,5 @@ class SimRobot:
             mujoco.mj_step(model, data)
             t += dt
         mujoco.mj_forward(model, data)
-        final = np.abs(data.qpos[qi] - goal)
+        final = np.abs(self._sensed(data.qpos[qi]) - goal)
         return ExecutionReport(trajectory.duration, t, max_err, final, settled)

@@ -1,8 +1,8 @@
 """The MuJoCo scene, compiled from the same expanded URDF as everything else.
 
 The URDF's visual geometry (real sizes, safety distance 0) becomes the scene; its collision
-geometry is dropped (planning checks collisions with FCL; the robot only moves along
-checked trajectories). Added through the MjSpec API: the flange camera (MuJoCo cameras
+geometry is dropped (planning checks collisions with the coal/pinocchio collision model;
+the robot only moves along checked trajectories). Added through the MjSpec API: the flange camera (MuJoCo cameras
 look along -z, so the OpenCV optical frame is turned by pi about x), the ChArUco board as
 a texture on the board plate, the object to scan as a mesh, lights, joint motors, and the
 drive data of robot/drives.yaml (reflected rotor inertia, plant-only viscous friction).
@@ -10,6 +10,7 @@ drive data of robot/drives.yaml (reflected rotor inertia, plant-only viscous fri
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import os
 from dataclasses import dataclass
@@ -54,9 +55,9 @@ class SimScene:
 
 
 def _mujoco_urdf(config: CellConfig) -> str:
-    """URDF text of the cell (real sizes) with MuJoCo's compiler options inside <robot>."""
-    urdf = expand_urdf(CellConfig(kind=config.kind, safety_distance=0.0,
-                                  table_lift=config.table_lift, ceiling_xy=config.ceiling_xy))
+    """URDF text of the cell (real sizes, the config's robot base and hand-eye transform)
+    with MuJoCo's compiler options inside <robot>."""
+    urdf = expand_urdf(dataclasses.replace(config, safety_distance=0.0))
     root = etree.fromstring(urdf.encode())
     mj = etree.SubElement(root, "mujoco")
     etree.SubElement(mj, "compiler", fusestatic="false", discardvisual="false",

@@ -7,7 +7,9 @@ import numpy as np
 from recon_cli.backends.sim.camera import SimCamera
 from recon_cli.backends.sim.robot import SimRobot
 from recon_cli.backends.sim.scene import build_scene, mujoco
+from recon_cli.backends.sim.truth import JointSensor, TrueCell, true_cell
 from recon_cli.objects import SceneObject
+from recon_cli.realism import IDEAL, RealismProfile
 from recon_cli.robot.cell import Cell
 
 
@@ -18,14 +20,33 @@ class SimStation:
     backend = "sim"
 
     def __init__(self, cell: Cell, scene_object: SceneObject | None, start: np.ndarray,
-                 rng: np.random.Generator, noise: bool = True, resolution: float = 1.0) -> None:
+                 rng: np.random.Generator, noise: bool = True, resolution: float = 1.0,
+                 realism: RealismProfile = IDEAL) -> None:
         self.cell = cell
         self.scene_object = scene_object
-        self.scene = build_scene(cell.config, scene_object)
+        self.realism = realism
+        self.truth: TrueCell | None = None
+        sensor, camera_rng = None, None
+        if not realism.is_ideal:  # its own generators: the session's stream stays as it is
+            kin_rng, camera_rng = rng.spawn(2)
+            if realism.kinematic_errors:
+                self.truth = true_cell(cell, realism.kinematics, kin_rng, realism.source or realism.name)
+                sensor = JointSensor(self.truth, kin_rng)
+        self.scene = build_scene(cell.config if self.truth is None else self.truth.config, scene_object)
         self.data = mujoco.MjData(self.scene.model)
-        self.robot = SimRobot(self.scene, self.data, cell.kin)
+        self.robot = SimRobot(self.scene, self.data, cell.kin, joint_sensor=sensor)
         self.robot.reset(np.asarray(start, dtype=float))
-        self.camera = SimCamera(self.scene, self.data, rng, noise=noise, scale=resolution)
+        self.camera = SimCamera(self.scene, self.data, rng, noise=noise, scale=resolution, realism=realism,
+                                realism_rng=camera_rng)
+
+    def realism_record(self) -> dict:
+        """What the realism profile drew for this session (ground truth, evaluation only)."""
+        cam = self.camera
+        record = {"profile": self.realism.to_dict(), "kinematics": None if self.truth is None else self.truth.to_dict()}
+        if not self.realism.is_ideal:
+            record["camera"] = {"actual_intrinsics": cam.actual_intrinsics.to_dict(),
+                                "assumed_intrinsics": cam.intrinsics.to_dict(), "assumed_distortion": cam.distortion}
+        return record
 
     def cover_board(self, covered: bool) -> None:
         """Lay a plain grey sheet over the printed ChArUco board (or take it away): the
@@ -40,7 +61,7 @@ class SimStation:
     def ground_truth(self) -> dict:
         """What only a simulation knows; stored apart from the scan data, for evaluation."""
         truth = {"world_T_camera": self.camera.world_T_camera_truth(),
-                 "joints": dict(zip(self.robot.joint_names, self.robot.measured_joints().tolist(), strict=True))}
+                 "joints": dict(zip(self.robot.joint_names, self.robot.true_joints().tolist(), strict=True))}
         if self.scene_object is not None:
             truth["object"] = self.scene_object.name
             truth["world_T_object"] = self.scene_object.world_T_object

@@ -14,10 +14,12 @@ from recon_cli.session import Backend
 
 @handles(C.SetCell)
 def set_cell(state: RunState, cmd: C.SetCell, report: CommandReport) -> None:
+    from recon_cli.realism import load_profile
     from recon_cli.robot.description import CellConfig, CellKind
 
+    realism = state.options.realism or load_profile(cmd.realism)
     state.set_config(cell=CellConfig(kind=CellKind.parse(cmd.kind), safety_distance=cmd.safety_distance),
-                     sensor=SensorConfig(noise=cmd.noise, resolution=cmd.resolution))
+                     sensor=SensorConfig(noise=cmd.noise, resolution=cmd.resolution), realism=realism)
     state.backend = state.options.backend or Backend(cmd.backend)
 
 

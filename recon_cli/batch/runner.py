@@ -1,0 +1,203 @@
+"""A batch run: the batch folder, resuming, the executor, each job's verdict on disk, and
+the reports.
+
+The batch folder::
+
+    <out>/
+        batch.json        the expanded jobs (what ran, with which arguments and bounds)
+        jobs/<name>/      one folder per job (recon_cli.batch.job)
+        junit.xml         one testcase per job
+        summary.json      every job's result
+        summary.md        a table for a CI job summary
+
+A job is done when its ``result.json`` is written (atomically, by this process, after the
+job's process ended). ``resume`` keeps every done job whose command, environment and bounds
+are unchanged and runs the others again from an empty folder.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from recon_cli.batch.job import JobResult, JobStatus, allow_runs
+from recon_cli.batch.spec import BatchSpec, JobSpec
+from recon_cli.errors import FileError
+
+EXIT_FAILED = 3  # like recon run: the batch finished, but some jobs failed
+RESULT = "result.json"
+
+
+@dataclass(frozen=True)
+class BatchOptions:
+    out: Path | None = None  # the batch folder (default runs/batch-<time>)
+    workers: int = 1  # local pool size, or workers of --cluster local
+    scheduler: str | None = None  # address of a running Dask scheduler
+    cluster: str | None = None  # "local": start a Dask LocalCluster
+    resume: bool = False
+    junit: Path | None = None  # extra copies of the reports
+    json: Path | None = None
+    markdown: Path | None = None
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    name: str
+    folder: Path
+    jobs: tuple[JobResult, ...]  # in the order of the batch; only the jobs that finished
+    pending: tuple[str, ...]  # jobs that did not finish (the batch was interrupted)
+    wall_s: float  # [s]
+    executor: str
+    workers: int
+    started: float  # [s since the epoch]
+    interrupted: str | None = None  # the signal that stopped the batch (SIGINT, SIGTERM)
+    reports: dict[str, Path] = field(default_factory=dict)
+
+    @property
+    def counts(self) -> dict[str, int]:
+        out = {s.value: 0 for s in JobStatus}
+        for r in self.jobs:
+            out[r.status.value] += 1
+        return out
+
+    @property
+    def failed(self) -> list[JobResult]:
+        return [r for r in self.jobs if not r.passed]
+
+    @property
+    def exit_code(self) -> int:
+        if self.interrupted:
+            from recon_cli.interrupts import exit_code
+
+            return exit_code(self.interrupted)
+        return EXIT_FAILED if self.failed or self.pending else 0
+
+
+def _folder(options: BatchOptions) -> Path:
+    from recon_cli.console import run_folder
+
+    if options.resume and options.out is None:
+        raise FileError("--resume needs the folder of the batch to resume", hint="give it with --out")
+    out = options.out
+    if out is not None and not options.resume and out.is_dir() and any(out.iterdir()):
+        raise FileError(f"batch folder {out} is not empty",
+                        hint="choose a new folder with --out, or pass --resume to finish the batch in it")
+    if out is not None and options.resume and not (out / "batch.json").is_file():
+        raise FileError(f"{out} holds no batch to resume (no batch.json)", hint="run it without --resume first")
+    return run_folder(out, "batch")
+
+
+class _Lock:
+    """One batch at a time in a folder (released by the kernel when the process dies)."""
+
+    def __init__(self, folder: Path) -> None:
+        self.path = folder / ".lock"
+        self.file = None
+
+    def __enter__(self):
+        try:
+            import fcntl
+        except ImportError:  # not POSIX: no lock
+            return self
+        self.file = open(self.path, "w")  # noqa: SIM115 (held for the batch)
+        try:
+            fcntl.flock(self.file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            self.file.close()
+            raise FileError(f"another recon batch is running in {self.path.parent}",
+                            hint="wait for it, or choose another folder with --out") from None
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.file is not None:
+            self.file.close()
+
+
+def fingerprint(job: JobSpec) -> dict:
+    """What must be equal for --resume to keep a job's earlier result."""
+    return {**job.fingerprint(), "expect": job.expect.to_dict(), "timeout_s": job.timeout_s}
+
+
+def _done(job: JobSpec, folder: Path) -> JobResult | None:
+    """The earlier result of ``job`` in ``folder`` if it is the same job, else None."""
+    try:
+        data = json.loads((folder / RESULT).read_text(encoding="utf-8"))
+        result = JobResult.from_dict(data)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if result.fingerprint != fingerprint(job):
+        return None
+    from dataclasses import replace
+
+    return replace(result, resumed=True)
+
+
+def run_batch(spec: BatchSpec, options: BatchOptions,
+              update: Callable[[str, int, int], None] | None = None,
+              on_result: Callable[[JobResult, int, int], None] | None = None) -> BatchResult:
+    """Run every job of ``spec`` (resume: those not done yet) and write the reports."""
+    from dataclasses import replace
+
+    from recon_cli.batch.executors import make_executor
+    from recon_cli.batch.reports import write_reports
+    from recon_cli.console import write_json
+    from recon_cli.interrupts import signal_name
+
+    out = _folder(options)
+    t0, started = time.monotonic(), time.time()
+    with _Lock(out):
+        write_json(out / "batch.json", {"name": spec.name, "sources": list(spec.sources),
+                                        "jobs": [j.to_dict() for j in spec.jobs]})
+        results: dict[str, JobResult] = {}
+        todo: list[tuple[JobSpec, Path]] = []
+        for job in spec.jobs:
+            folder = out / "jobs" / job.name
+            earlier = _done(job, folder) if options.resume else None
+            if earlier is not None:
+                results[job.name] = earlier
+                continue
+            if folder.exists():
+                shutil.rmtree(folder)  # a job that did not finish, or another job of the same name
+            todo.append((job, folder))
+        total, done = len(spec.jobs), len(results)
+        for r in results.values():
+            if on_result is not None:
+                on_result(r, done, total)
+        if update is not None:
+            update("jobs", done, total)
+        executor_text, workers, interrupted = "nothing to run", 0, None
+        by_name = {job.name: job for job, _ in todo}
+        if todo:
+            allow_runs()
+            executor = make_executor(options.workers, options.scheduler, options.cluster)
+            executor_text, workers = executor.description, executor.workers
+            try:
+                with executor:
+                    try:
+                        for r in executor.results(todo):
+                            r = replace(r, fingerprint=fingerprint(by_name[r.name]))
+                            folder = out / "jobs" / r.name  # also when the job ran on another machine
+                            folder.mkdir(parents=True, exist_ok=True)
+                            write_json(folder / RESULT, r.to_dict())
+                            results[r.name] = r
+                            done += 1
+                            if update is not None:
+                                update("jobs", done, total)
+                            if on_result is not None:
+                                on_result(r, done, total)
+                    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (recon_cli.interrupts)
+                        interrupted = signal_name(exc)
+                        executor.interrupt()
+            except KeyboardInterrupt as exc:  # a second Ctrl-C while stopping
+                interrupted = interrupted or signal_name(exc)
+        ordered = tuple(results[j.name] for j in spec.jobs if j.name in results)
+        pending = tuple(j.name for j in spec.jobs if j.name not in results)
+        result = BatchResult(spec.name, out, ordered, pending, time.monotonic() - t0, executor_text, workers,
+                             started, interrupted)
+        reports = write_reports(result, {"junit": options.junit, "json": options.json,
+                                         "markdown": options.markdown})
+    return replace(result, reports=reports)

@@ -1,0 +1,164 @@
+"""A calibrated camera (pinhole intrinsics and lens distortion) and its YAML file.
+
+The file is what ``recon calibrate intrinsics`` writes and what ``recon calibrate handeye
+--intrinsics`` (and a realism profile's ``camera.assumed``) reads::
+
+    format: 1
+    camera:              # exactly the keys of a realism profile's camera.assumed
+      width: 1600        # [px] the image size the numbers belong to
+      height: 1200
+      fx: 1738.93        # [px]
+      fy: 1739.91
+      cx: 799.59
+      cy: 602.95
+      distortion: [k1, k2, p1, p2, k3]   # OpenCV's model
+    calibration: {...}   # how it was obtained (RMS, views, ...); informational
+
+Other image sizes of the same camera scale the numbers (pixel centres at integers).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from recon_cli.errors import FileError, InputError
+from recon_cli.perception.camera_model import Intrinsics
+
+CAMERA_FILE_FORMAT = 1
+CAMERA_KEYS = ("width", "height", "fx", "fy", "cx", "cy", "distortion")
+
+
+@dataclass(frozen=True)
+class CameraCalibration:
+    """Intrinsics [px] and OpenCV distortion coefficients (k1, k2, p1, p2, k3)."""
+
+    intrinsics: Intrinsics
+    distortion: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
+
+    @property
+    def distortion_array(self) -> np.ndarray:
+        return np.asarray(self.distortion, dtype=np.float64)
+
+    def at_size(self, width: int, height: int) -> CameraCalibration:
+        """The same camera at another image size (a resized image; distortion unchanged,
+        being a function of normalized coordinates)."""
+        K = self.intrinsics
+        if (width, height) == (K.width, K.height):
+            return self
+        sx, sy = width / K.width, height / K.height
+        return CameraCalibration(Intrinsics(width, height, K.fx * sx, K.fy * sy, (K.cx + 0.5) * sx - 0.5,
+                                            (K.cy + 0.5) * sy - 0.5), self.distortion)
+
+    def to_mapping(self) -> dict:
+        K = self.intrinsics
+        return {"width": K.width, "height": K.height, "fx": float(K.fx), "fy": float(K.fy), "cx": float(K.cx),
+                "cy": float(K.cy), "distortion": [float(v) for v in self.distortion]}
+
+    @classmethod
+    def from_mapping(cls, d, where: str) -> CameraCalibration:
+        if not isinstance(d, dict):
+            raise InputError(f"{where} is not a mapping", hint=f"give {', '.join(CAMERA_KEYS)}")
+        for key in d:
+            if key not in CAMERA_KEYS:
+                raise InputError(f"{where}.{key} is not a known key", hint=f"known keys: {', '.join(CAMERA_KEYS)}")
+        values = {}
+        for key in CAMERA_KEYS[:6]:
+            v = d.get(key)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                raise InputError(f"{where}.{key} is {v!r}, not a positive number",
+                                 hint="width, height, fx, fy, cx, cy in pixels")
+            values[key] = v
+        dist = d.get("distortion", [0.0] * 5)
+        if (not isinstance(dist, list) or len(dist) not in (4, 5)
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                           for x in dist)):
+            raise InputError(f"{where}.distortion is {dist!r}, not [k1, k2, p1, p2] or [k1, k2, p1, p2, k3]")
+        dist = [float(x) for x in dist] + [0.0] * (5 - len(dist))
+        K = Intrinsics(int(values["width"]), int(values["height"]), float(values["fx"]), float(values["fy"]),
+                       float(values["cx"]), float(values["cy"]))
+        return cls(K, tuple(dist))
+
+    def to_camera_spec(self):
+        """The realism profile's CameraSpec (recon_cli.realism) of this camera."""
+        from recon_cli.realism import CameraSpec
+
+        K = self.intrinsics
+        return CameraSpec(K.fx, K.fy, K.cx, K.cy, K.width, K.height, tuple(self.distortion))
+
+
+def camera_file_text(camera: CameraCalibration, calibration: dict | None = None, comment: str = "") -> str:
+    import json
+
+    import yaml
+
+    from recon_cli.serialization import to_jsonable
+
+    head = "".join(f"# {line}\n" for line in comment.splitlines()) if comment else ""
+    body = {"format": CAMERA_FILE_FORMAT, "camera": camera.to_mapping()}
+    if calibration:
+        body["calibration"] = json.loads(json.dumps(calibration, default=to_jsonable))  # plain types
+    return head + yaml.safe_dump(body, sort_keys=False)
+
+
+def write_camera_file(path: Path, camera: CameraCalibration, calibration: dict | None = None,
+                      comment: str = "") -> Path:
+    from recon_cli.outputs import atomic_write_text
+
+    return atomic_write_text(Path(path), camera_file_text(camera, calibration, comment))
+
+
+def load_camera_file(path: Path) -> CameraCalibration:
+    """Read a camera file (see the module docstring); errors name ``FILE: key``."""
+    import yaml
+
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise FileError(f"camera file {path} does not exist",
+                        hint="write one with recon calibrate intrinsics (its intrinsics.yaml)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FileError(f"cannot read the camera file {path} ({getattr(exc, 'strerror', None) or exc})") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
+        raise InputError(f"{where}: not valid YAML ({getattr(exc, 'problem', None) or exc})") from None
+    if not isinstance(data, dict) or "camera" not in data:
+        raise InputError(f"{path}: no camera section", hint="camera: {width, height, fx, fy, cx, cy, distortion}")
+    if data.get("format", CAMERA_FILE_FORMAT) != CAMERA_FILE_FORMAT:
+        raise InputError(f"{path}: format {data.get('format')!r} is not {CAMERA_FILE_FORMAT}")
+    return CameraCalibration.from_mapping(data["camera"], f"{path}: camera")
+
+
+def write_calibrated_profile(profile: str | Path, camera: CameraCalibration, path: Path) -> Path:
+    """A copy of a realism profile (built-in name or YAML file) whose ``camera.assumed`` is
+    this camera: simulated sessions run with it (``--realism path``) detect and back-project
+    with the calibration instead of the nominal camera."""
+    import yaml
+
+    from recon_cli.outputs import atomic_write_text
+    from recon_cli.realism import BUILT_IN, REALISM_DIR, parse_profile
+
+    source = REALISM_DIR / f"{profile}.yaml" if str(profile) in BUILT_IN else Path(profile)
+    try:
+        data = yaml.safe_load(source.read_text(encoding="utf-8")) or {}
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FileError(f"cannot read the realism profile {source} ({getattr(exc, 'strerror', None) or exc})",
+                        hint="give ideal, thesis or a profile YAML file") from None
+    except yaml.YAMLError:
+        raise InputError(f"{source}: not valid YAML", hint="check it with recon capture --realism FILE") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{source}: the profile is not a mapping", hint="see docs/simulation.md")
+    camera_section = data.get("camera") if isinstance(data.get("camera"), dict) else {}
+    data["camera"] = {**camera_section, "assumed": camera.to_mapping()}
+    data["name"] = f"{data.get('name', source.stem)}, calibrated camera"
+    text = (f"# {source.name} with camera.assumed from recon calibrate intrinsics (the rest as in the source;\n"
+            "# its comments, with the source of each number, are in the source file)\n"
+            + yaml.safe_dump(data, sort_keys=False))
+    parse_profile(text, str(path))  # it must be a valid profile
+    return atomic_write_text(Path(path), text)
+

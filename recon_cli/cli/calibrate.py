@@ -1,0 +1,180 @@
+"""``recon calibrate handeye``, ``recon calibrate intrinsics``: the camera and its mount from
+views of the ChArUco board."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from recon_cli.cli.app import app
+from recon_cli.cli.options import CellOpt, D, RealismOpt, ResolutionOpt, SafetyOpt, SeedOpt, one_of
+from recon_cli.errors import InputError, UnknownNameError
+
+calibrate_app = typer.Typer(help="Calibration from views of the ChArUco board: camera intrinsics and distortion, "
+                                 "the hand-eye transform.", no_args_is_help=True, rich_markup_mode=None)
+app.add_typer(calibrate_app, name="calibrate")
+
+BoardOpt = Annotated[str | None, typer.Option(help="Another board than the cell's (robot/board.yaml): "
+                                                   "squares_x,squares_y,square,marker,DICTIONARY, e.g. "
+                                                   "5,7,0.04,0.02,DICT_6X6_250 (lengths in metres).")]
+METHODS = ("tsai", "park", "horaud", "andreff", "daniilidis", "shah", "li")
+MODELS = ("k1k2p1p2k3", "k1k2p1p2", "k1k2", "none")
+
+
+def parse_board(text: str | None):
+    """The BoardSpec of ``--board`` (None: the cell's board)."""
+    if text is None:
+        return None
+    import cv2
+
+    from recon_cli.perception.charuco import BoardSpec
+
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        sx, sy, square, marker = int(parts[0]), int(parts[1]), float(parts[2]), float(parts[3])
+        name = parts[4].upper()
+    except (ValueError, IndexError):
+        raise InputError(f"--board '{text}' is not squares_x,squares_y,square,marker,DICTIONARY",
+                         hint="e.g. 5,7,0.04,0.02,DICT_6X6_250 (lengths in metres)") from None
+    dictionaries = sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_") and not n.endswith("_SIZE"))
+    if name not in dictionaries:
+        raise UnknownNameError("ArUco dictionary", name, dictionaries)
+    if sx < 2 or sy < 2 or not 0 < marker < square:
+        raise InputError(f"--board '{text}': needs at least 2 x 2 squares and 0 < marker < square",
+                         hint="e.g. 5,7,0.04,0.02,DICT_6X6_250")
+    return BoardSpec(sx, sy, square, marker, name)
+
+
+@calibrate_app.command("handeye")
+def handeye(
+    scans: Annotated[Path | None, typer.Option(help="Scan store of board views to calibrate from (any workflow's, "
+                                                    "e.g. a script run's <out>/scans); default: record the "
+                                                    "generated views first.")] = None,
+    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/handeye-<time>).")] = None,
+    views: Annotated[int, typer.Option(min=3, max=200, help="Generated board views to record (tilted up to 48 deg, "
+                                                            "rolled up to 35 deg, around the board).")] = 20,
+    method: Annotated[str, typer.Option(help="OpenCV solver: tsai, park, horaud, andreff, daniilidis "
+                                             "(calibrateHandEye) or shah, li (calibrateRobotWorldHandEye); all are "
+                                             "computed and compared, this one is written.")] = "tsai",
+    refine: Annotated[bool, typer.Option("--refine/--no-refine", help="Refine the solution together with the "
+                                                                      "robot base's error (docs/calibration.md).")]
+    = True,
+    intrinsics: Annotated[Path | None, typer.Option(help="Calibrated camera (intrinsics.yaml of recon calibrate "
+                                                         "intrinsics); default: the scans' own intrinsics.")] = None,
+    station: Annotated[Path | None, typer.Option(help="Station file: record with its adapters and cell, and write "
+                                                      "the result into its hand_eye (old file kept as .bak).")]
+    = None,
+    write: Annotated[bool, typer.Option("--write/--no-write", help="Write the result into the station file.")]
+    = True,
+    force: Annotated[bool, typer.Option("--force", help="Write even when the views are poorly posed (warnings).")]
+    = False,
+    board: BoardOpt = None,
+    resolution: ResolutionOpt = D.sensor.resolution,
+    noise: Annotated[bool, typer.Option("--noise/--no-noise", help="Sensor noise of the simulation.")]
+    = D.sensor.noise,
+    cell: CellOpt = D.cell.kind.value,
+    safety: SafetyOpt = D.cell.safety_distance,
+    seed: SeedOpt = D.seed,
+    realism: RealismOpt = D.realism.name,
+) -> None:
+    """Hand-eye calibration: flange_T_camera (and the board in the world) from board views."""
+    import numpy as np
+
+    from recon_cli.calibration.handeye import HandEyeMethod
+    from recon_cli.calibration.views import BoardViewOptions
+    from recon_cli.cli.options import realism_profile
+    from recon_cli.config import SensorConfig
+    from recon_cli.console import console, progress_bar, run_folder, styled
+    from recon_cli.robot.description import CellConfig, CellKind
+    from recon_cli.workflows.calibrate import HandEyeOptions, run_handeye
+
+    one_of(method, METHODS, "hand-eye method")
+    config = D.replace(cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
+                       sensor=SensorConfig(noise, resolution), seed=seed, realism=realism_profile(realism))
+    options = HandEyeOptions(run_folder(out, "handeye", fresh=scans is None), config, scans,
+                             BoardViewOptions(n=views), HandEyeMethod(method), refine, intrinsics, station, write,
+                             force, parse_board(board))
+    with progress_bar() as update:
+        r = run_handeye(options, update)
+    if r.recorded is not None:
+        console.print(f"recorded {r.recorded.scans} of {r.recorded.views} board views in {r.recorded.seconds:.1f} s "
+                      f"({r.scans})")
+        for k, why in r.recorded.failures:
+            console.print(styled(f"view {k} skipped:", "yellow", f" {why}"))
+    for s in r.skipped:
+        console.print(styled(f"{s.name} not used:", "yellow", f" {s.reason}"))
+    if intrinsics is None:
+        console.print("board poses seen with the scans' own intrinsics (uncalibrated: calibrate the camera with "
+                      "recon calibrate intrinsics and pass --intrinsics)")
+    t = np.array([x.translation for x in r.residuals]) * 1e3
+    a = np.degrees([x.rotation for x in r.residuals])
+    console.print(f"{r.views} views; closed-chain residual per view: RMS {np.sqrt(np.mean(t**2)):.3f} mm "
+                  f"(max {t.max():.3f}), {np.sqrt(np.mean(a**2)):.4f}° (max {a.max():.4f})")
+    console.print("method      vs written [mm]  [deg]")
+    for name, (dt, dr) in r.method_spread().items():
+        console.print(f"{name:11s} {dt * 1e3:14.3f}  {np.degrees(dr):.4f}")
+    X = r.solution.flange_T_camera
+    dt, dr = r.change
+    label = r.solution.method.value + (" refined" if r.refined else "")
+    console.print(f"flange_T_camera ({label}), {dt * 1e3:.2f} mm / {np.degrees(dr):.3f}° from the model's:")
+    for row in X[:3]:
+        console.print("  [" + ", ".join(f"{v: .6f}" for v in row) + "]")
+    if r.base_rotation is not None:
+        console.print(f"robot base rotation against the model (and the arm's constant sag): "
+                      f"{np.degrees(np.linalg.norm(r.base_rotation)):.3f}°")
+    if r.truth_error is not None:
+        e = r.truth_error
+        console.print(f"simulation: {e[0] * 1e3:.3f} mm / {np.degrees(e[1]):.4f}° from the true camera mount")
+    for _, message in r.diversity.issues:
+        console.print(styled("warning:", "yellow", f" {message}"))
+    if r.station_written is not None:
+        console.print(f"written into {r.station_written} (hand_eye; the old file is {r.station_written}.bak)")
+    elif station is not None and write:
+        console.print(styled("not written", "yellow", f" into {station}: the views are poorly posed (see the "
+                                                      "warnings); record more views or pass --force"))
+    console.print(f"report: {r.folder / 'handeye.json'}\nhand_eye block: {r.folder / 'hand_eye.yaml'}\n"
+                  f"figure: {r.folder / 'handeye_residuals.png'}")
+
+
+@calibrate_app.command("intrinsics")
+def intrinsics(
+    source: Annotated[Path, typer.Argument(help="Folder of board images, or a scan store (its colour images).")],
+    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/intrinsics-<time>).")] = None,
+    pattern: Annotated[str, typer.Option(help="Which files of an image folder (glob), e.g. 'img_*.jpg'.")] = "*",
+    model: Annotated[str, typer.Option(help="Distortion coefficients to fit: k1k2p1p2k3 (OpenCV's default), "
+                                            "k1k2p1p2, k1k2 or none.")] = "k1k2p1p2k3",
+    board: BoardOpt = None,
+    min_corners: Annotated[int, typer.Option(min=4, help="Board corners an image needs to take part.")] = 8,
+    profile: Annotated[str | None, typer.Option(help="Realism profile (ideal, thesis or FILE.yaml) to copy into "
+                                                     "<out>/realism.yaml with the calibration as its assumed camera "
+                                                     "(simulated sessions then use it: --realism that file).")]
+    = None,
+) -> None:
+    """Camera calibration (intrinsics and lens distortion) from images of the ChArUco board."""
+    import numpy as np
+
+    from recon_cli.calibration.intrinsics import DistortionModel
+    from recon_cli.console import console, run_folder, styled
+    from recon_cli.workflows.calibrate import IntrinsicsOptions, run_intrinsics
+
+    one_of(model, MODELS, "distortion model")
+    run = run_intrinsics(IntrinsicsOptions(Path(source), run_folder(out, "intrinsics"), parse_board(board), pattern,
+                                           DistortionModel(model), min_corners, profile))
+    r = run.result
+    K = r.camera.intrinsics
+    for s in r.skipped:
+        console.print(styled(f"{s.name} not used:", "yellow", f" {s.reason}"))
+    console.print(f"{len(r.views)} of {run.images} images, {r.corners} corners; reprojection RMS {r.rms:.3f} px")
+    console.print("view                          RMS [px]  max [px]  corners")
+    for v in r.views:
+        console.print(f"{v.name[:28]:28s} {v.rms:9.3f} {v.max:9.3f}  {len(v.residuals):7d}")
+    std = r.std
+    console.print(f"{K.width} x {K.height}: fx {K.fx:.3f} ± {std.get('fx', np.nan):.3f}, fy {K.fy:.3f} ± "
+                  f"{std.get('fy', np.nan):.3f}, cx {K.cx:.3f} ± {std.get('cx', np.nan):.3f}, cy {K.cy:.3f} ± "
+                  f"{std.get('cy', np.nan):.3f} px")
+    console.print("distortion k1, k2, p1, p2, k3: " + ", ".join(f"{v:.6g}" for v in r.camera.distortion))
+    console.print(f"camera file: {run.camera_file}\nreport: {run.report}\nfigure: {run.figure}")
+    if run.profile is not None:
+        console.print(f"realism profile with this camera as the assumed one: {run.profile}")

@@ -1,0 +1,35 @@
+"""The calibrate commands: a user's mistake is one line with exit code 1."""
+
+from __future__ import annotations
+
+import pytest
+
+from recon_cli.cli import main
+
+
+def _run(capsys, *argv) -> tuple[int, str]:
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out + err
+
+
+def test_help_lists_both_commands(capsys):
+    code, out = _run(capsys, "calibrate", "--help")
+    assert code == 0 and "handeye" in out and "intrinsics" in out
+    code, out = _run(capsys, "calibrate", "handeye", "--help")
+    assert code == 0 and "calibrateRobotWorldHandEye" in out and "--station" in out
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (("handeye", "--scans", "{tmp}"), "holds no scan_NNNN folders"),
+    (("handeye", "--method", "kabsch", "--scans", "{tmp}"), "choose one of: tsai, park"),
+    (("handeye", "--scans", "{tmp}/none"), "does not exist"),
+    (("intrinsics", "{tmp}", "--board", "5,7,0.04,0.02,DICT_9X9"), "unknown ArUco dictionary 'DICT_9X9'"),
+    (("intrinsics", "{tmp}", "--board", "5,7,0.04"), "is not squares_x,squares_y,square,marker,DICTIONARY"),
+    (("intrinsics", "{tmp}"), "holds no images"),
+    (("intrinsics", "{tmp}", "--model", "fisheye"), "unknown distortion model 'fisheye'"),
+])
+def test_command_errors_are_one_line(tmp_path, capsys, argv, message):
+    code, out = _run(capsys, "calibrate", *[a.format(tmp=tmp_path) for a in argv], "--out", tmp_path / "o")
+    assert code == 1 and message in out, out
+    assert len(out.strip().splitlines()) == 1

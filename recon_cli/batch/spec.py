@@ -18,6 +18,10 @@ combination of its values (a key that is an option of the command sets that opti
 key can be used as ``{key}`` in the name, the script path and string option values).
 Options are checked against the command's own options (names, types), so a typo fails when
 the batch is read, as ``file:line key: what is wrong``.
+
+One module on purpose (about 540 lines): the batch file grammar (keys, matrix expansion,
+substitution, pass criteria) is read in one place so that every error names file:key the
+same way.
 """
 
 from __future__ import annotations

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -137,3 +138,21 @@ def test_hardware_without_station_says_what_to_do(files, tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "scan.xml:3: the hardware backend needs a station file" in err
     assert "--station" in err and not (tmp_path / "r").exists()
+
+
+def test_station_check_ads_and_software_gentl_camera(plc, tmp_path, monkeypatch, capsys):
+    """`recon station check` against both stand-ins: the ADS robot (pyads test server) and the
+    genicam package's software GenTL producer."""
+    pytest.importorskip("harvesters", reason="the GenICam adapter needs harvesters (recon-cli[genicam])")
+    from .test_cameras import _producer
+
+    cti = _producer()
+    if cti is None:
+        pytest.skip("the genicam package's software producer is not installed")
+    monkeypatch.setenv("GENICAM_GENTL64_PATH", str(Path(cti).parent))
+    path = tmp_path / "cell.yaml"
+    path.write_text(STATION.split("camera:")[0] + 'camera:\n  adapter: genicam\n  genicam: {serial: "2", timeout: 5}\n')
+    assert main(["station", "check", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "robot ads, camera genicam" in out and "base_joint_1 -1.0000 m" in out
+    assert "frame: 400 x 400 px" in out and "station ok" in out

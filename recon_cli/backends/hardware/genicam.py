@@ -20,6 +20,10 @@ Intrinsics: the station file's, else the device's Scan3dFocalLength, Scan3dAspec
 Scan3dPrincipalPointU/V, else fitted to the XYZ point map (u = fx X/Z + cx, v = fy Y/Z + cy,
 least squares; refused when the pixels do not follow a pinhole camera). Optional nodes that
 a device lacks are skipped one by one (each read is its own try), never guessed.
+
+One module on purpose (about 600 lines): the adapter, its configuration and the
+conversions of GenICam components (point maps, ranges, textures, optional nodes) are one
+device protocol; split, each part would be meaningless alone.
 """
 
 from __future__ import annotations

@@ -17,6 +17,10 @@ Two kinds of recording:
 After the last frame, ``capture()`` raises a one-line CameraFault (or, with ``loop``, starts
 again). ``import_recording`` turns a recording into a scan store whose kinematic poses are
 the recorded ones, so ``recon register STORE --no-board`` re-processes it.
+
+One module on purpose (a little over 400 lines): the replay camera and the import of a
+recording into a scan store share the readers of both source kinds (scan stores, image
+folders with poses).
 """
 
 from __future__ import annotations

@@ -1,4 +1,11 @@
-"""The simulated station: scene, robot backend and camera backend of one session."""
+"""The simulated station: scene, robot backend and camera backend of one session.
+
+With a realism profile (recon_cli/realism.py) the scene is the true cell (the model's
+description with the profile's base and hand-eye errors, recon_cli/backends/sim/truth.py),
+the robot reads its joints through encoders with offsets, sag and noise, and the camera is
+the profile's actual camera with its artefacts; the model recon works with stays the
+``cell`` passed in.
+"""
 
 from __future__ import annotations
 

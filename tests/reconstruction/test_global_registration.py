@@ -1,0 +1,65 @@
+"""Global registration under realism: the board-plane height refinement and the correction
+of kinematic poses by the session's board poses (synthetic data, exact answers)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from recon_cli.geometry.transforms import invert, pose_error
+from recon_cli.reconstruction.global_registration import kinematic_correction, refine_by_board_plane
+
+
+def _pose(rng, t_scale=0.5, r_scale=np.pi):
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec(rng.normal(size=3) / np.sqrt(3) * r_scale).as_matrix()
+    T[:3, 3] = rng.normal(size=3) * t_scale
+    return T
+
+
+def _small(rng, t, r_deg):
+    T = np.eye(4)
+    axis, shift = rng.normal(size=3), rng.normal(size=3)
+    T[:3, :3] = Rotation.from_rotvec(axis / np.linalg.norm(axis) * np.radians(r_deg)).as_matrix()
+    T[:3, 3] = shift / np.linalg.norm(shift) * t
+    return T
+
+
+def test_kinematic_correction_recovers_base_and_hand_eye_errors():
+    rng = np.random.default_rng(0)
+    L, R = _small(rng, 0.002, 0.1), _small(rng, 0.0005, 0.05)  # base error, hand-eye error
+    fk = [_pose(rng) for _ in range(8)]
+    board = [L @ F @ R @ _small(rng, 0.0002, 0.01) for F in fk]  # board poses with their own noise
+    c = kinematic_correction(board, fk)
+    assert c is not None and c.scans == 8 and c.after < 0.3 * c.before
+    for F in (_pose(rng) for _ in range(5)):  # scans without the board
+        dp, dr = pose_error(c.apply(F), L @ F @ R)
+        assert dp < 0.3e-3 and dr < np.radians(0.02)
+
+
+def test_no_correction_when_the_robot_agrees_with_the_board():
+    rng = np.random.default_rng(1)
+    fk = [_pose(rng) for _ in range(8)]
+    board = [F @ _small(rng, 0.0001, 0.005) for F in fk]  # board noise only
+    assert kinematic_correction(board, fk) is None
+    assert kinematic_correction(board[:3], fk[:3]) is None  # too few scans
+
+
+def test_board_plane_refinement_moves_the_height_only():
+    rng = np.random.default_rng(2)
+    size = (0.385, 0.245)
+    # board points (marker frame) plus an object above it, seen from a camera 0.6 m away
+    xy = rng.uniform([0.0, 0.0], size, size=(20000, 2))
+    board = np.column_stack([xy, rng.normal(0.0, 2e-4, len(xy))])
+    thing = np.column_stack([rng.uniform(0.15, 0.25, (3000, 2)), rng.uniform(0.01, 0.2, 3000)])
+    marker_T_camera = np.eye(4)
+    marker_T_camera[:3, :3] = Rotation.from_euler("x", 180 - 40, degrees=True).as_matrix()
+    marker_T_camera[:3, 3] = [0.19, -0.35, 0.45]
+    pts_camera = (invert(marker_T_camera) @ np.column_stack([np.vstack([board, thing]),
+                                                             np.ones(len(board) + len(thing))]).T).T[:, :3]
+    wrong = marker_T_camera.copy()
+    wrong[:3, 3] += [0.0004, -0.0003, 0.0012]  # a board pose 1.2 mm too high
+    refined, n = refine_by_board_plane(pts_camera, wrong, size)
+    assert n > 1000
+    assert abs(refined[2, 3] - marker_T_camera[2, 3]) < 5e-5  # the height is the depth's
+    assert np.allclose(refined[:2, 3], wrong[:2, 3]) and np.allclose(refined[:3, :3], wrong[:3, :3])

@@ -11,6 +11,7 @@
     replay.py    recon replay
     batch.py     recon batch
     calibrate.py recon calibrate handeye, recon calibrate intrinsics
+    view.py      recon view
 
 Heavy libraries (pinocchio, coal, Open3D, MuJoCo, OMPL) are imported inside the commands
 so that ``recon --help`` is instant. User errors (``ReconError`` and malformed options)
@@ -34,6 +35,7 @@ from recon_cli.cli import (  # noqa: F401 (registers the commands)
     scans,
     scripts,
     station,
+    view,
 )
 from recon_cli.cli.app import app, bench_app
 from recon_cli.cli.options import parse_vector

@@ -39,6 +39,7 @@ class AutoscanOptions:
     mesh: bool = True
     run: dict = field(default_factory=dict)  # recorded in config.yaml
     station: Path | None = None  # a station file (robot and camera adapters)
+    record: bool = False  # write a 3D recording of the run (recording.rrd in ``out``)
 
 
 @dataclass
@@ -93,6 +94,7 @@ class Autoscan:
         self.vp = opt.config.viewplan
         self.progress = progress or (lambda *a: None)
         self.rng = np.random.default_rng(opt.config.seed)
+        self.recorder = None
 
     # ------------------------------------------------------------------ set-up
     def _setup(self) -> None:
@@ -101,8 +103,12 @@ class Autoscan:
         from recon_cli.reconstruction.crop import CropBox
 
         opt, cfg = self.opt, self.opt.config
+        if opt.record:
+            from recon_cli.recording import open_recorder
+
+            self.recorder = open_recorder(opt.out, f"recon autoscan ({self.method.value})")
         spec = SessionSpec(opt.out, cfg, Mode.AUTOSCAN, opt.backend, run={"method": self.method.value, **opt.run},
-                           station=opt.station)
+                           station=opt.station, recorder=self.recorder)
         self.session = open_session(spec, self.rng)
         self.obj, self.cell, self.store = self.session.scene_object, self.session.cell, self.session.store
         self.station, self.acq = self.session.station, self.session.acquisition
@@ -198,7 +204,11 @@ class Autoscan:
 
         opt, vp, ellipsoid = self.opt, self.vp, self.method is Method.ELLIPSOID
         t0 = time.perf_counter()
-        self._setup()
+        try:
+            self._setup()
+        except BaseException:
+            self._close_recorder()
+            raise
         views: list[ViewRecord] = []
         pictures: list[Path] = []
         interrupted = False
@@ -233,9 +243,11 @@ class Autoscan:
                     continue
                 stuck = 0
                 T, _ = planned[sel.index]
+                others = [p for k, (p, _) in enumerate(planned) if k != sel.index]
                 if opt.pictures and ellipsoid:
-                    pictures.append(self._picture(it, ell, views, [p for k, (p, _) in enumerate(planned)
-                                                                   if k != sel.index], T))
+                    pictures.append(self._picture(it, ell, views, others, T))
+                if self.recorder is not None:
+                    self.recorder.iteration(it, ell, [(v.world_T_camera, v.status.value) for v in views], others, T)
                 if not ellipsoid:
                     queue.pop(sel.index)
                 self.station.robot.execute(sel.trajectory)
@@ -245,9 +257,19 @@ class Autoscan:
                 self.progress("scans", len(self.store), vp.n)
         except KeyboardInterrupt:
             interrupted = True
+        except BaseException:
+            self._close_recorder()
+            raise
         finally:
             self.session.close()  # stops the robot first
-        return self._finish(views, pictures, t0, interrupted)
+        try:
+            return self._finish(views, pictures, t0, interrupted)
+        finally:
+            self._close_recorder()
+
+    def _close_recorder(self) -> None:
+        if self.recorder is not None:
+            self.recorder.close()
 
     # ------------------------------------------------------------------ results
     def _finish(self, views, pictures, t0: float, interrupted) -> AutoscanResult:
@@ -266,6 +288,10 @@ class Autoscan:
             reg = run_register(opt.out, opt.out / "reconstruction",
                                replace(cfg.registration, mesh=opt.mesh, seed=cfg.seed))
             cloud, mesh = reg.cloud, reg.mesh
+            if self.recorder is not None:
+                from recon_cli.recording.results import record_registration
+
+                record_registration(self.recorder, reg, opt.out)
             import open3d as o3d
 
             pts = np.asarray(o3d.io.read_point_cloud(str(cloud)).points)

@@ -153,20 +153,20 @@ class Recorder:
         T = scan.world_T_camera_fk if world_T_camera is None else world_T_camera
         self._at(self.clock, scan.index)
         K = scan.intrinsics
+        colour, depth_m = scan.pinhole_images()  # undistorted where the scan has a lens distortion
         name = f"world/scans/scan_{scan.index:04d}"
-        pinhole = rr.Pinhole(image_from_camera=K.matrix(), resolution=[K.width, K.height],
-                             camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=0.08)
         pose = rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3])
-        color = None if scan.color is None else rr.EncodedImage(contents=S.jpeg(scan.color),
-                                                                  media_type="image/jpeg")
-        depth = rr.EncodedDepthImage(S.depth_png(scan.depth, self.depth_scale), media_type="image/png",
-                                     meter=self.depth_scale)
-        for entity in (f"{name}/camera", "world/camera"):
-            self.rec.log(entity, pose, pinhole)
+        # each scan's frustum keeps its images at full size; the current camera (the 2D view
+        # beside the cell) shows a preview of the latest scan
+        for entity, scale in ((f"{name}/camera", 1.0), ("world/camera", S.PREVIEW_SCALE)):
+            color, depth, Ks = S.scaled_images(colour, depth_m, K, scale)
+            self.rec.log(entity, pose, rr.Pinhole(image_from_camera=Ks.matrix(), resolution=[Ks.width, Ks.height],
+                                                  camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=0.08))
             if color is not None:
-                self.rec.log(f"{entity}/color", color)
-            self.rec.log(f"{entity}/depth", depth)
-        points, rgb = S.scan_points(scan.depth, scan.color, K, T)
+                self.rec.log(f"{entity}/color", rr.EncodedImage(contents=S.jpeg(color), media_type="image/jpeg"))
+            self.rec.log(f"{entity}/depth", rr.EncodedDepthImage(S.depth_png(depth, self.depth_scale),
+                                                                 media_type="image/png", meter=self.depth_scale))
+        points, rgb = S.scan_points(depth_m, colour, K, T)
         self.rec.log(f"{name}/cloud", rr.Points3D(points, colors=rgb, radii=0.001))
         self.rec.log("log", rr.TextLog(f"scan {scan.index}: {len(points)} points shown"
                                        + (f", {label}" if label else "")))

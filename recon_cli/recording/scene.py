@@ -12,6 +12,8 @@ STATUS_RGB = {"infeasible": (214, 39, 40), "completed": (44, 160, 44), "planned"
               "active": (255, 191, 0)}
 #: at most this many points of a scan's cloud go into a recording (the image keeps every pixel)
 SCAN_POINTS = 60_000
+#: image size of the current camera's preview, relative to the scan's
+PREVIEW_SCALE = 0.25
 #: samples per second of a trajectory's joint animation
 JOINT_RATE_HZ = 25.0
 #: signed distances beyond this [m] get the end colours of the scale
@@ -33,6 +35,21 @@ def scan_points(depth: np.ndarray, color: np.ndarray | None, K: Intrinsics, worl
     world = p @ world_T_camera[:3, :3].T + world_T_camera[:3, 3]
     rgb = None if color is None else color[v, u]
     return world.astype(np.float32), rgb
+
+
+def scaled_images(color: np.ndarray | None, depth: np.ndarray, K: Intrinsics, scale: float
+                  ) -> tuple[np.ndarray | None, np.ndarray, Intrinsics]:
+    """Colour (area-averaged) and depth (nearest: no blending across edges) at ``scale`` of
+    their size, with the intrinsics that go with them."""
+    if scale == 1.0:
+        return color, depth, K
+    import cv2
+
+    w, h = max(1, round(K.width * scale)), max(1, round(K.height * scale))
+    sx, sy = w / K.width, h / K.height
+    Ks = Intrinsics(w, h, K.fx * sx, K.fy * sy, (K.cx + 0.5) * sx - 0.5, (K.cy + 0.5) * sy - 0.5)
+    small = None if color is None else cv2.resize(color, (w, h), interpolation=cv2.INTER_AREA)
+    return small, cv2.resize(depth, (w, h), interpolation=cv2.INTER_NEAREST), Ks
 
 
 def camera_path(kin, q: np.ndarray) -> np.ndarray:

@@ -72,8 +72,15 @@ def crop_cloud(cloud, box: CropBox, plane_slab: float = PLANE_SLAB, plane_tolera
         import open3d as o3d
 
         sub = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(local[slab]))
-        o3d.utility.random.seed(0)
-        plane, inliers = sub.segment_plane(plane_tolerance / 2.0, 3, 200)
+        # Open3D's RANSAC draws its samples from several threads, in whatever order they run:
+        # with one thread the seed fixes the planes it tries, and a run repeats exactly
+        threads = o3d.utility.get_max_threads()
+        o3d.utility.set_max_threads(1)
+        try:
+            o3d.utility.random.seed(0)
+            plane, inliers = sub.segment_plane(plane_tolerance / 2.0, 3, 200)
+        finally:
+            o3d.utility.set_max_threads(threads)
         n = np.asarray(plane[:3])
         if len(inliers) >= 100 and abs(n[2]) > np.cos(np.radians(5.0)):
             a, b, c, d = (v / np.linalg.norm(n) * np.sign(n[2]) for v in plane)

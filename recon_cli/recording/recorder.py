@@ -52,21 +52,24 @@ class Recorder:
         self.joints: dict[str, object] = {}  # recon joint name -> rerun UrdfJoint
         self.kin = None
         self.depth_scale = 20000.0
+        self.scans: list[int] = []  # indices of the scans recorded
         self._closed = False
         self.rec.send_blueprint(self._layout())
         self._at(0.0)
 
     def _layout(self):
-        """The viewer's first layout: the cell in 3D (collision shapes and the clouds before
-        registration hidden), the current camera image, the event log."""
+        """The viewer's layout: the cell in 3D (collision shapes, the clouds before
+        registration and the depth images, which the 3D view would draw as clouds of their
+        own, hidden), the current camera image, the event log."""
         import rerun.blueprint as rrb
 
         hidden = rrb.EntityBehavior(visible=False)
+        depth = {f"/world/scans/scan_{k:04d}/camera/depth": hidden for k in self.scans}
         cell = rrb.Spatial3DView(
             name="cell", origin="/", contents=["+ /cell/**", "+ /world/**", "+ /viewplan/**",
                                                "+ /registration/**", "+ /reconstruction/**"],
             overrides={"/cell/recon_cell/collision_geometries": hidden, "/registration/before": hidden,
-                       "/world/camera": hidden},
+                       "/world/camera": hidden, **depth},
             eye_controls=rrb.EyeControls3D(position=(2.3, -2.6, 2.0), look_target=(0.0, 0.0, 0.85),
                                            eye_up=(0.0, 0.0, 1.0)))
         camera = rrb.Spatial2DView(name="camera", origin="/world/camera",
@@ -152,6 +155,7 @@ class Recorder:
         rr = self.rr
         T = scan.world_T_camera_fk if world_T_camera is None else world_T_camera
         self._at(self.clock, scan.index)
+        self.scans.append(scan.index)
         K = scan.intrinsics
         colour, depth_m = scan.pinhole_images()  # undistorted where the scan has a lens distortion
         name = f"world/scans/scan_{scan.index:04d}"
@@ -251,6 +255,8 @@ class Recorder:
         """Flush and close the file (idempotent)."""
         if not self._closed:
             self._closed = True
+            if self.scans:  # the layout again, now that the scans' depth images are known
+                self.rec.send_blueprint(self._layout())
             self.rec.flush()
             self.rec.disconnect()
 

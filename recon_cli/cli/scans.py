@@ -106,6 +106,8 @@ def capture(
         console.print(styled(f"view {f.view} skipped:", "yellow", f" {f.message}"))
     console.print(f"{len(result.scans)} of {len(view_list)} views scanned in {result.total_seconds:.1f} s; "
                   f"scan store: {folder}")
+    if result.page is not None:
+        console.print(f"page: {result.page}")
     if not result.scans:
         raise typer.Exit(1)
 
@@ -142,6 +144,7 @@ def register(
     from recon_cli.console import console, progress_bar, styled
     from recon_cli.reconstruction.crop import CropBox
     from recon_cli.reconstruction.pipeline import run_register
+    from recon_cli.report import write_page_after_run
 
     one_of(box_frame, ("world", "marker"), "box frame")
     one_of(loop_closures, ("icp", "global"), "loop closure initialization")
@@ -158,6 +161,7 @@ def register(
                       surface=replace(_R.surface, voxel=voxel, poisson_depth=depth, density_quantile=trim))
     with progress_bar() as update:
         result = run_register(folder, out or Path(folder) / "reconstruction", options, update)
+    page = write_page_after_run(result.folder)
     sources = {k: v for k, v in result.pose_sources.items() if v}
     skipped = len(result.scans) - len(result.used)
     console.print(f"{len(result.used)} of {len(result.scans)} scans registered"
@@ -179,6 +183,8 @@ def register(
                       f"({result.multiway.pruned} pruned, {sum(x.rejected for x in e)} ICP results rejected)")
     console.print(f"done in {result.timings['total_s']:.1f} s; frame: {result.frame}")
     console.print(f"cloud: {result.cloud}\nmesh: {result.mesh}\nreport: {result.report}")
+    if page is not None:
+        console.print(f"page: {page.path}")
 
 
 ALIGNMENTS = ("none", "icp")

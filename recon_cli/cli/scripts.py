@@ -100,5 +100,7 @@ def run_script(
     for k, v in result.outputs.items():
         console.print(f"{k}: {v}")
     console.print(f"report: {folder / 'run_report.json'}")
+    if result.page is not None:
+        console.print(f"page: {result.page}")
     if result.exit_code and not allow_failures:
         raise typer.Exit(result.exit_code)

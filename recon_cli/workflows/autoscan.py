@@ -7,7 +7,8 @@ views by the potential field until enough feasible ones are planned, go to the o
 planned trajectory is shortest (view selection, Table 2.4), scan. Finally the full
 registration and Poisson surface of ``recon register``. The same loop runs two baselines
 for ``recon bench viewplan``: views evenly spread on a sphere, and random feasible views.
-Every scan is written atomically on the way: an interrupted run keeps them all.
+Every scan is written atomically on the way: an interrupted run keeps them all, and its
+report (``autoscan_report.json``) and page (``report.html``) are written with what exists.
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ class AutoscanOptions:
     mesh: bool = True
     run: dict = field(default_factory=dict)  # recorded in config.yaml
     station: Path | None = None  # a station file (robot and camera adapters)
+    page: bool = True  # write the report page (report.html) at the end
 
 
 @dataclass
@@ -76,6 +78,7 @@ class AutoscanResult:
     report: Path
     pictures: list[Path]
     interrupted: bool = False
+    page: Path | None = None  # report.html (None: not written)
 
 
 class Autoscan:
@@ -202,6 +205,7 @@ class Autoscan:
         views: list[ViewRecord] = []
         pictures: list[Path] = []
         interrupted = False
+        error: ReconError | None = None
         queue: list = []
         try:
             T0 = self.cell.view_pose(opt.initial) if opt.initial is not None else self._default_initial()
@@ -245,40 +249,49 @@ class Autoscan:
                 self.progress("scans", len(self.store), vp.n)
         except KeyboardInterrupt:
             interrupted = True
+        except ReconError as exc:  # a fault, no reachable view: reported below, then raised
+            error = exc
         finally:
             self.session.close()  # stops the robot first
-        return self._finish(views, pictures, t0, interrupted)
+        return self._finish(views, pictures, t0, interrupted, error)
 
     # ------------------------------------------------------------------ results
-    def _finish(self, views, pictures, t0: float, interrupted) -> AutoscanResult:
+    def _finish(self, views, pictures, t0: float, interrupted: bool, error: ReconError | None) -> AutoscanResult:
+        """Register and evaluate what was scanned (unless the run ended early), write the
+        report and the page; then raise the error that ended the run, if any."""
         from recon_cli.console import write_json
 
         opt, cfg, vp = self.opt, self.opt.config, self.vp
         scanning = time.perf_counter() - t0
         cloud = mesh = None
         coverage = accuracy = None
-        if not interrupted and len(self.store) > 0:
+        if not interrupted and error is None and len(self.store) > 0:
             from dataclasses import replace
 
             from recon_cli.reconstruction.evaluation import signed_distances
             from recon_cli.reconstruction.pipeline import run_register
 
-            reg = run_register(opt.out, opt.out / "reconstruction",
-                               replace(cfg.registration, mesh=opt.mesh, seed=cfg.seed))
-            cloud, mesh = reg.cloud, reg.mesh
-            import open3d as o3d
+            try:
+                reg = run_register(opt.out, opt.out / "reconstruction",
+                                   replace(cfg.registration, mesh=opt.mesh, seed=cfg.seed))
+            except ReconError as exc:
+                error = exc
+            else:
+                cloud, mesh = reg.cloud, reg.mesh
+                import open3d as o3d
 
-            pts = np.asarray(o3d.io.read_point_cloud(str(cloud)).points)
-            coverage = surface_coverage(self.obj, pts, 0.001, np.random.default_rng(cfg.seed))
-            d = signed_distances(pts, self.obj.mesh_world())
-            accuracy = Accuracy(float(d.mean() * 1e3), float(d.std() * 1e3), len(pts))
+                pts = np.asarray(o3d.io.read_point_cloud(str(cloud)).points)
+                coverage = surface_coverage(self.obj, pts, 0.001, np.random.default_rng(cfg.seed))
+                d = signed_distances(pts, self.obj.mesh_world())
+                accuracy = Accuracy(float(d.mean() * 1e3), float(d.std() * 1e3), len(pts))
         seconds_total = time.perf_counter() - t0
         infeasible = sum(v.status is Status.INFEASIBLE for v in views)
         report = opt.out / "autoscan_report.json"
         write_json(report, {
             "method": self.method.value, "object": self.obj.name, "cell": cfg.cell.kind.value, "n": vp.n,
             "d_c": vp.d_c, "m": vp.m, "sigma": vp.sigma, "seed": cfg.seed, "scans": len(self.store),
-            "interrupted": interrupted, "infeasible_views": infeasible,
+            "interrupted": interrupted, "error": None if error is None else error.one_line(),
+            "infeasible_views": infeasible,
             "planning_requests": self.requests, "trajectory_s": self.trajectory_s,
             "coverage_1mm": coverage, "accuracy": accuracy, "seconds_scanning": scanning,
             "seconds_total": seconds_total,
@@ -287,8 +300,16 @@ class Autoscan:
             "outputs": {"cloud": None if cloud is None else str(cloud), "mesh": None if mesh is None else str(mesh),
                         "pictures": [str(p) for p in pictures]},
         })
+        page = None
+        if opt.page:
+            from recon_cli.report import write_page_after_run
+
+            written = write_page_after_run(opt.out)
+            page = None if written is None else written.path
+        if error is not None:
+            raise error
         return AutoscanResult(opt.out, len(self.store), views, infeasible, self.requests, self.trajectory_s,
-                              seconds_total, coverage, accuracy, cloud, mesh, report, pictures, interrupted)
+                              seconds_total, coverage, accuracy, cloud, mesh, report, pictures, interrupted, page)
 
     def _picture(self, it: int, ell, views: list[ViewRecord], planned: list[np.ndarray], active: np.ndarray) -> Path:
         from recon_cli.viewplan.picture import iteration_png

@@ -20,7 +20,7 @@ def report(
     render: Annotated[bool, typer.Option("--render/--no-render", help="Pictures of the mesh from 4 directions "
                                                                       "(CPU ray casting, no display needed).")]
     = _R.render,
-    width: Annotated[int, typer.Option(min=64, max=4096, help="Width of each mesh picture [px] (height 3/4 of "
+    width: Annotated[int, typer.Option(min=64, max=2000, help="Width of each mesh picture [px] (height 3/4 of "
                                                               "it).")] = _R.image_width,
 ) -> None:
     """Write the report page of a run folder (report.html, pictures in report_files/): summary, tables,

@@ -20,6 +20,7 @@ from recon_cli.report.options import MESH_VIEWS
 BACKGROUND = 255  # white
 SUPERSAMPLE = 2  # rays per pixel along each axis
 FOV_DEG = 30.0  # vertical field of view
+ROWS_PER_BATCH = 400_000  # rays cast at once
 
 
 @dataclass(frozen=True)
@@ -67,34 +68,38 @@ def shade(mesh, eye: np.ndarray, center: np.ndarray, up: np.ndarray, width: int,
     if scene is None:
         scene = o3d.t.geometry.RaycastingScene()
         scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
-    w, h = width * SUPERSAMPLE, height * SUPERSAMPLE
-    forward, right, cam_up = _look_at(np.asarray(eye, float), np.asarray(center, float), np.asarray(up, float))
-    # one ray per sub-pixel through a pinhole with FOV_DEG vertically
-    f = 0.5 * h / np.tan(np.radians(FOV_DEG) / 2)
-    u = (np.arange(w) + 0.5 - w / 2) / f
-    v = (np.arange(h) + 0.5 - h / 2) / f
-    uu, vv = np.meshgrid(u, v)
-    dirs = forward + uu[..., None] * right - vv[..., None] * cam_up
-    dirs /= np.linalg.norm(dirs, axis=2, keepdims=True)
-    rays = np.concatenate([np.broadcast_to(eye, dirs.shape), dirs], axis=2).astype(np.float32)
-    hit = scene.cast_rays(o3d.core.Tensor(rays))
-    ids = hit["primitive_ids"].numpy().astype(np.int64)
-    found = np.isfinite(hit["t_hit"].numpy())
-    normals = hit["primitive_normals"].numpy().astype(float)
-    if mesh.has_vertex_normals():  # smooth: the vertex normals interpolated at the hit
-        tri = np.asarray(mesh.triangles)[np.where(found, ids, 0)]
-        vn = np.asarray(mesh.vertex_normals)
-        bary = hit["primitive_uvs"].numpy().astype(float)
-        a, b = bary[..., :1], bary[..., 1:2]
-        smooth = (1 - a - b) * vn[tri[..., 0]] + a * vn[tri[..., 1]] + b * vn[tri[..., 2]]
-        length = np.linalg.norm(smooth, axis=2, keepdims=True)
-        normals = np.where(length > 1e-9, smooth / np.maximum(length, 1e-9), normals)
-    facing = np.einsum("hwk,hwk->hw", normals, dirs)
-    normals = np.where(facing[..., None] > 0, -normals, normals)  # both sides lit alike
+    eye = np.asarray(eye, float)
+    forward, right, cam_up = _look_at(eye, np.asarray(center, float), np.asarray(up, float))
     light = -forward + 0.5 * cam_up - 0.35 * right  # beside the camera, above and to the left
     light /= np.linalg.norm(light)
-    diffuse = np.clip(normals @ light, 0.0, 1.0)
-    grey = np.where(found, 35.0 + 195.0 * (0.18 + 0.82 * diffuse), float(BACKGROUND))
+    w, h = width * SUPERSAMPLE, height * SUPERSAMPLE
+    f = 0.5 * h / np.tan(np.radians(FOV_DEG) / 2)  # pinhole with FOV_DEG vertically
+    u = (np.arange(w) + 0.5 - w / 2) / f
+    triangles = np.asarray(mesh.triangles)
+    vertex_normals = np.asarray(mesh.vertex_normals) if mesh.has_vertex_normals() else None
+    grey = np.empty((h, w))
+    rows = max(SUPERSAMPLE, (ROWS_PER_BATCH // w) // SUPERSAMPLE * SUPERSAMPLE)
+    for top in range(0, h, rows):  # in blocks of rows: memory stays bounded at any size
+        v = (np.arange(top, min(h, top + rows)) + 0.5 - h / 2) / f
+        uu, vv = np.meshgrid(u, v)
+        dirs = forward + uu[..., None] * right - vv[..., None] * cam_up
+        dirs /= np.linalg.norm(dirs, axis=2, keepdims=True)
+        rays = np.concatenate([np.broadcast_to(eye, dirs.shape), dirs], axis=2).astype(np.float32)
+        hit = scene.cast_rays(o3d.core.Tensor(rays))
+        found = np.isfinite(hit["t_hit"].numpy())
+        normals = hit["primitive_normals"].numpy().astype(float)
+        if vertex_normals is not None:  # smooth: the vertex normals interpolated at the hit
+            tri = triangles[np.where(found, hit["primitive_ids"].numpy().astype(np.int64), 0)]
+            bary = hit["primitive_uvs"].numpy().astype(float)
+            a, b = bary[..., :1], bary[..., 1:2]
+            smooth = (1 - a - b) * vertex_normals[tri[..., 0]] + a * vertex_normals[tri[..., 1]] \
+                + b * vertex_normals[tri[..., 2]]
+            length = np.linalg.norm(smooth, axis=2, keepdims=True)
+            normals = np.where(length > 1e-9, smooth / np.maximum(length, 1e-9), normals)
+        facing = np.einsum("hwk,hwk->hw", normals, dirs)
+        normals = np.where(facing[..., None] > 0, -normals, normals)  # both sides lit alike
+        diffuse = np.clip(normals @ light, 0.0, 1.0)
+        grey[top: top + len(v)] = np.where(found, 35.0 + 195.0 * (0.18 + 0.82 * diffuse), float(BACKGROUND))
     image = grey.reshape(height, SUPERSAMPLE, width, SUPERSAMPLE).mean(axis=(1, 3))
     return np.clip(np.round(image), 0, 255).astype(np.uint8)
 

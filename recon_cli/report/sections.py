@@ -78,11 +78,11 @@ def summary(run: RunFolder) -> Html:
         rows += [("object", s.object_name), ("cell", s.cell), ("backend", s.backend),
                  ("sensor", None if s.sensor is None else s.sensor + ("" if s.noise is None else
                                                                      f" (noise {'on' if s.noise else 'off'})")),
-                 ("realism", s.realism), ("seed", num(s.seed)), ("scans recorded", f"{_when(s.created)}")]
+                 ("realism", s.realism), ("seed", num(s.seed)), ("scans recorded", _when(s.created))]
     g = run.registration
     if g is not None:
         sources = ", ".join(f"{k} {v}" for k, v in g.pose_sources.items() if v)
-        rows += [("registered", f"{g.registered} scans" + (f", {g.skipped} skipped" if g.skipped else "")
+        rows += [("registered", f"{g.registered} of {g.registered + g.skipped} scans"
                   + (f" (pose sources: {sources})" if sources else "")), ("output frame", g.frame),
                  ("ChArUco pose error (mean)", _error(g.charuco_error_mean)),
                  ("final pose error (mean)", _error(g.final_error_mean)),

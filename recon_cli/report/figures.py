@@ -43,19 +43,20 @@ def _band_mm(label: str) -> float:
 
 
 def plan_times_png(path: Path, moves: tuple[Move, ...]) -> Path:
-    """Planning time and trajectory duration [s] of every move, in the order of the run."""
+    """Planning time and trajectory duration [s] of every move, in the order of the run
+    (two panels: planning takes a fraction of the time the robot moves)."""
     plt = _pyplot()
     x = np.arange(len(moves))
-    plan = [m.plan_s if m.plan_s is not None else np.nan for m in moves]
-    traj = [m.trajectory_s if m.trajectory_s is not None else np.nan for m in moves]
-    fig, ax = plt.subplots(figsize=(max(5.0, 0.45 * len(moves) + 2.5), 3.6))
-    ax.bar(x - 0.2, plan, 0.4, color=_BLUE, label="planning [s]")
-    ax.bar(x + 0.2, traj, 0.4, color=_ORANGE, label="trajectory [s]")
-    ax.set_xticks(x, [_short(m.label) for m in moves], rotation=60, ha="right", fontsize=7)
-    ax.set_ylabel("time [s]")
-    total_plan, total_traj = np.nansum(plan), np.nansum(traj)
-    ax.set_title(f"{len(moves)} moves: planning {total_plan:.2f} s, trajectories {total_traj:.1f} s", fontsize=10)
-    ax.legend(fontsize=8)
+    plan = np.array([m.plan_s if m.plan_s is not None else np.nan for m in moves])
+    traj = np.array([m.trajectory_s if m.trajectory_s is not None else np.nan for m in moves])
+    fig, axes = plt.subplots(2, 1, figsize=(max(5.0, 0.35 * len(moves) + 2.5), 4.6), sharex=True)
+    axes[0].bar(x, plan, color=_BLUE)
+    axes[0].set_ylabel("planning [s]")
+    axes[1].bar(x, traj, color=_ORANGE)
+    axes[1].set_ylabel("trajectory [s]")
+    axes[1].set_xticks(x, [_short(m.label) for m in moves], rotation=60, ha="right", fontsize=7)
+    axes[0].set_title(f"{len(moves)} move{'s' if len(moves) != 1 else ''}: planning {np.nansum(plan):.2f} s, "
+                      f"trajectories {np.nansum(traj):.1f} s", fontsize=10)
     return _save(fig, path)
 
 
@@ -106,7 +107,8 @@ def icp_png(path: Path, edges: tuple[Edge, ...]) -> Path:
 
     axes[0].legend(handles=[Patch(color=_BLUE, label="odometry"), Patch(color=_GREEN, label="loop closure"),
                             Patch(color=_GREY, label="rejected")], fontsize=7, loc="lower right")
-    axes[0].set_title(f"pose graph: {len(edges)} pairwise ICP results", fontsize=10)
+    axes[0].set_title(f"pose graph: {len(edges)} pairwise ICP result{'s' if len(edges) != 1 else ''}",
+                      fontsize=10)
     return _save(fig, path)
 
 

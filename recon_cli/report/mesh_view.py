@@ -4,8 +4,8 @@ The mesh is ray-cast on the CPU with Open3D's ``RaycastingScene`` (Embree): one 
 sub-pixel (2 x 2 per pixel, averaged), the hit triangle's vertex normals interpolated and
 lit by a light beside the camera. No OpenGL context is needed, so this works the same on a
 headless server, in CI and on a desktop, and cannot take a run down with a failing graphics
-driver. Views look at the centre of the mesh's bounding box from :data:`MESH_VIEWS`
-directions, far enough for its bounding sphere to fill the image.
+driver. Each view looks from one of the :data:`MESH_VIEWS` directions at the mesh, framed so
+that it just fills the image.
 """
 
 from __future__ import annotations
@@ -104,17 +104,25 @@ def shade(mesh, eye: np.ndarray, center: np.ndarray, up: np.ndarray, width: int,
     return np.clip(np.round(image), 0, 255).astype(np.uint8)
 
 
-def view_eye(center: np.ndarray, radius: float, azimuth_deg: float, elevation_deg: float, aspect: float
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """Camera position and up vector for a view of a sphere (``center``, ``radius``) that
-    fills the image's smaller angle."""
+def framed_view(vertices: np.ndarray, azimuth_deg: float, elevation_deg: float, aspect: float,
+                margin: float = 1.08) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Camera position, the point it looks at and its up vector for a view from the
+    direction (azimuth, elevation) in which the vertices just fill the image (``aspect``:
+    width / height)."""
     az, el = np.radians(azimuth_deg), np.radians(elevation_deg)
-    direction = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
-    half = np.radians(FOV_DEG) / 2 * min(1.0, aspect)
-    distance = radius / np.sin(half) * 1.05
-    up = np.array([0.0, 0.0, 1.0]) if abs(elevation_deg) < 80 else np.array([np.cos(az), np.sin(az), 0.0]) * -np.sign(
-        elevation_deg)
-    return np.asarray(center) + distance * direction, up
+    direction = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])  # toward the camera
+    up = np.array([0.0, 0.0, 1.0]) if abs(elevation_deg) < 80 else \
+        -np.sign(elevation_deg) * np.array([np.cos(az), np.sin(az), 0.0])
+    forward, right, cam_up = _look_at(direction, np.zeros(3), up)
+    x, y, z = vertices @ right, vertices @ cam_up, vertices @ forward
+    center = (x.max() + x.min()) / 2 * right + (y.max() + y.min()) / 2 * cam_up + (z.max() + z.min()) / 2 * forward
+    x, y, z = x - center @ right, y - center @ cam_up, z - center @ forward
+    tan_v = np.tan(np.radians(FOV_DEG) / 2)
+    tan_h = tan_v * aspect
+    # a vertex at depth distance + z is inside the image when |x| <= tan_h (distance + z), ...
+    needed = max(float(np.max(np.abs(x) / tan_h - z)), float(np.max(np.abs(y) / tan_v - z)), 1e-6)
+    distance = max(needed * margin, 1e-3 - float(z.min()))  # never inside the mesh
+    return center - distance * forward, center, cam_up
 
 
 def render_mesh(mesh_path: Path, out_dir: Path, views: tuple[str, ...] = tuple(MESH_VIEWS),
@@ -133,9 +141,8 @@ def render_mesh(mesh_path: Path, out_dir: Path, views: tuple[str, ...] = tuple(M
     if not mesh.has_vertex_normals():
         mesh.compute_vertex_normals()
     vertices = np.asarray(mesh.vertices)
-    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    center = (lo + hi) / 2
-    radius = max(float(np.linalg.norm(vertices - center, axis=1).max()), 1e-6)
+    if len(vertices) > 50_000:  # the framing needs the outline only
+        vertices = vertices[np.random.default_rng(0).choice(len(vertices), 50_000, replace=False)]
     height = max(1, round(width * 3 / 4))
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
@@ -143,7 +150,7 @@ def render_mesh(mesh_path: Path, out_dir: Path, views: tuple[str, ...] = tuple(M
     out = []
     for name in views:
         azimuth, elevation = MESH_VIEWS[name]
-        eye, up = view_eye(center, radius, azimuth, elevation, width / height)
+        eye, center, up = framed_view(vertices, azimuth, elevation, width / height)
         image = shade(mesh, eye, center, up, width, height, scene)
         path = out_dir / f"mesh_{name}.png"
         if not cv2.imwrite(str(path), image):

@@ -10,6 +10,7 @@ instead of an error, so a page can always show what is there.
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -145,8 +146,8 @@ def _script_run(data: dict) -> tuple[ScriptRun, tuple[Move, ...]]:
         cmd = Command(str(c.get("source", "")), str(c.get("command", "")), str(c.get("status", "")),
                       _float(c.get("seconds")) or 0.0, str(c.get("message", "")))
         commands.append(cmd)
-        if "plan_time_s" in c or "trajectory_s" in c:
-            moves.append(Move(f"{cmd.source} {cmd.command}", _str(c.get("planner")), _float(c.get("plan_time_s")),
+        if "plan_time_s" in c or "trajectory_s" in c:  # a move (its command is in the commands table)
+            moves.append(Move(cmd.source, _str(c.get("planner")), _float(c.get("plan_time_s")),
                               _float(c.get("trajectory_s"))))
     interrupted = _dict(data.get("interrupted"))
     run = ScriptRun(script=str(data.get("script", "")), name=str(data.get("name", "")),
@@ -181,15 +182,23 @@ def _capture(data: dict) -> Capture:
                    error=_str(data.get("error")))
 
 
-def _scan_store_of(report_dir: Path, text: str | None) -> Path | None:
-    """The scan store a registration report names (a path as given on its command line,
-    so relative to where it ran, or the report folder's parent by default)."""
-    candidates = []
+def _scan_store_of(report_dir: Path, text: str | None, names: set[str]) -> Path | None:
+    """The scan store of a registration report: beside the report folder when the scans
+    named in the report are there (the layouts of recon register and recon run, also after
+    the folder was moved), else the path the report names (as given on the command line, so
+    relative to where it ran)."""
+    def folders(p: Path) -> set[str]:
+        return {f.name for _, f in _scan_folders(p)} if p.is_dir() else set()
+
+    nearby = [report_dir.parent, report_dir.parent / "scans"]
+    for c in nearby:
+        if names and names <= folders(c):
+            return c
+    stated = []
     if text:
         p = Path(text)
-        candidates += [p] if p.is_absolute() else [Path.cwd() / p, report_dir / p]
-    candidates.append(report_dir.parent)
-    return next((c for c in candidates if c.is_dir() and _scan_folders(c)), None)
+        stated = [p] if p.is_absolute() else [Path.cwd() / p, report_dir / p]
+    return next((c for c in [*stated, *nearby] if folders(c)), None)
 
 
 def _registration(path: Path, data: dict) -> Registration:
@@ -217,7 +226,7 @@ def _registration(path: Path, data: dict) -> Registration:
     mesh_name = _dict(data.get("outputs")).get("mesh")
     mesh = path.parent / str(mesh_name) if mesh_name else None
     return Registration(
-        report=path, scan_store=_scan_store_of(path.parent, _str(data.get("scan_store"))),
+        report=path, scan_store=_scan_store_of(path.parent, _str(data.get("scan_store")), {p.folder for p in poses}),
         frame=str(data.get("frame", "")), registered=_int(data.get("scans_registered")) or len(used),
         skipped=_int(data.get("scans_skipped")) or 0,
         pose_sources={str(k): _int(v) or 0 for k, v in _dict(data.get("pose_sources")).items()},
@@ -351,6 +360,8 @@ def read_run_folder(folder: Path) -> RunFolder:
         store = None if registration is None else registration.scan_store
         if store is None:
             notes.items.append("the scan store of this registration was not found (its scans are not shown)")
+    elif registration is not None:  # the scans beside it, wherever the folder was moved
+        registration = replace(registration, scan_store=store)
     session = None
     scans: tuple[Scan, ...] = ()
     if store is not None and store.is_dir():

@@ -129,7 +129,7 @@ def _icp(edges: tuple[Edge, ...]) -> str | None:
     good = [e for e in edges if not e.rejected and e.fitness is not None and e.rmse_mm is not None]
     if not edges:
         return None
-    text = f"{len(edges)} edges"
+    text = f"{len(edges)} edge" + ("s" if len(edges) != 1 else "")
     if good:
         text += (f": fitness {min(e.fitness for e in good):.2f}...{max(e.fitness for e in good):.2f}, "
                  f"RMSE ≤ {max(e.rmse_mm for e in good):.3f} mm")

@@ -137,10 +137,10 @@ def test_a_run_writes_its_page(smoke, capsys):
     assert len(table_rows(page, "commands")) == len(report["commands"])
     scans = table_rows(page, "scans")
     assert len(scans) == 3
-    for row in scans:
-        cells = [c.text_content() for c in row.findall("td")]
-        assert cells[4] in ("charuco", "kinematics") and "edges: fitness" in cells[8]
-        assert row.find(".//img") is not None  # the thumbnail
+    cells = [[c.text_content() for c in row.findall("td")] for row in scans]
+    assert all(c[4] in ("charuco", "kinematics") for c in cells)  # the pose source
+    assert sum("fitness" in c[8] and "RMSE" in c[8] for c in cells) >= 2  # ICP of the scans in the pose graph
+    assert all(row.find(".//img") is not None for row in scans)  # the thumbnails
     # a link to every PLY file of the run
     plys = {p.relative_to(smoke).as_posix() for p in smoke.rglob("*.ply")}
     linked = {unquote(link) for tag, link in parser.links if tag == "a" and link.endswith(".ply")}

@@ -87,6 +87,8 @@ class ViewOutcome:
 
     iteration: int
     status: str  # completed | infeasible
+    planning_s: float | None = None  # completed: planning of the move to it (view selection)
+    trajectory_s: float | None = None  # completed: duration of that move
 
 
 @dataclass(frozen=True)

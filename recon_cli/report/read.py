@@ -159,10 +159,26 @@ def _script_run(data: dict) -> tuple[ScriptRun, tuple[Move, ...]]:
     return run, tuple(moves)
 
 
-def _autoscan(data: dict) -> Autoscan:
+def _autoscan(path: Path, data: dict, reg_dir: Path) -> tuple[Autoscan, tuple[Move, ...], Evaluation | None]:
+    """The autoscan, its moves (one per completed view) and its evaluation against the truth
+    (when the run got that far)."""
     accuracy = _dict(data.get("accuracy"))
-    views = tuple(ViewOutcome(_int(v.get("iteration")) or 0, str(v.get("status", "")))
+    views = tuple(ViewOutcome(_int(v.get("iteration")) or 0, str(v.get("status", "")), _float(v.get("planning_s")),
+                              _float(v.get("trajectory_s")))
                   for v in map(_dict, _list(data.get("views"))))
+    moves = tuple(Move(f"iteration {v.iteration}", "view selection" if v.iteration else None, v.planning_s,
+                       v.trajectory_s) for v in views if v.status == "completed" and v.trajectory_s is not None)
+    evaluation = None
+    coverage, mean, std = _float(data.get("coverage_1mm")), _float(accuracy.get("mean_mm")), \
+        _float(accuracy.get("std_mm"))
+    if coverage is not None and mean is not None:
+        hist = reg_dir / "cloud_distances.png"
+        evaluation = Evaluation(
+            report=path, name="cloud", reference=f"true {data.get('object', 'object')} surface",
+            histogram=hist if hist.is_file() else None, points=_int(accuracy.get("points")), mean_mm=mean,
+            std_mm=std, rms_mm=None if std is None else (mean**2 + std**2) ** 0.5,
+            within={str(k): f for k, v in _dict(accuracy.get("within")).items() if (f := _float(v)) is not None},
+            coverage=coverage, coverage_visible=None, tolerance_mm=1.0)
     return Autoscan(method=str(data.get("method", "")), object_name=_str(data.get("object")),
                     cell=_str(data.get("cell")), n=_int(data.get("n")), d_c_m=_float(data.get("d_c")),
                     seed=_int(data.get("seed")), scans=_int(data.get("scans")) or 0,
@@ -171,7 +187,7 @@ def _autoscan(data: dict) -> Autoscan:
                     planning_requests=_int(data.get("planning_requests")),
                     trajectory_s=_float(data.get("trajectory_s")), coverage_1mm=_float(data.get("coverage_1mm")),
                     accuracy_mean_mm=_float(accuracy.get("mean_mm")), accuracy_std_mm=_float(accuracy.get("std_mm")),
-                    seconds_total=_float(data.get("seconds_total")), views=views)
+                    seconds_total=_float(data.get("seconds_total")), views=views), moves, evaluation
 
 
 def _capture(data: dict) -> Capture:
@@ -337,6 +353,7 @@ def read_run_folder(folder: Path) -> RunFolder:
     notes = _Notes()
     script_run = autoscan = capture = None
     moves: tuple[Move, ...] = ()
+    extra: tuple[Evaluation, ...] = ()  # an evaluation a run reports itself
     exports: set[str] = set()
     store: Path | None = folder
     reg_dir = folder / "reconstruction"
@@ -348,7 +365,9 @@ def read_run_folder(folder: Path) -> RunFolder:
             exports = {Path(str(v)).name for k, v in _dict(data.get("outputs")).items() if k.startswith("export_")}
     elif kind is RunKind.AUTOSCAN:
         data = notes.load(folder / AUTOSCAN_REPORT, AUTOSCAN_REPORT)
-        autoscan = None if data is None else _autoscan(data)
+        if data is not None:
+            autoscan, moves, evaluation = _autoscan(folder / AUTOSCAN_REPORT, data, reg_dir)
+            extra = () if evaluation is None else (evaluation,)
     elif kind is RunKind.SCANS:
         data = notes.load(folder / CAPTURE_REPORT, CAPTURE_REPORT)
         capture = None if data is None else _capture(data)
@@ -367,10 +386,10 @@ def read_run_folder(folder: Path) -> RunFolder:
     if store is not None and store.is_dir():
         session = _session(notes.load(store / "session.json", "session.json"))
         scans = _scans(store, notes)
-    if script_run is None:
+    if not moves:
         moves = tuple(s.move for s in scans if s.move is not None)
     pictures = tuple(sorted((folder / "iterations").glob("iteration_*.png"))) if kind is RunKind.AUTOSCAN else ()
     return RunFolder(kind=kind, folder=folder, session=session, script_run=script_run, autoscan=autoscan,
                      capture=capture, scans=scans, moves=moves, registration=registration,
-                     evaluations=_evaluations(reg_dir, notes) if reg_dir.is_dir() else (), pictures=pictures,
+                     evaluations=extra + (_evaluations(reg_dir, notes) if reg_dir.is_dir() else ()), pictures=pictures,
                      plys=_plys(folder, exports), reports=_reports(folder), notes=tuple(notes.items))

@@ -67,10 +67,8 @@ def summary(run: RunFolder) -> Html:
                  ("stopped", "interrupted" if a.interrupted else None),
                  ("error", a.error), ("infeasible views sampled", num(a.infeasible_views)),
                  ("planning requests", num(a.planning_requests)),
-                 ("trajectories", num(a.trajectory_s, ".1f", "s")), ("coverage (1 mm)", pct(a.coverage_1mm, 2)),
-                 ("signed distance", None if a.accuracy_mean_mm is None else
-                  f"mean {a.accuracy_mean_mm:+.3f} mm, std {a.accuracy_std_mm:.3f} mm"),
-                 ("wall time", num(a.seconds_total, ".1f", "s"))]
+                 ("trajectories", num(a.trajectory_s, ".1f", "s")),
+                 ("wall time", num(a.seconds_total, ".1f", "s"))]  # coverage and accuracy: the evaluation
     if c is not None:
         rows += [("views", f"{c.scans} of {c.views} scanned"), ("views skipped", num(len(c.failures)) or None),
                  ("error", c.error), ("wall time", num(c.seconds, ".1f", "s"))]
@@ -78,7 +76,7 @@ def summary(run: RunFolder) -> Html:
         rows += [("object", s.object_name), ("cell", s.cell), ("backend", s.backend),
                  ("sensor", None if s.sensor is None else s.sensor + ("" if s.noise is None else
                                                                      f" (noise {'on' if s.noise else 'off'})")),
-                 ("realism", s.realism), ("seed", num(s.seed)), ("scans recorded", _when(s.created))]
+                 ("realism", s.realism), ("seed", num(s.seed)), ("session started", _when(s.created))]
     g = run.registration
     if g is not None:
         sources = ", ".join(f"{k} {v}" for k, v in g.pose_sources.items() if v)

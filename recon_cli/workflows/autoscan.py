@@ -5,7 +5,8 @@ the partial object (registered by the board, cropped to the known bounding volum
 re-project the completed and infeasible views onto it (nearest points, Eberly), sample
 views by the potential field until enough feasible ones are planned, go to the one whose
 planned trajectory is shortest (view selection, Table 2.4), scan. Finally the full
-registration and Poisson surface of ``recon register``. The same loop runs two baselines
+registration and Poisson surface of ``recon register``, and in simulation the coverage and
+signed distances of the fused cloud against the true surface (with their histogram). The same loop runs two baselines
 for ``recon bench viewplan``: views evenly spread on a sphere, and random feasible views.
 Every scan is written atomically on the way: an interrupted run keeps them all, and its
 report (``autoscan_report.json``) and page (``report.html``) are written with what exists.
@@ -48,6 +49,8 @@ class ViewRecord:
     world_T_camera: np.ndarray
     status: Status
     iteration: int
+    planning_s: float | None = None  # completed views: planning of the move to it (view selection) [s]
+    trajectory_s: float | None = None  # completed views: duration of that move [s]
 
 
 @dataclass(frozen=True)
@@ -57,9 +60,10 @@ class Accuracy:
     mean_mm: float
     std_mm: float
     points: int
+    within: dict[str, float] = field(default_factory=dict)  # "±0.5 mm" -> share of the points
 
     def to_dict(self) -> dict:
-        return {"mean_mm": self.mean_mm, "std_mm": self.std_mm, "points": self.points}
+        return {"mean_mm": self.mean_mm, "std_mm": self.std_mm, "points": self.points, "within": self.within}
 
 
 @dataclass
@@ -213,7 +217,7 @@ class Autoscan:
             self.requests += move.plan.attempts
             self.trajectory_s += move.execution.duration
             self._scan(T0)
-            views.append(ViewRecord(T0, Status.COMPLETED, 0))
+            views.append(ViewRecord(T0, Status.COMPLETED, 0, move.plan.total_time, move.execution.duration))
             self.progress("scans", 1, vp.n)
             it, stuck = 0, 0
             while len(self.store) < vp.n and stuck < 3:
@@ -228,7 +232,9 @@ class Autoscan:
                     planned = queue
                 if not planned:
                     break
+                t_select = time.perf_counter()
                 sel = select_view(q, [c for _, c in planned], self.lower, self._plan_edge)
+                planning = time.perf_counter() - t_select
                 if sel.index is None:  # nothing reachable: those views are infeasible
                     views.extend(ViewRecord(T, Status.INFEASIBLE, it) for T, _ in planned)
                     stuck += 1
@@ -245,7 +251,7 @@ class Autoscan:
                 self.station.robot.execute(sel.trajectory)
                 self.trajectory_s += sel.trajectory.duration
                 self._scan(T)
-                views.append(ViewRecord(T, Status.COMPLETED, it))
+                views.append(ViewRecord(T, Status.COMPLETED, it, planning, sel.trajectory.duration))
                 self.progress("scans", len(self.store), vp.n)
         except KeyboardInterrupt:
             interrupted = True
@@ -268,7 +274,7 @@ class Autoscan:
         if not interrupted and error is None and len(self.store) > 0:
             from dataclasses import replace
 
-            from recon_cli.reconstruction.evaluation import signed_distances
+            from recon_cli.reconstruction.evaluation import histogram_png, signed_distances, within_shares
             from recon_cli.reconstruction.pipeline import run_register
 
             try:
@@ -283,7 +289,9 @@ class Autoscan:
                 pts = np.asarray(o3d.io.read_point_cloud(str(cloud)).points)
                 coverage = surface_coverage(self.obj, pts, 0.001, np.random.default_rng(cfg.seed))
                 d = signed_distances(pts, self.obj.mesh_world())
-                accuracy = Accuracy(float(d.mean() * 1e3), float(d.std() * 1e3), len(pts))
+                accuracy = Accuracy(float(d.mean() * 1e3), float(d.std() * 1e3), len(pts), within_shares(d))
+                histogram_png(cloud.parent / f"{cloud.stem}_distances.png", {cloud.stem: d},
+                              f"{cloud.name} vs the true {self.obj.name}")
         seconds_total = time.perf_counter() - t0
         infeasible = sum(v.status is Status.INFEASIBLE for v in views)
         report = opt.out / "autoscan_report.json"
@@ -295,8 +303,8 @@ class Autoscan:
             "planning_requests": self.requests, "trajectory_s": self.trajectory_s,
             "coverage_1mm": coverage, "accuracy": accuracy, "seconds_scanning": scanning,
             "seconds_total": seconds_total,
-            "views": [{"status": v.status.value, "iteration": v.iteration, "world_T_camera": v.world_T_camera}
-                      for v in views],
+            "views": [{"status": v.status.value, "iteration": v.iteration, "world_T_camera": v.world_T_camera,
+                       "planning_s": v.planning_s, "trajectory_s": v.trajectory_s} for v in views],
             "outputs": {"cloud": None if cloud is None else str(cloud), "mesh": None if mesh is None else str(mesh),
                         "pictures": [str(p) for p in pictures]},
         })

@@ -6,8 +6,9 @@ re-project the completed and infeasible views onto it (nearest points, Eberly), 
 views by the potential field until enough feasible ones are planned, go to the one whose
 planned trajectory is shortest (view selection, Table 2.4), scan. Finally the full
 registration and Poisson surface of ``recon register``, and in simulation the coverage and
-signed distances of the fused cloud against the true surface (with their histogram). The same loop runs two baselines
-for ``recon bench viewplan``: views evenly spread on a sphere, and random feasible views.
+signed distances of the fused cloud against the true surface (with their histogram). The
+same loop runs two baselines for ``recon bench viewplan``: views evenly spread on a sphere,
+and random feasible views.
 Every scan is written atomically on the way: an interrupted run keeps them all, and its
 report (``autoscan_report.json``) and page (``report.html``) are written with what exists.
 """

@@ -54,7 +54,8 @@ def plan_times_png(path: Path, moves: tuple[Move, ...]) -> Path:
     axes[0].set_ylabel("planning [s]")
     axes[1].bar(x, traj, color=_ORANGE)
     axes[1].set_ylabel("trajectory [s]")
-    axes[1].set_xticks(x, [_short(m.label) for m in moves], rotation=60, ha="right", fontsize=7)
+    axes[1].set_xticks(x, [_short(f"{k + 1}: {m.label}") for k, m in enumerate(moves)], rotation=60, ha="right",
+                       fontsize=7)
     axes[0].set_title(f"{len(moves)} move{'s' if len(moves) != 1 else ''}: planning {np.nansum(plan):.2f} s, "
                       f"trajectories {np.nansum(traj):.1f} s", fontsize=10)
     return _save(fig, path)
@@ -89,9 +90,12 @@ def coverage_png(path: Path, evaluations: tuple[Evaluation, ...]) -> Path:
     return _save(fig, path)
 
 
-def icp_png(path: Path, edges: tuple[Edge, ...]) -> Path:
-    """Fitness and inlier RMSE [mm] of every pairwise ICP result of the pose graph."""
+def icp_png(path: Path, edges: tuple[Edge, ...], max_bars: int = 30) -> Path:
+    """Fitness and inlier RMSE [mm] of every pairwise ICP result of the pose graph: a bar
+    per edge, or for larger graphs a scan-by-scan matrix of each."""
     plt = _pyplot()
+    if len(edges) > max_bars:
+        return _icp_matrix(plt, path, edges)
     fig, axes = plt.subplots(2, 1, figsize=(max(5.0, 0.3 * len(edges) + 2.5), 4.6), sharex=True)
     x = np.arange(len(edges))
     colors = [_GREY if e.rejected else _BLUE if e.kind == "odometry" else _GREEN for e in edges]
@@ -109,6 +113,35 @@ def icp_png(path: Path, edges: tuple[Edge, ...]) -> Path:
                             Patch(color=_GREY, label="rejected")], fontsize=7, loc="lower right")
     axes[0].set_title(f"pose graph: {len(edges)} pairwise ICP result{'s' if len(edges) != 1 else ''}",
                       fontsize=10)
+    return _save(fig, path)
+
+
+def _icp_matrix(plt, path: Path, edges: tuple[Edge, ...]) -> Path:
+    names = sorted({e.source for e in edges} | {e.target for e in edges})
+    at = {n: k for k, n in enumerate(names)}
+    fitness = np.full((len(names), len(names)), np.nan)
+    rmse = np.full_like(fitness, np.nan)
+    for e in edges:
+        for i, j in ((at[e.source], at[e.target]), (at[e.target], at[e.source])):
+            fitness[i, j] = np.nan if e.fitness is None else e.fitness
+            rmse[i, j] = np.nan if e.rmse_mm is None else e.rmse_mm
+    fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.6))
+    ticks = [n.removeprefix("scan_") for n in names]
+    for ax, values, label, cmap in ((axes[0], fitness, "fitness", "viridis"),
+                                    (axes[1], rmse, "inlier RMSE [mm]", "magma_r")):
+        im = ax.imshow(values, cmap=cmap, interpolation="nearest")
+        fig.colorbar(im, ax=ax, label=label, fraction=0.046, pad=0.04)
+        step = max(1, len(names) // 12)
+        ax.set_xticks(range(0, len(names), step), ticks[::step], rotation=90, fontsize=7)
+        ax.set_yticks(range(0, len(names), step), ticks[::step], fontsize=7)
+        ax.set_xlabel("scan")
+        ax.set_title(label, fontsize=10)
+        for e in edges:
+            if e.rejected:
+                ax.plot([at[e.source], at[e.target]], [at[e.target], at[e.source]], "x", color="red", ms=4)
+    n_odo = sum(e.kind == "odometry" for e in edges)
+    fig.suptitle(f"pose graph: {len(edges)} pairwise ICP results ({n_odo} odometry, {len(edges) - n_odo} loop "
+                 f"closures; rejected: red x)", fontsize=10)
     return _save(fig, path)
 
 

@@ -144,7 +144,7 @@ def register(
     from recon_cli.console import console, progress_bar, styled
     from recon_cli.reconstruction.crop import CropBox
     from recon_cli.reconstruction.pipeline import run_register
-    from recon_cli.report import write_page_after_run
+    from recon_cli.report import write_pages_after_register
 
     one_of(box_frame, ("world", "marker"), "box frame")
     one_of(loop_closures, ("icp", "global"), "loop closure initialization")
@@ -161,7 +161,7 @@ def register(
                       surface=replace(_R.surface, voxel=voxel, poisson_depth=depth, density_quantile=trim))
     with progress_bar() as update:
         result = run_register(folder, out or Path(folder) / "reconstruction", options, update)
-    page = write_page_after_run(result.folder)
+    page = write_pages_after_register(result.folder)
     sources = {k: v for k, v in result.pose_sources.items() if v}
     skipped = len(result.scans) - len(result.used)
     console.print(f"{len(result.used)} of {len(result.scans)} scans registered"

@@ -19,6 +19,6 @@ relative, so the folder can be moved, zipped and mailed.
 from __future__ import annotations
 
 from recon_cli.report.options import ReportOptions
-from recon_cli.report.page import PAGE, ReportPage, write_page, write_page_after_run
+from recon_cli.report.page import PAGE, ReportPage, write_page, write_page_after_run, write_pages_after_register
 
-__all__ = ["PAGE", "ReportOptions", "ReportPage", "write_page", "write_page_after_run"]
+__all__ = ["PAGE", "ReportOptions", "ReportPage", "write_page", "write_page_after_run", "write_pages_after_register"]

@@ -122,6 +122,17 @@ def write_page(folder: Path, options: ReportOptions = ReportOptions()) -> Report
     return ReportPage(path, run.kind, run.status, assets.mesh_views, shown, notes)
 
 
+def write_pages_after_register(out: Path) -> ReportPage | None:
+    """The page of ``recon register``'s output folder; when that is the ``reconstruction``
+    folder of a run or scan store with a page, that page is written again too, so that it
+    shows the registration and the mesh."""
+    out = Path(out)
+    page = write_page_after_run(out)
+    if out.name == "reconstruction" and (out.parent / PAGE).is_file():
+        write_page_after_run(out.parent)
+    return page
+
+
 def write_page_after_run(folder: Path, options: ReportOptions = ReportOptions()) -> ReportPage | None:  # noqa: B008
     """The page at the end of a run, however it ended. The run's own results are written by
     now: a page that cannot be made is a warning (``recon report FOLDER`` tries again), not

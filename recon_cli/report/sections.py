@@ -70,7 +70,8 @@ def summary(run: RunFolder) -> Html:
                  ("trajectories", num(a.trajectory_s, ".1f", "s")),
                  ("wall time", num(a.seconds_total, ".1f", "s"))]  # coverage and accuracy: the evaluation
     if c is not None:
-        rows += [("views", f"{c.scans} of {c.views} scanned"), ("views skipped", num(len(c.failures)) or None),
+        rows += [("views", f"{c.scans} of {c.views} scanned"),
+                 ("views skipped", num(len(c.failures)) if c.failures else None),
                  ("error", c.error), ("wall time", num(c.seconds, ".1f", "s"))]
     if s is not None:
         rows += [("object", s.object_name), ("cell", s.cell), ("backend", s.backend),
@@ -155,17 +156,21 @@ def _scan_row(run: RunFolder, s: Scan, assets: Assets) -> list[Content]:
 
 
 def scans(run: RunFolder, assets: Assets) -> Html:
-    if not run.scans:
-        return section("scans", "Scans", note("no scans in this folder"))
-    head = ("scan", "colour", "size [px]", "move", "pose source", "corners", "reprojection [px]",
-            "points in box", "ICP (pose graph)", "pose error vs truth", "note")
-    rows = [_scan_row(run, s, assets) for s in run.scans]
-    return section("scans", f"Scans ({len(run.scans)})",
-                   table(head, rows, numeric=(5, 6, 7)),
-                   tag("p", "Pose source: the ChArUco board in the colour image, else the robot's kinematics. "
-                            "ICP: the scan's pairwise registrations in the pose graph (fitness: share of points "
-                            "with a correspondence; RMSE of the inliers). Pose error: simulation only.",
-                       class_="meta"))
+    parts: list[Content] = []
+    if run.scans:
+        head = ("scan", "colour", "size [px]", "move", "pose source", "corners", "reprojection [px]",
+                "points in box", "ICP (pose graph)", "pose error vs truth", "note")
+        parts += [table(head, [_scan_row(run, s, assets) for s in run.scans], numeric=(5, 6, 7)),
+                  tag("p", "Pose source: the ChArUco board in the colour image, else the robot's kinematics. "
+                           "ICP: the scan's pairwise registrations in the pose graph (fitness: share of points "
+                           "with a correspondence; RMSE of the inliers). Pose error: simulation only.",
+                      class_="meta")]
+    else:
+        parts.append(note("no scans in this folder"))
+    if run.capture is not None and run.capture.failures:
+        parts += [tag("h3", "Skipped views"),
+                  table(("view", "why"), [(str(f.view), f.message) for f in run.capture.failures], numeric=(0,))]
+    return section("scans", f"Scans ({len(run.scans)})", *parts)
 
 
 def registration(run: RunFolder) -> Html:

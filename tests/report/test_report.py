@@ -172,6 +172,20 @@ def test_recon_report_rebuilds_every_kind_of_folder(smoke, tmp_path, capsys):
     assert "scan store" in page.read_text() and len(table_rows(page, "scans")) == 3
 
 
+def test_recon_register_writes_its_page_and_updates_the_store_page(smoke, tmp_path, capsys):
+    store = tmp_path / "store"
+    shutil.copytree(smoke / "scans", store)
+    assert main(["report", str(store), "--no-render"]) == 0
+    assert "registered" not in (store / "report.html").read_text()
+    assert main(["register", str(store), "--depth", "6", "--global-only"]) == 0
+    assert f"page: {store / 'reconstruction' / 'report.html'}" in capsys.readouterr().out
+    parser = check_page(store / "reconstruction" / "report.html")
+    assert len(pictures(parser, store / "reconstruction" / "report.html", "report_files/mesh_")) == 4
+    page = store / "report.html"  # the store's page now shows the registration and its mesh
+    parser = check_page(page)
+    assert "3 of 3 scans" in page.read_text() and len(pictures(parser, page, "report_files/mesh_")) == 4
+
+
 def test_an_autoscan_folder(smoke, tmp_path, capsys):
     auto = tmp_path / "auto"
     shutil.copytree(smoke / "scans", auto)
@@ -238,6 +252,18 @@ def test_blank_pictures_are_recognized(tmp_path):
     o3d.io.write_triangle_mesh(str(tmp_path / "empty.ply"), o3d.geometry.TriangleMesh())
     with pytest.raises(FileError, match="no triangles"):
         render_mesh(tmp_path / "empty.ply", tmp_path / "out")
+
+
+def test_many_icp_results_are_one_matrix(tmp_path):
+    from recon_cli.report.figures import icp_png
+    from recon_cli.report.model import Edge
+
+    names = [f"scan_{k:04d}" for k in range(12)]
+    edges = tuple(Edge(a, b, "odometry" if j == i + 1 else "loop_closure", 100, 0.5, 0.1, rejected=(i, j) == (0, 5))
+                  for i, a in enumerate(names) for j, b in enumerate(names) if j > i)
+    assert len(edges) == 66
+    image = cv2.imread(str(icp_png(tmp_path / "icp.png", edges)))
+    assert image.shape[1] <= 1200 and not image_stats(image).blank()
 
 
 # ----------------------------------------------------------------------------- batches

@@ -5,9 +5,14 @@ folder and its log."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from recon_cli.report.markup import Content, Html, facts, link, note, num, page, section, status, table, tag
 from recon_cli.report.page import PAGE
+
+if TYPE_CHECKING:
+    from recon_cli.batch.job import JobResult
+    from recon_cli.batch.runner import BatchResult
 
 INDEX = "index.html"
 
@@ -17,12 +22,12 @@ def job_page(batch_folder: Path, name: str) -> Path:
     return Path(batch_folder) / "jobs" / name / "output" / PAGE
 
 
-def _checks(result) -> Html:
+def _checks(result: JobResult) -> Html:
     items = [tag("li", [status("passed" if c.passed else "failed"), " ", c.describe()]) for c in result.checks]
     return tag("ul", items) if items else Html("")
 
 
-def _row(result, folder: Path) -> list[Content]:
+def _row(result: JobResult, folder: Path) -> list[Content]:
     from recon_cli.batch.reports import measured_text
 
     page_path = job_page(folder, result.name)
@@ -36,7 +41,7 @@ def _row(result, folder: Path) -> list[Content]:
             measured_text(result), result.reason or "", Html(" ".join(f for f in files if f))]
 
 
-def write_index(batch) -> Path:
+def write_index(batch: BatchResult) -> Path:
     """``index.html`` of a :class:`~recon_cli.batch.runner.BatchResult` in its folder."""
     from recon_cli.outputs import atomic_write_text
 

@@ -2,9 +2,11 @@
 
 The mesh is ray-cast on the CPU with Open3D's ``RaycastingScene`` (Embree): one ray per
 sub-pixel (2 x 2 per pixel, averaged), the hit triangle's vertex normals interpolated and
-lit by a light beside the camera. No OpenGL context is needed, so this works the same on a
+lit by a light beside the camera. No graphics context is needed, so this works the same on a
 headless server, in CI and on a desktop, and cannot take a run down with a failing graphics
-driver. Each view looks from one of the :data:`MESH_VIEWS` directions at the mesh, framed so
+driver (Open3D's OffscreenRenderer does run headless with a software Vulkan device, but it
+starts its Filament engine for seconds, prints the engine's log, and crashes where EGL is
+missing). Each view looks from one of the :data:`MESH_VIEWS` directions at the mesh, framed so
 that it just fills the image.
 """
 

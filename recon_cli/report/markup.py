@@ -116,6 +116,8 @@ def status(text: str) -> Html:
     return tag("span", text, class_=f"status {STATUS_CLASS.get(text, 'warn')}")
 
 
+GENERATOR = "recon report"  # marks a page recon wrote (and may write again)
+
 CSS = """
 body { font: 14px/1.45 system-ui, -apple-system, "Segoe UI", sans-serif; margin: 0 auto; max-width: 1200px;
        padding: 0 1.5em 3em; color: #222; }
@@ -139,6 +141,7 @@ def page(title: str, subtitle: Content, nav: Sequence[tuple[str, str]], body: Se
     links = tag("nav", [tag("a", text, href=f"#{ident}") for ident, text in nav])
     stamp = time.strftime("%Y-%m-%d %H:%M:%S")
     head = ('<head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">'
+            f'<meta name="generator" content="{GENERATOR}">'
             f"{tag('title', title)}<style>{CSS}</style></head>")
     header = tag("header", [tag("h1", title), tag("p", subtitle, class_="meta"), links])
     footer = tag("footer", tag("p", f"written by recon on {stamp}", class_="meta"))

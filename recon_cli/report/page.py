@@ -22,6 +22,7 @@ from recon_cli.report.read import PAGE_FILES, read_run_folder
 from recon_cli.report.sections import Assets, Picture
 
 PAGE = "report.html"
+MARKER = ".recon-report"  # inside report_files/: the folder is the page's own (and may be replaced)
 
 
 @dataclass(frozen=True)
@@ -89,6 +90,20 @@ def _moved(assets: Assets, tmp: Path, final: Path) -> Assets:
                    thumbnails={k: move(v) for k, v in assets.thumbnails.items()})
 
 
+def _refuse_foreign(folder: Path, final: Path) -> None:
+    """Never replace a report.html or report_files/ that recon did not write (a script may
+    export files under any name)."""
+    from recon_cli.report.markup import GENERATOR
+
+    page = folder / PAGE
+    if page.is_file() and f'content="{GENERATOR}"' not in page.read_text(encoding="utf-8", errors="replace")[:2000]:
+        raise FileError(f"{page} is not a page recon wrote; it is left as it is",
+                        hint="move it away to let recon write the run's page")
+    if final.exists() and not (final / MARKER).is_file():
+        raise FileError(f"{final} is not the pictures folder of a recon page; it is left as it is",
+                        hint="move it away to let recon write the run's page")
+
+
 def write_page(folder: Path, options: ReportOptions = ReportOptions()) -> ReportPage:  # noqa: B008
     """(Re)write the page of a run folder; a FileError when it is no run folder or cannot be
     written."""
@@ -99,10 +114,12 @@ def write_page(folder: Path, options: ReportOptions = ReportOptions()) -> Report
     folder = Path(folder)
     run = read_run_folder(folder)
     final = inside(folder, PAGE_FILES, "report pictures folder")
+    _refuse_foreign(folder, final)
     tmp = folder / f".{PAGE_FILES}.tmp-{os.getpid()}"
     try:
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir()
+        (tmp / MARKER).write_text("the pictures of report.html, replaced whenever the page is written\n")
         assets = _draw(run, options, tmp)
         if final.exists():
             shutil.rmtree(final)

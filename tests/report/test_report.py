@@ -224,6 +224,20 @@ def test_text_from_the_run_is_escaped(smoke, tmp_path, capsys):
     check_page(run / "report.html")
 
 
+def test_files_recon_did_not_write_are_left_alone(smoke, tmp_path, capsys):
+    run = tmp_path / "run"
+    shutil.copytree(smoke, run)
+    (run / "report_files" / ".recon-report").unlink()  # as if a script had exported into report_files/
+    assert main(["report", str(run)]) == 1
+    assert "is not the pictures folder of a recon page" in capsys.readouterr().err
+    assert (run / "report_files" / "mesh_front.png").is_file()
+    shutil.rmtree(run / "report_files")
+    (run / "report.html").write_text("<p>mine</p>")
+    assert main(["report", str(run)]) == 1
+    assert "is not a page recon wrote" in capsys.readouterr().err
+    assert (run / "report.html").read_text() == "<p>mine</p>"
+
+
 def test_a_folder_that_is_no_run_is_a_one_line_error(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     (tmp_path / "file").write_text("x")

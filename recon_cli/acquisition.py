@@ -59,7 +59,8 @@ class Acquisition:
     def __init__(self, cell: Cell, robot: RobotBackend, camera: CameraBackend, store: ScanStore,
                  rng: np.random.Generator, plan_options: PlanOptions = PlanOptions(),  # noqa: B008
                  depth_scale: float = 20000.0,
-                 ground_truth: Callable[[], dict] | None = None) -> None:
+                 ground_truth: Callable[[], dict] | None = None,
+                 on_scan: Callable[[Scan], None] | None = None) -> None:
         self.cell = cell
         self.robot = robot
         self.camera = camera
@@ -68,6 +69,7 @@ class Acquisition:
         self.planner = MotionPlanner(cell, plan_options)
         self.depth_scale = depth_scale
         self.ground_truth = ground_truth
+        self.on_scan = on_scan  # told of every scan once it is written (recordings)
 
     def move_to_pose(self, world_T_camera: np.ndarray, what: str = "view") -> MoveReport:
         q0 = self.robot.measured_joints()
@@ -113,4 +115,6 @@ class Acquisition:
             distortion=frame.distortion,
         )
         self.store.write(scan, self.depth_scale)
+        if self.on_scan is not None:
+            self.on_scan(scan)
         return scan

@@ -115,6 +115,22 @@ class HardwareUnavailable(ReconError):
     """The hardware backend was asked for, but no station adapters are configured here."""
 
 
+class OptionalPackageMissing(ReconError):
+    """A feature needs an optional extra that is not installed (or not the pinned release)."""
+
+    def __init__(self, package: str, extra: str, what: str, *, found: str | None = None,
+                 wanted: str | None = None) -> None:
+        self.package = package
+        self.extra = extra
+        self.found = found
+        self.wanted = wanted
+        if found is None:
+            message = f"{what} need the Python package '{package}', which is not installed"
+        else:
+            message = f"{what} need {package} {wanted}, installed is {found}"
+        super().__init__(message, hint=f"pip install 'recon-cli[{extra}]'")
+
+
 class RobotFault(ReconError):
     """The robot was stopped by recon or reported a fault: the run cannot go on safely.
 

@@ -70,6 +70,7 @@ class SessionSpec:
     run: dict = field(default_factory=dict)  # what else config.yaml records (command, options)
     station: Path | None = None  # a station file: the robot and camera adapters (and the cell) to use
     board_only: bool = False  # nothing on the table but the ChArUco board (calibration views)
+    recorder: object | None = None  # a recording.Recorder: the cell, every motion and every scan go into it
 
 
 class Session:
@@ -133,6 +134,13 @@ class Session:
         self.station = open_station(spec.backend, self.cell, self.scene_object, self.start, self.rng, cfg,
                                     self.station_file)
         self.store = self._open_store()
+        if spec.recorder is not None:
+            from recon_cli.recording.station import RecordedStation
+
+            self.station = RecordedStation(self.station, spec.recorder)
+            spec.recorder.depth_scale = sensor.depth_scale
+            spec.recorder.cell(self.cell, self.station.robot.measured_joints(), box,
+                               obj.mesh_world() if obj is not None and spec.backend is Backend.SIM else None)
         write_config(spec.run_folder or spec.out, cfg, mode=spec.mode.value, backend=spec.backend.value,
                      script=spec.script, object=None if obj is None else obj.name, **spec.run)
         if spec.backend is Backend.SIM:
@@ -142,7 +150,8 @@ class Session:
                 write_realism_record(spec.out, self.station.realism_record())
         self.acquisition = Acquisition(self.cell, self.station.robot, self.station.camera, self.store, self.rng,
                                        cfg.planner, depth_scale=sensor.depth_scale,
-                                       ground_truth=self.station.ground_truth)
+                                       ground_truth=self.station.ground_truth,
+                                       on_scan=None if spec.recorder is None else spec.recorder.scan)
 
     def _open_store(self):
         from recon_cli.reconstruction.scan_store import ScanStore

@@ -157,6 +157,7 @@ class Overrides:
 
     timeout_s: float | None = None
     retries: int | None = None
+    record: bool = False  # every job whose command can, writes a 3D recording (--record)
 
 
 # ----------------------------------------------------------------------------- the options of a command
@@ -539,4 +540,7 @@ def load_batch(sources: list[str], overrides: Overrides = Overrides()) -> BatchS
             else:
                 raise FileError(f"{p}: not a batch file (.yaml) or a script (.xml)")
     name = names[0] if len(names) == 1 and len(sources) == 1 else "batch"
+    if overrides.record:
+        jobs = [dataclasses.replace(j, args=(*j.args, "--record"))
+                if "record" in command_options(j.kind) and "--record" not in j.args else j for j in jobs]
     return BatchSpec(name, _unique(jobs), tuple(sources))

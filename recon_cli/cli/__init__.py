@@ -12,6 +12,7 @@
     batch.py     recon batch
     report.py    recon report
     calibrate.py recon calibrate handeye, recon calibrate intrinsics
+    view.py      recon view
 
 Heavy libraries (pinocchio, coal, Open3D, MuJoCo, OMPL) are imported inside the commands
 so that ``recon --help`` is instant. User errors (``ReconError`` and malformed options)
@@ -36,6 +37,7 @@ from recon_cli.cli import (  # noqa: F401 (registers the commands)
     scans,
     scripts,
     station,
+    view,
 )
 from recon_cli.cli.app import app, bench_app
 from recon_cli.cli.options import parse_vector

@@ -12,9 +12,11 @@ from recon_cli.cli.options import (
     CellOpt,
     D,
     RealismOpt,
+    RecordOpt,
     ResolutionOpt,
     SafetyOpt,
     SeedOpt,
+    check_record,
     make_view,
     parse_vector,
     realism_profile,
@@ -44,6 +46,7 @@ def autoscan(
     station: Annotated[Path | None, typer.Option(help="Station file: run on the robot and camera adapters it names "
                                                       "(docs/hardware.md); default: the simulation.")] = None,
     realism: RealismOpt = D.realism.name,
+    record: RecordOpt = False,
 ) -> None:
     """Scan an unknown object autonomously: the ellipsoid view planner of the thesis."""
     from dataclasses import replace
@@ -53,6 +56,7 @@ def autoscan(
     from recon_cli.robot.description import CellConfig, CellKind
     from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions
 
+    check_record(record)
     config = D.replace(
         cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
         scene=SceneConfig(object_name, scale), sensor=replace(D.sensor, resolution=resolution), seed=seed,
@@ -65,7 +69,8 @@ def autoscan(
 
         center, _ = load_object(object_name, scale).crop_box(config.scene.box_margin)
         view = make_view(",".join(map(str, center)), dc + 0.1, theta, phi, 0.0, "world")
-    opts = AutoscanOptions(folder, config, view, pictures=pictures, run={"command": "autoscan"}, station=station)
+    opts = AutoscanOptions(folder, config, view, pictures=pictures, run={"command": "autoscan"}, station=station,
+                           record=record)
     with progress_bar() as update:
         result = Autoscan(opts, update).run()
     if result.interrupted:
@@ -83,5 +88,7 @@ def autoscan(
     console.print(f"mesh: {result.mesh}\ncloud: {result.cloud}\nreport: {result.report}")
     if result.pictures:
         console.print(f"pictures: {result.pictures[0].parent}")
+    if record:
+        console.print(f"recording: {folder / 'recording.rrd'} (recon view {folder})")
     if result.page is not None:
         console.print(f"page: {result.page}")

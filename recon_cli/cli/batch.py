@@ -43,6 +43,9 @@ def batch(
                                                        "$GITHUB_STEP_SUMMARY).")] = None,
     list_jobs: Annotated[bool, typer.Option("--list", help="Print the jobs and their commands; run nothing.")]
     = False,
+    record: Annotated[bool, typer.Option("--record", help="Every job that can writes a 3D recording of its run "
+                                                          "(recording.rrd in its folder; needs recon-cli[viz]).")]
+    = False,
 ) -> None:
     """Run a batch of scans (scripts, autoscans, captures; seeds, objects) as isolated recon processes, check
     their pass criteria and write JUnit XML and summaries."""
@@ -55,7 +58,11 @@ def batch(
 
     if cluster is not None and scheduler == os.environ.get("DASK_SCHEDULER_ADDRESS"):
         scheduler = None  # an explicit --cluster wins over the environment's scheduler
-    spec = load_batch(sources, Overrides(timeout, retries))
+    if record:
+        from recon_cli.recording import require_rerun
+
+        require_rerun()
+    spec = load_batch(sources, Overrides(timeout, retries, record))
     if list_jobs:
         for job in spec.jobs:
             bounds = ", ".join(f"{k} {v:g}" for k, v in job.expect.items())

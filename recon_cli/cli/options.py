@@ -31,6 +31,9 @@ ResolutionOpt = Annotated[float, typer.Option(min=0.05, max=1.0, help="Image siz
 RealismOpt = Annotated[str, typer.Option("--realism", help="How real the simulated cell is: 'ideal' (the model "
                                                            "itself), 'thesis' (errors of the thesis' cell) or a "
                                                            "profile FILE.yaml (docs/simulation.md).")]
+RecordOpt = Annotated[bool, typer.Option("--record", help="Also write a 3D recording of the run (recording.rrd "
+                                                         "in the output folder; recon view opens it; needs "
+                                                         "recon-cli[viz]).")]
 
 #: the example view of ``recon ik`` and ``recon capture``: the thesis' focus point above the board
 FOCUS = "0,0,0.78"
@@ -50,6 +53,14 @@ def parse_vector(text: str, n: int, option: str, unit: str) -> tuple[float, ...]
         raise InputError(f"{option} '{text}' is not {n} numbers",
                          hint=f"write {n} comma-separated values in {unit}, e.g. {example}")
     return values
+
+
+def check_record(record: bool) -> None:
+    """--record: the recording library must be there before anything runs."""
+    if record:
+        from recon_cli.recording import require_rerun
+
+        require_rerun()
 
 
 def realism_profile(text: str):

@@ -21,10 +21,12 @@ from recon_cli.cli.options import (
     PhiOpt,
     RadiusOpt,
     RealismOpt,
+    RecordOpt,
     ResolutionOpt,
     SafetyOpt,
     SeedOpt,
     ThetaOpt,
+    check_record,
     index_list,
     make_view,
     one_of,
@@ -65,6 +67,7 @@ def capture(
     station: Annotated[Path | None, typer.Option(help="Station file: run on the robot and camera adapters it names "
                                                       "(docs/hardware.md); default: the simulation.")] = None,
     realism: RealismOpt = D.realism.name,
+    record: RecordOpt = False,
 ) -> None:
     """Move the simulated robot through views and write one scan per view into a scan store."""
     from dataclasses import replace
@@ -77,6 +80,7 @@ def capture(
     from recon_cli.session import resolve_object_name
     from recon_cli.workflows.capture import CaptureOptions, run_capture
 
+    check_record(record)
     object_name = resolve_object_name(object_name)
     if one_of(views, VIEW_SETS, "view set") == "single":
         view_list = (make_view(focus, radius, theta, phi, alpha, frame),)
@@ -92,7 +96,8 @@ def capture(
         planner=replace(D.planner, planner=planner, time_limit=planning_time), realism=realism_profile(realism))
     folder = run_folder(out, "capture")
     options = CaptureOptions(views=view_list, out=folder, config=config, cover_board=frozenset(covered),
-                             run={"command": "capture", "views": views}, station=station)
+                             run={"command": "capture", "views": views}, station=station,
+                             record=record)
     with progress_bar() as update:
         result = run_capture(options, update)
     for m, scan, n_points, t_cap in zip(result.moves, result.scans, result.points, result.capture_seconds,
@@ -106,6 +111,8 @@ def capture(
         console.print(styled(f"view {f.view} skipped:", "yellow", f" {f.message}"))
     console.print(f"{len(result.scans)} of {len(view_list)} views scanned in {result.total_seconds:.1f} s; "
                   f"scan store: {folder}")
+    if record:
+        console.print(f"recording: {folder / 'recording.rrd'} (recon view {folder})")
     if result.page is not None:
         console.print(f"page: {result.page}")
     if not result.scans:
@@ -132,6 +139,7 @@ def register(
     depth: Annotated[int, typer.Option(min=5, max=12, help="Poisson octree depth.")] = _R.surface.poisson_depth,
     trim: Annotated[float, typer.Option(min=0.0, max=0.5, help="Poisson density quantile trimmed.")]
     = _R.surface.density_quantile,
+    record: RecordOpt = False,
 ) -> None:
     """Register all scans of a folder (ChArUco or kinematics, pose-graph ICP), fuse, mesh.
 
@@ -143,9 +151,10 @@ def register(
 
     from recon_cli.console import console, progress_bar, styled
     from recon_cli.reconstruction.crop import CropBox
-    from recon_cli.reconstruction.pipeline import run_register
     from recon_cli.report import write_pages_after_register
+    from recon_cli.workflows.register import register_folder
 
+    check_record(record)
     one_of(box_frame, ("world", "marker"), "box frame")
     one_of(loop_closures, ("icp", "global"), "loop closure initialization")
     crop = None
@@ -160,7 +169,7 @@ def register(
                       multiway=replace(_R.multiway, loop_closure_init=loop_closures),
                       surface=replace(_R.surface, voxel=voxel, poisson_depth=depth, density_quantile=trim))
     with progress_bar() as update:
-        result = run_register(folder, out or Path(folder) / "reconstruction", options, update)
+        result = register_folder(folder, out or Path(folder) / "reconstruction", options, record, update)
     page = write_pages_after_register(result.folder)
     sources = {k: v for k, v in result.pose_sources.items() if v}
     skipped = len(result.scans) - len(result.used)
@@ -183,6 +192,8 @@ def register(
                       f"({result.multiway.pruned} pruned, {sum(x.rejected for x in e)} ICP results rejected)")
     console.print(f"done in {result.timings['total_s']:.1f} s; frame: {result.frame}")
     console.print(f"cloud: {result.cloud}\nmesh: {result.mesh}\nreport: {result.report}")
+    if record:
+        console.print(f"recording: {result.folder / 'recording.rrd'} (recon view {result.folder})")
     if page is not None:
         console.print(f"page: {page.path}")
 

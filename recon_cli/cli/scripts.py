@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from recon_cli.cli.app import app
-from recon_cli.cli.options import D, SeedOpt, one_of, realism_profile
+from recon_cli.cli.options import D, RecordOpt, SeedOpt, check_record, one_of, realism_profile
 
 BACKENDS = ("sim", "hardware")
 SEQUENCE_METHODS = ("ours", "thesis")
@@ -63,6 +63,7 @@ def run_script(
                                                                   "'thesis' or a profile FILE.yaml (overrides the "
                                                                   "script's <cell realism=...>; docs/simulation.md)."
                                                 )] = None,
+    record: RecordOpt = False,
 ) -> None:
     """Run an automation script: moves, scans, registration, reconstruction, exports."""
     from recon_cli.console import console, progress_bar, run_folder, styled
@@ -75,6 +76,7 @@ def run_script(
 
     if backend is not None:
         one_of(backend, BACKENDS, "backend")
+    check_record(record)
     one_of(sequence_method, SEQUENCE_METHODS, "sequence method")
     s = load_script(script)
     check_script(s, object_override=object_name)  # before the output folder is made
@@ -82,7 +84,7 @@ def run_script(
     profile = None if realism is None else realism_profile(realism)
     folder = run_folder(out, "run", fresh=not append)
     options = RunOptions(folder, None if backend is None else Backend(backend), seed, dry_run, object_name, optimize,
-                         SequenceMethod(sequence_method), append, station, profile)
+                         SequenceMethod(sequence_method), append, station, profile, record)
     with stop_signals(), progress_bar() as update:
         result = ScriptRunner(s, options, update).run()
     counts: dict[str, int] = {}
@@ -100,6 +102,8 @@ def run_script(
     for k, v in result.outputs.items():
         console.print(f"{k}: {v}")
     console.print(f"report: {folder / 'run_report.json'}")
+    if record and not dry_run:
+        console.print(f"recording: {folder / 'recording.rrd'} (recon view {folder})")
     if result.page is not None:
         console.print(f"page: {result.page}")
     if result.exit_code and not allow_failures:

@@ -305,7 +305,8 @@ _REPORTS = {RUN_REPORT: "the run: every command, its status, time and message",
             "session.json": "what produced the scans (cell, sensor, object)",
             "config.yaml": "the effective configuration (repeat the run from it)",
             "script.expanded.xml": "the script after xacro",
-            "realism.json": "what the realism profile drew (simulation; evaluation only)"}
+            "realism.json": "what the realism profile drew (simulation; evaluation only)",
+            "recording.rrd": "3D recording of the run (recon view shows it)"}
 
 
 def _walk(folder: Path, suffixes: tuple[str, ...], depth: int = 3) -> list[Path]:
@@ -336,7 +337,7 @@ def _plys(folder: Path, exports: set[str]) -> tuple[OutputFile, ...]:
 
 def _reports(folder: Path) -> tuple[OutputFile, ...]:
     out = []
-    for path in _walk(folder, (".json", ".yaml", ".xml")):
+    for path in _walk(folder, (".json", ".yaml", ".xml", ".rrd")):
         if path.name.endswith("_evaluation.json"):
             what = f"evaluation of {path.name.removesuffix('_evaluation.json')} against the reference"
         else:

@@ -70,6 +70,7 @@ class RunOptions:
     append: bool = False  # add scans to the scan store already in ``out``
     station: Path | None = None  # a station file: robot and camera adapters (and the cell)
     realism: RealismProfile | None = None  # overrides the script's <cell realism=...>
+    record: bool = False  # write a 3D recording of the run (recording.rrd in ``out``)
     page: bool = True  # write the run's report page (report.html) at its end
 
 
@@ -127,6 +128,7 @@ class RunState:
     fragment_box: Any = None  # crop box of fragments (marker frame)
     outputs: dict[str, str] = field(default_factory=dict)
     sequences: list[SequenceReport] = field(default_factory=list)
+    recorder: Any = None  # recording.recorder.Recorder of a recorded run
 
     @property
     def out(self) -> Path:
@@ -164,7 +166,7 @@ class RunState:
         spec = SessionSpec(self.out / "scans", self.config, Mode.SCRIPT, self.backend, box=self._explicit_box(),
                            script=self.script.path, append=self.options.append, run_folder=self.out,
                            run={"command": "run", "dialect": self.script.dialect, "dry_run": self.dry_run},
-                           station=self.options.station)
+                           station=self.options.station, recorder=None if self.dry_run else self.recorder)
         self.session = open_session(spec, self.rng, plan_only=self.dry_run)
         self.cell = self.session.cell
         self.q_planned = self.session.start
@@ -230,5 +232,10 @@ class RunState:
         return target
 
     def close(self) -> None:
-        if self.session is not None:
-            self.session.close()
+        """Stop the robot and free the station, then finish the recording."""
+        try:
+            if self.session is not None:
+                self.session.close()
+        finally:
+            if self.recorder is not None:
+                self.recorder.close()

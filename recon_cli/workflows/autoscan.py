@@ -42,6 +42,7 @@ class AutoscanOptions:
     mesh: bool = True
     run: dict = field(default_factory=dict)  # recorded in config.yaml
     station: Path | None = None  # a station file (robot and camera adapters)
+    record: bool = False  # write a 3D recording of the run (recording.rrd in ``out``)
     page: bool = True  # write the report page (report.html) at the end
 
 
@@ -101,6 +102,7 @@ class Autoscan:
         self.vp = opt.config.viewplan
         self.progress = progress or (lambda *a: None)
         self.rng = np.random.default_rng(opt.config.seed)
+        self.recorder = None
 
     # ------------------------------------------------------------------ set-up
     def _setup(self) -> None:
@@ -109,8 +111,12 @@ class Autoscan:
         from recon_cli.reconstruction.crop import CropBox
 
         opt, cfg = self.opt, self.opt.config
+        if opt.record:
+            from recon_cli.recording import open_recorder
+
+            self.recorder = open_recorder(opt.out, f"recon autoscan ({self.method.value})")
         spec = SessionSpec(opt.out, cfg, Mode.AUTOSCAN, opt.backend, run={"method": self.method.value, **opt.run},
-                           station=opt.station)
+                           station=opt.station, recorder=self.recorder)
         self.session = open_session(spec, self.rng)
         self.obj, self.cell, self.store = self.session.scene_object, self.session.cell, self.session.store
         self.station, self.acq = self.session.station, self.session.acquisition
@@ -206,7 +212,11 @@ class Autoscan:
 
         opt, vp, ellipsoid = self.opt, self.vp, self.method is Method.ELLIPSOID
         t0 = time.perf_counter()
-        self._setup()
+        try:
+            self._setup()
+        except BaseException:
+            self._close_recorder()
+            raise
         views: list[ViewRecord] = []
         pictures: list[Path] = []
         interrupted = False
@@ -244,9 +254,11 @@ class Autoscan:
                     continue
                 stuck = 0
                 T, _ = planned[sel.index]
+                others = [p for k, (p, _) in enumerate(planned) if k != sel.index]
                 if opt.pictures and ellipsoid:
-                    pictures.append(self._picture(it, ell, views, [p for k, (p, _) in enumerate(planned)
-                                                                   if k != sel.index], T))
+                    pictures.append(self._picture(it, ell, views, others, T))
+                if self.recorder is not None:
+                    self.recorder.iteration(it, ell, [(v.world_T_camera, v.status.value) for v in views], others, T)
                 if not ellipsoid:
                     queue.pop(sel.index)
                 self.station.robot.execute(sel.trajectory)
@@ -258,14 +270,33 @@ class Autoscan:
             interrupted = True
         except ReconError as exc:  # a fault, no reachable view: reported below, then raised
             error = exc
+        except BaseException:
+            self._close_recorder()
+            raise
         finally:
             self.session.close()  # stops the robot first
-        return self._finish(views, pictures, t0, interrupted, error)
+        try:
+            result, error = self._finish(views, pictures, t0, interrupted, error)
+        finally:
+            self._close_recorder()
+        if opt.page:  # with the recording complete
+            from recon_cli.report import write_page_after_run
+
+            written = write_page_after_run(opt.out)
+            result.page = None if written is None else written.path
+        if error is not None:
+            raise error
+        return result
+
+    def _close_recorder(self) -> None:
+        if self.recorder is not None:
+            self.recorder.close()
 
     # ------------------------------------------------------------------ results
-    def _finish(self, views, pictures, t0: float, interrupted: bool, error: ReconError | None) -> AutoscanResult:
-        """Register and evaluate what was scanned (unless the run ended early), write the
-        report and the page; then raise the error that ended the run, if any."""
+    def _finish(self, views, pictures, t0: float, interrupted: bool, error: ReconError | None
+                ) -> tuple[AutoscanResult, ReconError | None]:
+        """Register and evaluate what was scanned (unless the run ended early) and write the
+        report; the result and the error that ended the run (None when it did not)."""
         from recon_cli.console import write_json
 
         opt, cfg, vp = self.opt, self.opt.config, self.vp
@@ -285,6 +316,10 @@ class Autoscan:
                 error = exc
             else:
                 cloud, mesh = reg.cloud, reg.mesh
+                if self.recorder is not None:
+                    from recon_cli.recording.results import record_registration
+
+                    record_registration(self.recorder, reg, opt.out)
                 import open3d as o3d
 
                 pts = np.asarray(o3d.io.read_point_cloud(str(cloud)).points)
@@ -309,16 +344,8 @@ class Autoscan:
             "outputs": {"cloud": None if cloud is None else str(cloud), "mesh": None if mesh is None else str(mesh),
                         "pictures": [str(p) for p in pictures]},
         })
-        page = None
-        if opt.page:
-            from recon_cli.report import write_page_after_run
-
-            written = write_page_after_run(opt.out)
-            page = None if written is None else written.path
-        if error is not None:
-            raise error
         return AutoscanResult(opt.out, len(self.store), views, infeasible, self.requests, self.trajectory_s,
-                              seconds_total, coverage, accuracy, cloud, mesh, report, pictures, interrupted, page)
+                              seconds_total, coverage, accuracy, cloud, mesh, report, pictures, interrupted), error
 
     def _picture(self, it: int, ell, views: list[ViewRecord], planned: list[np.ndarray], active: np.ndarray) -> Path:
         from recon_cli.viewplan.picture import iteration_png

@@ -25,6 +25,7 @@ from recon_cli.errors import ReconError
 from recon_cli.geometry.view import View
 from recon_cli.objects import SceneObject
 from recon_cli.reconstruction.scan_store import Scan
+from recon_cli.recording import closing, open_recorder
 from recon_cli.session import Backend, Mode, SessionSpec, open_session
 
 
@@ -37,6 +38,7 @@ class CaptureOptions:
     cover_board: frozenset[int] = frozenset()  # 1-based views with the board covered (simulation)
     run: dict = field(default_factory=dict)  # recorded in config.yaml
     station: Path | None = None  # a station file (robot and camera adapters)
+    record: bool = False  # write a 3D recording of the run (recording.rrd in ``out``)
     page: bool = True  # write the report page (report.html) at the end
 
 
@@ -76,11 +78,13 @@ def run_capture(opt: CaptureOptions, progress: Callable[[str, int, int], None] |
     n = len(opt.views)
     step = (lambda k: progress("capture", k, n)) if progress else (lambda k: None)
     scans, moves, failures, capture_seconds = [], [], [], []
-    spec = SessionSpec(opt.out, opt.config, Mode.CAPTURE, opt.backend, run=opt.run, station=opt.station)
+    recorder = open_recorder(opt.out, "recon capture") if opt.record else None
+    spec = SessionSpec(opt.out, opt.config, Mode.CAPTURE, opt.backend, run=opt.run, station=opt.station,
+                       recorder=recorder)
     ended: CaptureStatus | None = None
     error = report = page = session = None
     try:
-        with open_session(spec) as session:
+        with closing(recorder), open_session(spec) as session:
             cell, acq = session.cell, session.acquisition
             for k, view in enumerate(opt.views, start=1):
                 try:

@@ -107,8 +107,12 @@ class ScriptRunner:
         self.out.mkdir(parents=True, exist_ok=True)
         if self.options.append:
             refuse_links(self.out)
-            self._keep_earlier("run_report.json", "script.expanded.xml", "config.yaml")
+            self._keep_earlier("run_report.json", "script.expanded.xml", "config.yaml", "recording.rrd")
         atomic_write_text(self.out / "script.expanded.xml", self.script.expanded_xml)
+        if self.options.record and not self.options.dry_run:
+            from recon_cli.recording import open_recorder
+
+            self.state.recorder = open_recorder(self.out, f"recon run {self.script.name}")
         aborted, interrupted = "", None
         commands = self.script.commands
         n = len(commands)

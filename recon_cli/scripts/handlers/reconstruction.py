@@ -25,6 +25,10 @@ def register_scans(state: RunState, local=True, board=True, loop_closures="icp",
     if surface is not None:
         opts = replace(opts, surface=surface)
     state.registered = run_register(state.store.root, state.out / "reconstruction", opts)
+    if state.recorder is not None:
+        from recon_cli.recording.results import record_registration
+
+        record_registration(state.recorder, state.registered, state.store.root)
     state.reconstruction = {"cloud": state.registered.cloud, "cloud_global": state.registered.cloud_global}
     return state.registered
 
@@ -56,6 +60,10 @@ def reconstruct(state: RunState, cmd: C.Reconstruct, report: CommandReport) -> N
     cloud = write_cloud(folder / "cloud.ply", fused, r.out_T_marker)
     mesh, _ = poisson_mesh(fused, surface)
     mesh_path = write_mesh(folder / "mesh.ply", mesh, r.out_T_marker)
+    if state.recorder is not None:
+        import open3d as o3d
+
+        state.recorder.mesh("reconstruction/mesh", o3d.io.read_triangle_mesh(str(mesh_path)))
     state.reconstruction.update(cloud=cloud, mesh=mesh_path)
     state.outputs.update(cloud=str(cloud), mesh=str(mesh_path))
     report.details.update(points=len(fused.points), triangles=len(mesh.triangles))

@@ -1,0 +1,36 @@
+"""``recon view``: open a run's 3D recording."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from recon_cli.cli.app import app
+
+
+@app.command()
+def view(
+    run: Annotated[Path, typer.Argument(help="Run folder written with --record (or its recording.rrd).")],
+    web: Annotated[bool, typer.Option("--web", help="Serve rerun's web viewer from here instead of opening a "
+                                                    "window (open the printed address in a browser).")] = False,
+    port: Annotated[int | None, typer.Option(min=1, max=65535, help="Port of the web viewer (with --web; "
+                                                                    "default 9090).")] = None,
+    summary: Annotated[bool, typer.Option("--summary", help="Only print what the recording holds.")] = False,
+) -> None:
+    """Open a run's recording in rerun's viewer (or say how to open it where there is no display)."""
+    from recon_cli.console import console
+    from recon_cli.recording.readback import summarize
+    from recon_cli.recording.viewer import elsewhere, find_recording, has_display, open_viewer
+
+    path = find_recording(run)
+    console.print(summarize(path).describe(), markup=False)
+    if summary:
+        return
+    if not web and not has_display():
+        console.print(elsewhere(path), markup=False, soft_wrap=True)
+        return
+    code = open_viewer(path, web, port)
+    if code:
+        raise typer.Exit(code)

@@ -1,0 +1,102 @@
+"""What a registration adds to a recording, and the scans of a store recorded after the fact.
+
+:func:`record_registration` logs, after ``run_register``: the board found in each scan's
+image (detected again on the stored image, the same detector the registration used), the
+cropped clouds before and after local registration, the mesh and, where the scan store
+holds the simulated object, the fused cloud's signed distances to it.
+:func:`record_store` records a scan store that was written without a recording
+(``recon register --record``): the cell of its session, the robot at each scan's joint
+readings, each scan's frustum, images and cloud.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from recon_cli.reconstruction.scan_store import ScanStore
+
+
+def record_registration(recorder, result, store_root: Path) -> None:
+    """Board detections, clouds before/after registration, mesh, signed distances."""
+    import open3d as o3d
+
+    from recon_cli.perception.charuco import detect, thesis_board
+    from recon_cli.reconstruction.global_registration import PoseSource
+    from recon_cli.reconstruction.scan_store import read_scan
+
+    spec = thesis_board()
+    for rec in result.used:
+        if rec.pose is None or not rec.folder:
+            continue
+        if rec.pose.source is PoseSource.CHARUCO:
+            scan = read_scan(Path(store_root) / rec.folder)
+            color, _ = scan.pinhole_images()
+            if color is not None:
+                found = detect(color, spec)
+                px = rec.pose.reprojection_px
+                recorder.board(rec.index, found.corners, found.marker_corners,
+                               f"board: {found.n_corners} corners, {found.marker_count} markers"
+                               + (f", pose reprojects to {px:.2f} px" if px is not None else ""))
+        else:
+            recorder.note(f"scan {rec.index}: pose from {rec.pose.source.value}"
+                          + (f" ({rec.pose.reason})" if rec.pose.reason else ""))
+    recorder.registration(result)
+    if result.mesh is not None:
+        recorder.mesh("reconstruction/mesh", o3d.io.read_triangle_mesh(str(result.mesh)))
+    truth = _truth_mesh(Path(store_root))
+    if truth is not None:
+        from recon_cli.reconstruction.evaluation import signed_distances
+
+        points = np.asarray(o3d.io.read_point_cloud(str(result.cloud)).points)
+        if len(points):
+            recorder.distances(points, signed_distances(points, truth))
+
+
+def _truth_mesh(store_root: Path):
+    """The simulated object of a scan store (ground_truth/<object>.ply), or None."""
+    import open3d as o3d
+
+    try:
+        name = ScanStore(store_root).session().object_name
+    except Exception:  # noqa: BLE001 - a store without a readable session has no truth to show
+        return None
+    path = store_root / "ground_truth" / f"{name}.ply"
+    if not name or not path.is_file():
+        return None
+    return o3d.io.read_triangle_mesh(str(path))
+
+
+def record_store(recorder, store_root: Path) -> int:
+    """The cell of a scan store's session and each readable scan at its joint readings;
+    returns the number of scans recorded (unreadable scans are left out, as registration
+    leaves them out)."""
+    from recon_cli.errors import MetadataError
+    from recon_cli.reconstruction.scan_store import read_scan
+    from recon_cli.robot.cell import Cell
+    from recon_cli.robot.collision import ObjectBox
+    from recon_cli.robot.description import CellConfig, CellKind
+
+    store = ScanStore(store_root)
+    info = store.session()
+    box = None if info.object_box is None else ObjectBox(tuple(info.object_box.center), tuple(info.object_box.size))
+    cell = None
+    if info.cell_kind is not None:  # stores replayed from other cameras have no cell
+        cfg = CellConfig(kind=CellKind.parse(info.cell_kind), table_lift=info.table_lift or 0.0,
+                         **({} if info.safety_distance is None else {"safety_distance": info.safety_distance}))
+        cell = Cell(cfg, object_box=box)
+        recorder.cell(cell, None, box, _truth_mesh(store_root))
+    count = 0
+    for _, folder in store.scan_folders():
+        try:
+            scan = read_scan(folder)
+        except MetadataError as exc:
+            recorder.note(f"{folder.name} left out: {exc.one_line()}", level="WARN")
+            continue
+        if cell is not None and all(name in scan.joints for name in cell.joint_names):
+            recorder.configuration(np.array([scan.joints[name] for name in cell.joint_names]))
+        recorder.scan(scan)
+        recorder.clock += 1.0  # one second between scans on the timeline: their joint readings
+        count += 1
+    return count

@@ -1,0 +1,34 @@
+"""``recon register``: the registration pipeline on a scan store, recorded when asked.
+
+The pipeline itself is :func:`recon_cli.reconstruction.pipeline.run_register`; with
+``record`` the scans of the store (cell, joint readings, frustums, images, clouds) and
+what registration made of them go into ``<out>/recording.rrd``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from recon_cli.reconstruction.options import RegisterOptions
+from recon_cli.reconstruction.pipeline import RegisterResult, run_register
+
+
+def register_folder(folder: Path, out: Path, options: RegisterOptions, record: bool = False,
+                    progress: Callable[[str, int, int], None] | None = None) -> RegisterResult:
+    """Register the scan store ``folder`` into ``out`` (and record it into
+    ``out/recording.rrd`` with ``record``)."""
+    if not record:
+        return run_register(folder, out, options, progress)
+    from recon_cli.recording import closing, open_recorder
+    from recon_cli.recording.results import record_registration, record_store
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        return run_register(folder, out, options, progress)  # the pipeline's one-line error
+    recorder = open_recorder(out, f"recon register {folder.name}")
+    with closing(recorder):
+        record_store(recorder, folder)
+        result = run_register(folder, out, options, progress)
+        record_registration(recorder, result, folder)
+    return result

@@ -239,6 +239,9 @@ def _check_four(out: Path) -> dict[str, ET.Element]:
     summary = json.loads((out / "summary.json").read_text())
     assert summary["counts"] == {"passed": 2, "failed": 1, "timeout": 1, "error": 0, "not_run": 0}
     assert summary["exit_code"] == 3
+    index = (out / "index.html").read_text()  # links the pages of the jobs that wrote one
+    assert 'href="jobs/smoke/output/report.html"' in index and 'href="jobs/capture/output/report.html"' in index
+    assert (out / "jobs" / "smoke" / "output" / "report.html").is_file()
     return failures
 
 

@@ -56,6 +56,9 @@ def test_scan_record(drill_capture):
     assert dp < 1e-4 and np.degrees(dr) < 1e-2
     assert (drill_capture.folder / "ground_truth").is_dir()
     assert json.loads((drill_capture.folder / "session.json").read_text())["backend"] == "sim"
+    report = json.loads(drill_capture.report.read_text())
+    assert (report["status"], report["views"], report["scans"], report["failures"]) == ("done", 1, 1, [])
+    assert drill_capture.page == drill_capture.folder / "report.html" and drill_capture.page.is_file()
 
 
 def test_capture_cli_errors(capsys, tmp_path):

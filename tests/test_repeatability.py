@@ -29,7 +29,7 @@ from recon_cli.planning.planner import MotionPlanner, PlanOptions, ompl_seed  # 
 CLOCK_KEYS = frozenset({
     "seconds", "seconds_scanning", "seconds_total", "seconds_register", "created",
     "capture_start", "capture_end", "capture_seconds", "global_s", "local_s", "surface_s", "total_s",
-    "plan_time_s", "plan_time", "search_time", "simplify_time", "post_time",
+    "plan_time_s", "plan_time", "planning_s", "search_time", "simplify_time", "post_time",
     "time_min", "time_median", "time_p90", "time_max", "time_median_all", "post_time_median",
 })
 #: keys of numbers that come from the Poisson mesh (see the module docstring)

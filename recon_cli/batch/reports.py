@@ -1,5 +1,6 @@
-"""The reports of a batch: JUnit XML (one testcase per job), a JSON summary and a Markdown
-summary (for a CI job summary, e.g. ``$GITHUB_STEP_SUMMARY``).
+"""The reports of a batch: JUnit XML (one testcase per job), a JSON summary, a Markdown
+summary (for a CI job summary, e.g. ``$GITHUB_STEP_SUMMARY``) and an HTML index page that
+links every job's report page (:mod:`recon_cli.report.batch_index`).
 
 JUnit: a job that failed (exit code, expectation) or timed out is a ``<failure>`` whose
 ``message`` names the measured value and the bound; an infrastructure failure on every
@@ -115,10 +116,11 @@ def markdown(batch) -> str:
 
 
 def write_reports(batch, extra: dict[str, Path | None]) -> dict[str, Path]:
-    """junit.xml, summary.json and summary.md in the batch folder, and copies where
-    ``extra`` says (keys "junit", "json", "markdown")."""
+    """junit.xml, summary.json, summary.md and index.html in the batch folder, and copies
+    where ``extra`` says (keys "junit", "json", "markdown")."""
     from recon_cli.console import write_json
     from recon_cli.outputs import atomic_write_text
+    from recon_cli.report.batch_index import write_index
 
     tree = junit_xml(batch)
     xml = ET.tostring(tree.getroot(), encoding="unicode", xml_declaration=True) + "\n"
@@ -134,4 +136,5 @@ def write_reports(batch, extra: dict[str, Path | None]) -> dict[str, Path]:
             else:
                 atomic_write_text(target, texts[key])
         written[key] = targets[-1]
+    written["index"] = write_index(batch)
     return written

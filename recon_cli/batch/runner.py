@@ -9,6 +9,7 @@ The batch folder::
         junit.xml         one testcase per job
         summary.json      every job's result
         summary.md        a table for a CI job summary
+        index.html        a page linking every job's report page, with its verdict and checks
 
 A job is done when its ``result.json`` is written (atomically, by this process, after the
 job's process ended). ``resume`` keeps every done job whose command, environment and bounds

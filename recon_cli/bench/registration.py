@@ -73,7 +73,8 @@ def run_registration_bench(out: Path, object_name: str = "auto", seed: int = 0, 
                               sensor=SensorConfig(DEFAULTS.sensor.noise, resolution), realism=realism)
     cases = [c for c in CASES if realism.is_ideal or not c[1]] + [(KINEMATICS_CASE, False, "none")]
     capture = run_capture(CaptureOptions(views=tuple(eq_4_1_views()), out=scans, config=config,
-                                         cover_board=COVERED_VIEWS, run={"command": "bench registration"}),
+                                         cover_board=COVERED_VIEWS, run={"command": "bench registration"},
+                                         page=False),
                           progress)
     reference = scans / "ground_truth" / f"{capture.scene_object.name}.ply"
     rows, results = [], {}

@@ -61,7 +61,8 @@ def run_viewplan_bench(out: Path, objects=BUILT_IN, methods=METHODS, n: int = 16
                                   sensor=SensorConfig(DEFAULTS.sensor.noise, resolution),
                                   viewplan=replace(DEFAULTS.viewplan, n=n, d_c=d_c), realism=realism)
         opts = AutoscanOptions(folder, config, face_on_view(name, d_c) if initial == "face-on" else None,
-                               Method(method), pictures=method == "ellipsoid", run={"command": "bench viewplan"})
+                               Method(method), pictures=method == "ellipsoid", run={"command": "bench viewplan"},
+                               page=False)
         try:
             r = Autoscan(opts).run()
         except ReconError as exc:  # reported as a failed run, the others go on

@@ -10,6 +10,7 @@
     station.py   recon station check
     replay.py    recon replay
     batch.py     recon batch
+    report.py    recon report
     calibrate.py recon calibrate handeye, recon calibrate intrinsics
     view.py      recon view
 
@@ -32,6 +33,7 @@ from recon_cli.cli import (  # noqa: F401 (registers the commands)
     calibrate,
     cell,
     replay,
+    report,
     scans,
     scripts,
     station,

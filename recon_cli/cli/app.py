@@ -7,7 +7,7 @@ from typer.core import TyperGroup
 
 #: the order of the commands in ``recon --help``: from looking at the cell to benchmarks
 ORDER = ("cell", "ik", "objects", "capture", "register", "evaluate", "validate", "run", "autoscan", "view", "batch",
-         "station", "replay", "calibrate", "bench")
+         "report", "station", "replay", "calibrate", "bench")
 
 
 class _Ordered(TyperGroup):

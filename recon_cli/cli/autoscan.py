@@ -76,6 +76,8 @@ def autoscan(
     if result.interrupted:
         console.print(f"interrupted after {result.scans} scans; they are in {folder} "
                       f"(recon register {folder} works on them)")
+        if result.page is not None:
+            console.print(f"page: {result.page}")
         raise typer.Exit(130)
     console.print(f"{result.scans} scans of the {object_name} ({result.infeasible} infeasible views sampled, "
                   f"{result.requests} planning requests, {result.trajectory_s:.1f} s of trajectories) "
@@ -88,3 +90,5 @@ def autoscan(
         console.print(f"pictures: {result.pictures[0].parent}")
     if record:
         console.print(f"recording: {folder / 'recording.rrd'} (recon view {folder})")
+    if result.page is not None:
+        console.print(f"page: {result.page}")

@@ -21,7 +21,7 @@ def batch(
                                 "run in this order.",
         show_default=False)],
     out: Annotated[Path | None, typer.Option(help="Batch folder (default runs/batch-<time>): a folder per job, "
-                                                  "junit.xml, summary.json, summary.md.")] = None,
+                                                  "junit.xml, summary.json, summary.md, index.html.")] = None,
     workers: Annotated[int, typer.Option(min=1, max=1024, help="Jobs at once on this machine (or worker "
                                                                "processes of --cluster local).")] = 1,
     scheduler: Annotated[str | None, typer.Option(envvar="DASK_SCHEDULER_ADDRESS", help="Run the jobs on the Dask "
@@ -86,7 +86,7 @@ def batch(
     console.print(f"{len(result.jobs)} jobs: {c['passed']} passed, {c['failed']} failed, {c['timeout']} timed out, "
                   f"{c['error']} errors" + (f", {len(result.pending)} not run" if result.pending else "")
                   + f" in {result.wall_s:.1f} s ({result.executor})")
-    for key in ("junit", "json", "markdown"):
+    for key in ("junit", "json", "markdown", "index"):
         console.print(f"{key}: {result.reports[key]}")
     if result.interrupted:
         console.print(f"interrupted by {result.interrupted}; recon batch ... --out {result.folder} --resume goes on")

@@ -113,6 +113,8 @@ def capture(
                   f"scan store: {folder}")
     if record:
         console.print(f"recording: {folder / 'recording.rrd'} (recon view {folder})")
+    if result.page is not None:
+        console.print(f"page: {result.page}")
     if not result.scans:
         raise typer.Exit(1)
 
@@ -149,6 +151,7 @@ def register(
 
     from recon_cli.console import console, progress_bar, styled
     from recon_cli.reconstruction.crop import CropBox
+    from recon_cli.report import write_pages_after_register
     from recon_cli.workflows.register import register_folder
 
     check_record(record)
@@ -167,6 +170,7 @@ def register(
                       surface=replace(_R.surface, voxel=voxel, poisson_depth=depth, density_quantile=trim))
     with progress_bar() as update:
         result = register_folder(folder, out or Path(folder) / "reconstruction", options, record, update)
+    page = write_pages_after_register(result.folder)
     sources = {k: v for k, v in result.pose_sources.items() if v}
     skipped = len(result.scans) - len(result.used)
     console.print(f"{len(result.used)} of {len(result.scans)} scans registered"
@@ -190,6 +194,8 @@ def register(
     console.print(f"cloud: {result.cloud}\nmesh: {result.mesh}\nreport: {result.report}")
     if record:
         console.print(f"recording: {result.folder / 'recording.rrd'} (recon view {result.folder})")
+    if page is not None:
+        console.print(f"page: {page.path}")
 
 
 ALIGNMENTS = ("none", "icp")

@@ -104,5 +104,7 @@ def run_script(
     console.print(f"report: {folder / 'run_report.json'}")
     if record and not dry_run:
         console.print(f"recording: {folder / 'recording.rrd'} (recon view {folder})")
+    if result.page is not None:
+        console.print(f"page: {result.page}")
     if result.exit_code and not allow_failures:
         raise typer.Exit(result.exit_code)

@@ -55,6 +55,12 @@ class Evaluation:
         }
 
 
+def within_shares(distances: np.ndarray) -> dict[str, float]:
+    """Share of the (signed) distances [m] within ±0.25, 0.5, 1 and 2 mm ("±0.5 mm": share)."""
+    d = np.abs(np.asarray(distances, dtype=float))
+    return {f"±{t:g} mm": float(np.mean(d <= t * 1e-3)) for t in (0.25, 0.5, 1.0, 2.0)}
+
+
 def signed_distances(points: np.ndarray, reference) -> np.ndarray:
     """Signed distances [m] of points (N, 3) to an Open3D TriangleMesh."""
     import open3d as o3d
@@ -122,7 +128,7 @@ def evaluate(points: np.ndarray, reference, tolerance: float = 0.001, samples: i
 
     points = np.asarray(points, dtype=float)
     d = signed_distances(points, reference)
-    within = {f"±{t:g} mm": float(np.mean(np.abs(d) <= t * 1e-3)) for t in (0.25, 0.5, 1.0, 2.0)}
+    within = within_shares(d)
     surf, normals = sample_surface(reference, samples, seed)
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     ref = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(surf))

@@ -9,6 +9,7 @@ goes into ``RunState.out``::
     <out>/script.expanded.xml    the script after xacro
     <out>/config.yaml            the effective configuration
     <out>/run_report.json        every command: where it was written, status, time, message
+    <out>/report.html            the run's page (recon_cli.report), pictures in report_files/
 """
 
 from __future__ import annotations
@@ -70,6 +71,7 @@ class RunOptions:
     station: Path | None = None  # a station file: robot and camera adapters (and the cell)
     realism: RealismProfile | None = None  # overrides the script's <cell realism=...>
     record: bool = False  # write a 3D recording of the run (recording.rrd in ``out``)
+    page: bool = True  # write the run's report page (report.html) at its end
 
 
 @dataclass

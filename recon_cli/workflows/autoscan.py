@@ -5,9 +5,12 @@ the partial object (registered by the board, cropped to the known bounding volum
 re-project the completed and infeasible views onto it (nearest points, Eberly), sample
 views by the potential field until enough feasible ones are planned, go to the one whose
 planned trajectory is shortest (view selection, Table 2.4), scan. Finally the full
-registration and Poisson surface of ``recon register``. The same loop runs two baselines
-for ``recon bench viewplan``: views evenly spread on a sphere, and random feasible views.
-Every scan is written atomically on the way: an interrupted run keeps them all.
+registration and Poisson surface of ``recon register``, and in simulation the coverage and
+signed distances of the fused cloud against the true surface (with their histogram). The
+same loop runs two baselines for ``recon bench viewplan``: views evenly spread on a sphere,
+and random feasible views.
+Every scan is written atomically on the way: an interrupted run keeps them all, and its
+report (``autoscan_report.json``) and page (``report.html``) are written with what exists.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ class AutoscanOptions:
     run: dict = field(default_factory=dict)  # recorded in config.yaml
     station: Path | None = None  # a station file (robot and camera adapters)
     record: bool = False  # write a 3D recording of the run (recording.rrd in ``out``)
+    page: bool = True  # write the report page (report.html) at the end
 
 
 @dataclass
@@ -47,6 +51,8 @@ class ViewRecord:
     world_T_camera: np.ndarray
     status: Status
     iteration: int
+    planning_s: float | None = None  # completed views: planning of the move to it (view selection) [s]
+    trajectory_s: float | None = None  # completed views: duration of that move [s]
 
 
 @dataclass(frozen=True)
@@ -56,9 +62,10 @@ class Accuracy:
     mean_mm: float
     std_mm: float
     points: int
+    within: dict[str, float] = field(default_factory=dict)  # "±0.5 mm" -> share of the points
 
     def to_dict(self) -> dict:
-        return {"mean_mm": self.mean_mm, "std_mm": self.std_mm, "points": self.points}
+        return {"mean_mm": self.mean_mm, "std_mm": self.std_mm, "points": self.points, "within": self.within}
 
 
 @dataclass
@@ -77,6 +84,7 @@ class AutoscanResult:
     report: Path
     pictures: list[Path]
     interrupted: bool = False
+    page: Path | None = None  # report.html (None: not written)
 
 
 class Autoscan:
@@ -212,6 +220,7 @@ class Autoscan:
         views: list[ViewRecord] = []
         pictures: list[Path] = []
         interrupted = False
+        error: ReconError | None = None
         queue: list = []
         try:
             T0 = self.cell.view_pose(opt.initial) if opt.initial is not None else self._default_initial()
@@ -219,7 +228,7 @@ class Autoscan:
             self.requests += move.plan.attempts
             self.trajectory_s += move.execution.duration
             self._scan(T0)
-            views.append(ViewRecord(T0, Status.COMPLETED, 0))
+            views.append(ViewRecord(T0, Status.COMPLETED, 0, move.plan.total_time, move.execution.duration))
             self.progress("scans", 1, vp.n)
             it, stuck = 0, 0
             while len(self.store) < vp.n and stuck < 3:
@@ -234,7 +243,9 @@ class Autoscan:
                     planned = queue
                 if not planned:
                     break
+                t_select = time.perf_counter()
                 sel = select_view(q, [c for _, c in planned], self.lower, self._plan_edge)
+                planning = time.perf_counter() - t_select
                 if sel.index is None:  # nothing reachable: those views are infeasible
                     views.extend(ViewRecord(T, Status.INFEASIBLE, it) for T, _ in planned)
                     stuck += 1
@@ -253,68 +264,88 @@ class Autoscan:
                 self.station.robot.execute(sel.trajectory)
                 self.trajectory_s += sel.trajectory.duration
                 self._scan(T)
-                views.append(ViewRecord(T, Status.COMPLETED, it))
+                views.append(ViewRecord(T, Status.COMPLETED, it, planning, sel.trajectory.duration))
                 self.progress("scans", len(self.store), vp.n)
         except KeyboardInterrupt:
             interrupted = True
+        except ReconError as exc:  # a fault, no reachable view: reported below, then raised
+            error = exc
         except BaseException:
             self._close_recorder()
             raise
         finally:
             self.session.close()  # stops the robot first
         try:
-            return self._finish(views, pictures, t0, interrupted)
+            result, error = self._finish(views, pictures, t0, interrupted, error)
         finally:
             self._close_recorder()
+        if opt.page:  # with the recording complete
+            from recon_cli.report import write_page_after_run
+
+            written = write_page_after_run(opt.out)
+            result.page = None if written is None else written.path
+        if error is not None:
+            raise error
+        return result
 
     def _close_recorder(self) -> None:
         if self.recorder is not None:
             self.recorder.close()
 
     # ------------------------------------------------------------------ results
-    def _finish(self, views, pictures, t0: float, interrupted) -> AutoscanResult:
+    def _finish(self, views, pictures, t0: float, interrupted: bool, error: ReconError | None
+                ) -> tuple[AutoscanResult, ReconError | None]:
+        """Register and evaluate what was scanned (unless the run ended early) and write the
+        report; the result and the error that ended the run (None when it did not)."""
         from recon_cli.console import write_json
 
         opt, cfg, vp = self.opt, self.opt.config, self.vp
         scanning = time.perf_counter() - t0
         cloud = mesh = None
         coverage = accuracy = None
-        if not interrupted and len(self.store) > 0:
+        if not interrupted and error is None and len(self.store) > 0:
             from dataclasses import replace
 
-            from recon_cli.reconstruction.evaluation import signed_distances
+            from recon_cli.reconstruction.evaluation import histogram_png, signed_distances, within_shares
             from recon_cli.reconstruction.pipeline import run_register
 
-            reg = run_register(opt.out, opt.out / "reconstruction",
-                               replace(cfg.registration, mesh=opt.mesh, seed=cfg.seed))
-            cloud, mesh = reg.cloud, reg.mesh
-            if self.recorder is not None:
-                from recon_cli.recording.results import record_registration
+            try:
+                reg = run_register(opt.out, opt.out / "reconstruction",
+                                   replace(cfg.registration, mesh=opt.mesh, seed=cfg.seed))
+            except ReconError as exc:
+                error = exc
+            else:
+                cloud, mesh = reg.cloud, reg.mesh
+                if self.recorder is not None:
+                    from recon_cli.recording.results import record_registration
 
-                record_registration(self.recorder, reg, opt.out)
-            import open3d as o3d
+                    record_registration(self.recorder, reg, opt.out)
+                import open3d as o3d
 
-            pts = np.asarray(o3d.io.read_point_cloud(str(cloud)).points)
-            coverage = surface_coverage(self.obj, pts, 0.001, np.random.default_rng(cfg.seed))
-            d = signed_distances(pts, self.obj.mesh_world())
-            accuracy = Accuracy(float(d.mean() * 1e3), float(d.std() * 1e3), len(pts))
+                pts = np.asarray(o3d.io.read_point_cloud(str(cloud)).points)
+                coverage = surface_coverage(self.obj, pts, 0.001, np.random.default_rng(cfg.seed))
+                d = signed_distances(pts, self.obj.mesh_world())
+                accuracy = Accuracy(float(d.mean() * 1e3), float(d.std() * 1e3), len(pts), within_shares(d))
+                histogram_png(cloud.parent / f"{cloud.stem}_distances.png", {cloud.stem: d},
+                              f"{cloud.name} vs the true {self.obj.name}")
         seconds_total = time.perf_counter() - t0
         infeasible = sum(v.status is Status.INFEASIBLE for v in views)
         report = opt.out / "autoscan_report.json"
         write_json(report, {
             "method": self.method.value, "object": self.obj.name, "cell": cfg.cell.kind.value, "n": vp.n,
             "d_c": vp.d_c, "m": vp.m, "sigma": vp.sigma, "seed": cfg.seed, "scans": len(self.store),
-            "interrupted": interrupted, "infeasible_views": infeasible,
+            "interrupted": interrupted, "error": None if error is None else error.one_line(),
+            "infeasible_views": infeasible,
             "planning_requests": self.requests, "trajectory_s": self.trajectory_s,
             "coverage_1mm": coverage, "accuracy": accuracy, "seconds_scanning": scanning,
             "seconds_total": seconds_total,
-            "views": [{"status": v.status.value, "iteration": v.iteration, "world_T_camera": v.world_T_camera}
-                      for v in views],
+            "views": [{"status": v.status.value, "iteration": v.iteration, "world_T_camera": v.world_T_camera,
+                       "planning_s": v.planning_s, "trajectory_s": v.trajectory_s} for v in views],
             "outputs": {"cloud": None if cloud is None else str(cloud), "mesh": None if mesh is None else str(mesh),
                         "pictures": [str(p) for p in pictures]},
         })
         return AutoscanResult(opt.out, len(self.store), views, infeasible, self.requests, self.trajectory_s,
-                              seconds_total, coverage, accuracy, cloud, mesh, report, pictures, interrupted)
+                              seconds_total, coverage, accuracy, cloud, mesh, report, pictures, interrupted), error
 
     def _picture(self, it: int, ell, views: list[ViewRecord], planned: list[np.ndarray], active: np.ndarray) -> Path:
         from recon_cli.viewplan.picture import iteration_png

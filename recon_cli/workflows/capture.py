@@ -3,6 +3,10 @@
 Views that cannot be reached (IK or planning fails) are reported and skipped; scans already
 written stay. ``cover_board`` lists views (1-based) at which a plain sheet lies over the
 ChArUco board (simulation), so registration must fall back to kinematics there.
+
+Beside the scan store: ``capture_report.json`` (views, scans, the skipped views and why,
+how the capture ended) and the report page ``report.html``, written also when a capture
+ends early (Ctrl-C, a fault).
 """
 
 from __future__ import annotations
@@ -10,6 +14,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +39,14 @@ class CaptureOptions:
     run: dict = field(default_factory=dict)  # recorded in config.yaml
     station: Path | None = None  # a station file (robot and camera adapters)
     record: bool = False  # write a 3D recording of the run (recording.rrd in ``out``)
+    page: bool = True  # write the report page (report.html) at the end
+
+
+class CaptureStatus(StrEnum):
+    DONE = "done"  # every view scanned
+    INCOMPLETE = "incomplete"  # some views skipped (unreachable, no path)
+    FAILED = "failed"  # no scan, or an error ended the capture
+    INTERRUPTED = "interrupted"  # Ctrl-C or SIGTERM
 
 
 @dataclass(frozen=True)
@@ -51,6 +64,8 @@ class CaptureResult:
     capture_seconds: list[float]
     total_seconds: float
     scene_object: SceneObject
+    report: Path | None = None  # capture_report.json
+    page: Path | None = None  # report.html (None: not written)
 
     @property
     def points(self) -> list[int]:
@@ -66,22 +81,56 @@ def run_capture(opt: CaptureOptions, progress: Callable[[str, int, int], None] |
     recorder = open_recorder(opt.out, "recon capture") if opt.record else None
     spec = SessionSpec(opt.out, opt.config, Mode.CAPTURE, opt.backend, run=opt.run, station=opt.station,
                        recorder=recorder)
-    with closing(recorder), open_session(spec) as session:
-        cell, acq = session.cell, session.acquisition
-        for k, view in enumerate(opt.views, start=1):
-            try:
-                T = cell.view_pose(view)
-                move = acq.move_to_pose(T, what=f"view {k}")
-            except ReconError as exc:  # unreachable or unplannable view: report, go on
-                failures.append(ViewFailure(k, str(exc)))
+    ended: CaptureStatus | None = None
+    error = report = page = session = None
+    try:
+        with closing(recorder), open_session(spec) as session:
+            cell, acq = session.cell, session.acquisition
+            for k, view in enumerate(opt.views, start=1):
+                try:
+                    T = cell.view_pose(view)
+                    move = acq.move_to_pose(T, what=f"view {k}")
+                except ReconError as exc:  # unreachable or unplannable view: report, go on
+                    failures.append(ViewFailure(k, str(exc)))
+                    step(k)
+                    continue
+                if hasattr(session.station, "cover_board"):
+                    session.station.cover_board(k in opt.cover_board)
+                t_cap = time.perf_counter()
+                scans.append(acq.scan(view_record(view, T), move))
+                capture_seconds.append(time.perf_counter() - t_cap)
+                moves.append(move)
                 step(k)
-                continue
-            if hasattr(session.station, "cover_board"):
-                session.station.cover_board(k in opt.cover_board)
-            t_cap = time.perf_counter()
-            scans.append(acq.scan(view_record(view, T), move))
-            capture_seconds.append(time.perf_counter() - t_cap)
-            moves.append(move)
-            step(k)
-    return CaptureResult(opt.out, scans, moves, failures, capture_seconds, time.perf_counter() - t0,
-                         session.scene_object)
+    except KeyboardInterrupt:
+        ended = CaptureStatus.INTERRUPTED
+        raise
+    except ReconError as exc:
+        ended, error = CaptureStatus.FAILED, exc.one_line()
+        raise
+    finally:
+        seconds = time.perf_counter() - t0
+        if session is not None:  # the session was opened: report what it did
+            if ended is None:
+                ended = CaptureStatus.DONE if len(scans) == n else \
+                    CaptureStatus.INCOMPLETE if scans else CaptureStatus.FAILED
+            report, page = _write_report(opt, ended, len(scans), failures, seconds, error)
+    return CaptureResult(opt.out, scans, moves, failures, capture_seconds, seconds, session.scene_object, report,
+                         page)
+
+
+def _write_report(opt: CaptureOptions, status: CaptureStatus, scans: int, failures: list[ViewFailure],
+                  seconds: float, error: str | None) -> tuple[Path, Path | None]:
+    """capture_report.json and (when asked) the report page."""
+    from recon_cli.console import write_json
+
+    report = opt.out / "capture_report.json"
+    write_json(report, {"command": "capture", "status": status.value, "views": len(opt.views), "scans": scans,
+                        "seconds": seconds, "error": error,
+                        "failures": [{"view": f.view, "message": f.message} for f in failures]})
+    page = None
+    if opt.page:
+        from recon_cli.report import write_page_after_run
+
+        written = write_page_after_run(opt.out)
+        page = None if written is None else written.path
+    return report, page

@@ -54,6 +54,7 @@ class RunResult:
     outputs: dict[str, str]
     aborted: str = ""
     sequences: list[SequenceReport] = field(default_factory=list)
+    page: Path | None = None  # report.html (None: not written)
 
     @property
     def failed(self) -> list[CommandReport]:
@@ -90,6 +91,7 @@ class ScriptRunner:
         self.on_failure = OnFailure(script.on_failure)
         self.reports: list[CommandReport] = []
         self.current: C.Command | None = None  # the command in progress (for interruptions)
+        self.page: Path | None = None  # the run's report page, once written
         optimize = script.optimize if options.optimize is None else options.optimize
         self.groups = movable_groups(script.commands) if optimize else {}
 
@@ -134,13 +136,14 @@ class ScriptRunner:
         finally:
             self.state.close()  # stops the robot first
             self._write_report(time.perf_counter() - t0, aborted, interrupted)
+            self._write_page()
         if interrupted is not None:
             scans = self.out / "scans"
             raise RunInterrupted(f"{interrupted.reason}; {interrupted.scans_kept} completed scan(s) kept in {scans}",
                                  signal=interrupted.signal, scans_kept=interrupted.scans_kept,
                                  hint=f"run_report.json records it; recon register {scans} works on the kept scans")
         return RunResult(self.out, self.script, self.reports, self.state.scan_count(), time.perf_counter() - t0,
-                         dict(self.state.outputs), aborted, list(self.state.sequences))
+                         dict(self.state.outputs), aborted, list(self.state.sequences), self.page)
 
     def _keep_earlier(self, *names: str) -> None:
         """--append: an earlier run's report, script and configuration stay, as NAME-1, NAME-2, ..."""
@@ -215,6 +218,14 @@ class ScriptRunner:
                                 hint="the script says on_failure=\"abort\"; earlier scans are kept")
 
     # ------------------------------------------------------------------ report
+    def _write_page(self) -> None:
+        """The run's page, however the run ended (with what it wrote)."""
+        if self.options.page:
+            from recon_cli.report import write_page_after_run
+
+            page = write_page_after_run(self.out)
+            self.page = None if page is None else page.path
+
     def _write_report(self, seconds: float, aborted: str, interrupted: Interruption | None) -> None:
         from recon_cli.console import write_json
 

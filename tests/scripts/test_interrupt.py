@@ -68,6 +68,7 @@ def test_stop_signal_keeps_scans_and_says_why(tmp_path, sig, code):
     assert report["interrupted"]["signal"] == sig.name and report["interrupted"]["scans_kept"] == n
     assert report["interrupted"]["command"].startswith("ring.xml:")
     assert any(c["status"] == "interrupted" for c in report["commands"])
+    assert "status interrupted" in (out / "report.html").read_text()
     _registers(out, tmp_path, n)
 
 

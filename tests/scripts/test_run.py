@@ -45,6 +45,7 @@ def test_dry_run_plans_but_does_not_move(tmp_path):
     statuses = [c["status"] for c in report["commands"] if c["command"].startswith(("move", "scan", "register"))]
     assert statuses == ["planned", "skipped", "planned", "skipped", "skipped"]
     assert not (out / "scans").exists()
+    assert "status done" in (out / "report.html").read_text()  # the page of the planned moves
 
 
 def test_failed_move_skips_its_scan(tmp_path, capsys):
@@ -69,6 +70,7 @@ def test_abort_keeps_earlier_scans(tmp_path, capsys):
     assert len(ScanStore(out / "scans")) == 1  # the scan before the failure is kept
     report = json.loads((out / "run_report.json").read_text())
     assert report["aborted"] and report["commands"][-1]["status"] == "failed"
+    assert "status aborted" in (out / "report.html").read_text()  # the page of what was done
 
 
 def test_hardware_backend_is_a_clear_error(tmp_path, capsys):

@@ -32,6 +32,7 @@ def test_autoscan_small(tmp_path, kind):
     assert len(r.pictures) == 4 and all(p.exists() for p in r.pictures)
     report = json.loads(r.report.read_text())
     assert report["scans"] == 5 and report["planning_requests"] >= 4
+    assert r.page == out / "report.html" and "iteration_04.png" in r.page.read_text()
 
 
 def test_autoscan_cli_errors(tmp_path, capsys):
@@ -59,5 +60,7 @@ def test_interrupted_autoscan_keeps_its_scans(tmp_path):
     scans = len(ScanStore(out))
     assert 3 <= scans < 30
     assert "interrupted" in stdout + stderr
+    assert json.loads((out / "autoscan_report.json").read_text())["interrupted"]
+    assert "status interrupted" in (out / "report.html").read_text()
     result = run_register(out, tmp_path / "rec", RegisterOptions(mesh=False))
     assert len(result.used) == scans

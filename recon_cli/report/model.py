@@ -1,0 +1,270 @@
+"""What a run folder holds, as small typed values: read by :mod:`recon_cli.report.read`,
+shown by :mod:`recon_cli.report.sections`.
+
+Lengths here are in millimetres and times in seconds (the reports' own units), shares in
+[0, 1]. ``None`` means the folder does not say (not measured, not recorded).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+from pathlib import Path
+
+
+class RunKind(StrEnum):
+    """What made a run folder."""
+
+    RUN = "run"  # recon run: run_report.json, scans/, reconstruction/
+    AUTOSCAN = "autoscan"  # recon autoscan: autoscan_report.json, iterations/*.png, reconstruction/
+    SCANS = "scans"  # a scan store (recon capture, or any store): session.json, scan_NNNN/
+    REGISTER = "register"  # recon register's output folder: report.json
+
+    @property
+    def title(self) -> str:
+        return {RunKind.RUN: "recon run", RunKind.AUTOSCAN: "recon autoscan",
+                RunKind.SCANS: "scan store (recon capture)", RunKind.REGISTER: "recon register"}[self]
+
+
+@dataclass(frozen=True)
+class Session:
+    """``session.json``: what produced the scans."""
+
+    mode: str | None = None
+    backend: str | None = None
+    object_name: str | None = None
+    cell: str | None = None
+    sensor: str | None = None
+    noise: bool | None = None
+    seed: int | None = None
+    realism: str | None = None  # the realism profile's name (simulation)
+    created: float | None = None  # [s since the epoch]
+
+
+@dataclass(frozen=True)
+class Move:
+    """One planned (and usually executed) move."""
+
+    label: str  # the command or the scan it led to
+    planner: str | None
+    plan_s: float | None  # planning time (with simplification)
+    trajectory_s: float | None  # duration of the timed trajectory
+
+
+@dataclass(frozen=True)
+class Command:
+    """One command of a script run (run_report.json)."""
+
+    source: str  # file:line
+    command: str
+    status: str
+    seconds: float
+    message: str
+
+
+@dataclass(frozen=True)
+class ScriptRun:
+    """``run_report.json``."""
+
+    script: str
+    name: str
+    dialect: str
+    status: str  # done | failed | aborted | interrupted
+    exit_code: int | None
+    seconds: float | None
+    scans: int | None
+    backend: str | None
+    seed: int | None
+    dry_run: bool
+    on_failure: str | None
+    stopped: str | None  # why the run ended early (aborted or interrupted), else None
+    commands: tuple[Command, ...]
+
+
+@dataclass(frozen=True)
+class ViewOutcome:
+    """One view of an autoscan: planned and scanned, or found infeasible."""
+
+    iteration: int
+    status: str  # completed | infeasible
+    planning_s: float | None = None  # completed: planning of the move to it (view selection)
+    trajectory_s: float | None = None  # completed: duration of that move
+
+
+@dataclass(frozen=True)
+class Autoscan:
+    """``autoscan_report.json``."""
+
+    method: str
+    object_name: str | None
+    cell: str | None
+    n: int | None
+    d_c_m: float | None  # [m]
+    seed: int | None
+    scans: int
+    interrupted: bool
+    error: str | None  # the error that ended the run early
+    infeasible_views: int | None
+    planning_requests: int | None
+    trajectory_s: float | None
+    coverage_1mm: float | None  # share of the true surface
+    accuracy_mean_mm: float | None
+    accuracy_std_mm: float | None
+    seconds_total: float | None
+    views: tuple[ViewOutcome, ...]
+
+
+@dataclass(frozen=True)
+class ViewFailure:
+    view: int  # 1-based
+    message: str
+
+
+@dataclass(frozen=True)
+class Capture:
+    """``capture_report.json``."""
+
+    status: str  # done | failed | interrupted
+    views: int
+    scans: int
+    seconds: float | None
+    failures: tuple[ViewFailure, ...]
+    error: str | None  # the error that ended the capture early
+
+
+@dataclass(frozen=True)
+class Scan:
+    """One scan folder of the store."""
+
+    folder: str  # scan_NNNN
+    index: int
+    name: str | None  # the script's name for it
+    color: Path | None  # color.png (None: no colour image)
+    depth: Path | None  # depth.png
+    width: int | None  # [px]
+    height: int | None
+    move: Move | None  # the move that led to it (when the scan records it)
+    problem: str | None = None  # why its scan.json cannot be read
+
+
+@dataclass(frozen=True)
+class PoseError:
+    translation_mm: float
+    rotation_deg: float
+
+
+@dataclass(frozen=True)
+class ScanPose:
+    """The registration of one scan (report.json)."""
+
+    folder: str
+    source: str | None  # charuco | kinematics (None: no pose)
+    corners: int | None  # ChArUco corners found
+    reprojection_px: float | None
+    reason: str  # why the board was not used
+    points: int  # after cropping
+    skipped: str | None  # why the scan is not in the result
+    charuco_error: PoseError | None  # the board's pose against the truth (simulation)
+    final_error: PoseError | None  # the registered pose against the truth (simulation)
+
+
+@dataclass(frozen=True)
+class Edge:
+    """One pairwise ICP result of the pose graph."""
+
+    source: str  # scan folder
+    target: str
+    kind: str  # odometry | loop_closure
+    correspondences: int | None
+    fitness: float | None  # share of source points with a correspondence
+    rmse_mm: float | None  # inlier RMSE
+    rejected: bool
+
+
+@dataclass(frozen=True)
+class Registration:
+    """``report.json`` of ``recon register`` (also inside run and autoscan folders)."""
+
+    report: Path
+    scan_store: Path | None  # where the scans are (None: not found)
+    frame: str
+    registered: int
+    skipped: int
+    pose_sources: dict[str, int]
+    poses: tuple[ScanPose, ...]
+    edges: tuple[Edge, ...]
+    pruned_loop_closures: int | None
+    timings_s: dict[str, float]  # global, local, surface, total
+    fused_points: int | None
+    charuco_error_mean: PoseError | None
+    final_error_mean: PoseError | None
+    mesh: Path | None
+
+    def pose_of(self, folder: str) -> ScanPose | None:
+        return next((p for p in self.poses if p.folder == folder), None)
+
+    def edges_of(self, folder: str) -> tuple[Edge, ...]:
+        return tuple(e for e in self.edges if folder in (e.source, e.target))
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """``<name>_evaluation.json`` of ``recon evaluate`` / ``<evaluate>``, with its histogram."""
+
+    report: Path
+    name: str  # the evaluated file's stem
+    reference: str
+    histogram: Path | None  # <name>_distances.png
+    points: int | None
+    mean_mm: float | None
+    std_mm: float | None
+    rms_mm: float | None
+    within: dict[str, float]  # "±0.5 mm" -> share of points
+    coverage: float | None
+    coverage_visible: float | None
+    tolerance_mm: float | None
+
+
+@dataclass(frozen=True)
+class OutputFile:
+    path: Path
+    what: str
+    bytes: int
+
+
+@dataclass(frozen=True)
+class RunFolder:
+    """Everything a page shows about one folder."""
+
+    kind: RunKind
+    folder: Path  # where the page is written
+    session: Session | None = None
+    script_run: ScriptRun | None = None
+    autoscan: Autoscan | None = None
+    capture: Capture | None = None
+    scans: tuple[Scan, ...] = ()
+    moves: tuple[Move, ...] = ()  # a script run's move commands, else the moves the scans record
+    registration: Registration | None = None
+    evaluations: tuple[Evaluation, ...] = ()
+    pictures: tuple[Path, ...] = ()  # autoscan: one per iteration
+    plys: tuple[OutputFile, ...] = ()
+    reports: tuple[OutputFile, ...] = ()  # JSON reports, configuration, expanded script
+    notes: tuple[str, ...] = ()  # what the folder lacks or could not be read
+
+    @property
+    def status(self) -> str:
+        if self.script_run is not None:
+            return self.script_run.status
+        if self.autoscan is not None:
+            return "interrupted" if self.autoscan.interrupted else "failed" if self.autoscan.error else "done"
+        if self.capture is not None:
+            return self.capture.status
+        return "done"
+
+    @property
+    def title(self) -> str:
+        if self.script_run is not None:
+            return f"{self.kind.title}: {self.script_run.name}"
+        obj = (self.autoscan.object_name if self.autoscan else None) or (
+            self.session.object_name if self.session else None)
+        return f"{self.kind.title}" + (f": {obj}" if obj else "")

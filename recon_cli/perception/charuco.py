@@ -95,11 +95,15 @@ def detect(image: np.ndarray, spec: BoardSpec) -> CharucoDetection:
 
 @dataclass(frozen=True)
 class BoardPose:
-    """camera_T_marker [4x4] and the RMS reprojection error [px] of the corners used."""
+    """camera_T_marker [4x4], the RMS reprojection error [px] of the corners used, and how
+    well those corners fix the pose: the standard deviations of the camera's position [m]
+    and orientation [rad] in the board's frame (largest principal axis; see estimate_pose)."""
 
     camera_T_marker: np.ndarray
     reprojection_rms: float
     n_corners: int
+    position_sigma: float = 0.0
+    rotation_sigma: float = 0.0
 
 
 def estimate_pose(detection: CharucoDetection, spec: BoardSpec, K: Intrinsics,
@@ -117,9 +121,41 @@ def estimate_pose(detection: CharucoDetection, spec: BoardSpec, K: Intrinsics,
     if not ok:
         return None
     rvec, tvec = cv2.solvePnPRefineLM(obj, img, K.matrix(), dist, rvec, tvec)
-    proj, _ = cv2.projectPoints(obj, rvec, tvec, K.matrix(), dist)
-    rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - img.reshape(-1, 2)) ** 2, axis=1))))
+    proj, jacobian = cv2.projectPoints(obj, rvec, tvec, K.matrix(), dist)
+    residual = proj.reshape(-1, 2) - img.reshape(-1, 2)
+    rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
+    sigma_p, sigma_r = _pose_sigmas(jacobian[:, :6], residual, rvec.reshape(3), tvec.reshape(3))
     T = np.eye(4)
     T[:3, :3] = cv2.Rodrigues(rvec)[0]
     T[:3, 3] = tvec.reshape(3)
-    return BoardPose(T @ spec.opencv_board_T_marker(), rms, len(obj))
+    return BoardPose(T @ spec.opencv_board_T_marker(), rms, len(obj), sigma_p, sigma_r)
+
+
+#: [px] floor of the corner noise in the pose covariance (sub-pixel corners of a sharp image)
+CORNER_SIGMA_FLOOR_PX = 0.1
+
+
+def _pose_sigmas(J: np.ndarray, residual: np.ndarray, rvec: np.ndarray, tvec: np.ndarray) -> tuple[float, float]:
+    """Standard deviations [m, rad] of the camera position and orientation in the board
+    frame: the Gauss-Newton covariance s^2 (J^T J)^-1 of the pose (rvec, tvec), s^2 the
+    corners' residual variance (at least CORNER_SIGMA_FLOOR_PX), carried to the camera
+    centre -R^T t by its derivative; the largest principal axes. Few corners, bunched or
+    seen at a grazing angle give large values."""
+    m = residual.size
+    s2 = max(float(np.sum(residual**2)) / max(m - 6, 1), CORNER_SIGMA_FLOOR_PX**2)
+    try:
+        C = s2 * np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        return float("inf"), float("inf")
+
+    def centre(p: np.ndarray) -> np.ndarray:
+        return -cv2.Rodrigues(p[:3])[0].T @ p[3:]
+
+    p0, D = np.r_[rvec, tvec], np.zeros((3, 6))
+    for k in range(6):
+        h = np.zeros(6)
+        h[k] = 1e-6
+        D[:, k] = (centre(p0 + h) - centre(p0 - h)) / 2e-6
+    position = float(np.sqrt(max(np.linalg.eigvalsh(D @ C @ D.T).max(), 0.0)))
+    rotation = float(np.sqrt(max(np.linalg.eigvalsh(C[:3, :3]).max(), 0.0)))
+    return position, rotation

@@ -27,7 +27,7 @@ import numpy as np
 
 from recon_cli.geometry.transforms import invert, transform_points
 from recon_cli.perception.charuco import BoardSpec, detect, estimate_pose
-from recon_cli.reconstruction.options import MAX_REPROJECTION_PX
+from recon_cli.reconstruction.options import MAX_BOARD_SIGMA, MAX_REPROJECTION_PX
 from recon_cli.reconstruction.scan_store import Scan
 
 
@@ -63,12 +63,14 @@ class GlobalPose:
 
 def global_pose(scan: Scan, board: BoardSpec, world_T_marker: np.ndarray | None,
                 min_corners: int = 6, use_board: bool = True,
-                max_reprojection_px: float = MAX_REPROJECTION_PX, board_plane: bool = True) -> GlobalPose | None:
+                max_reprojection_px: float = MAX_REPROJECTION_PX, board_plane: bool = True,
+                max_board_sigma: float = MAX_BOARD_SIGMA) -> GlobalPose | None:
     """The scan's camera pose in M: from the board when found with a reprojection RMS of at
-    most ``max_reprojection_px``, else from kinematics (a poorer board pose is still used
+    most ``max_reprojection_px`` whose corners fix the camera position to ``max_board_sigma``
+    (standard deviation), else from kinematics (a poorer board pose is still used
     when there is no world_T_marker), then refined by the board plane in the scan's depth
     (``board_plane``, see the module docstring). None when neither is available."""
-    pose = _global_pose(scan, board, world_T_marker, min_corners, use_board, max_reprojection_px)
+    pose = _global_pose(scan, board, world_T_marker, min_corners, use_board, max_reprojection_px, max_board_sigma)
     if pose is None or not board_plane:
         return pose
     refined = refine_by_board_plane(scan.points_camera(), pose.marker_T_camera, board.size)
@@ -113,7 +115,7 @@ def refine_by_board_plane(points_camera: np.ndarray, marker_T_camera: np.ndarray
 
 
 def _global_pose(scan: Scan, board: BoardSpec, world_T_marker: np.ndarray | None, min_corners: int,
-                 use_board: bool, max_reprojection_px: float) -> GlobalPose | None:
+                 use_board: bool, max_reprojection_px: float, max_board_sigma: float) -> GlobalPose | None:
     corners, reason = 0, "board not used"
     if use_board:
         if scan.color is None:
@@ -125,10 +127,14 @@ def _global_pose(scan: Scan, board: BoardSpec, world_T_marker: np.ndarray | None
             if board_pose is not None:
                 charuco = GlobalPose(scan.index, invert(board_pose.camera_T_marker), PoseSource.CHARUCO,
                                      corners, board_pose.reprojection_rms)
-                if board_pose.reprojection_rms <= max_reprojection_px or world_T_marker is None:
+                sharp = board_pose.reprojection_rms <= max_reprojection_px
+                fixed = board_pose.position_sigma <= max_board_sigma
+                if (sharp and fixed) or world_T_marker is None:
                     return charuco
                 reason = (f"board pose rejected (reprojection {board_pose.reprojection_rms:.2f} px > "
-                          f"{max_reprojection_px:g} px)")
+                          f"{max_reprojection_px:g} px)" if not sharp else
+                          f"board pose rejected ({corners} corners fix the camera to "
+                          f"{board_pose.position_sigma * 1e3:.1f} mm > {max_board_sigma * 1e3:g} mm)")
             else:
                 reason = f"board not found ({corners} corners, {min_corners} needed)"
     if world_T_marker is None:

@@ -16,6 +16,7 @@ if TYPE_CHECKING:
 #: [px] a board pose whose corners reproject worse than this is not trusted (a grazing view
 #: of the board: in simulation such a pose was 2.85 mm off at 2.7 px, the good ones < 0.4 px)
 MAX_REPROJECTION_PX = 1.0
+MAX_BOARD_SIGMA = 0.002  # [m]
 
 
 @dataclass(frozen=True)
@@ -68,7 +69,11 @@ class MultiwayOptions:
     normal_agreement: float = 0.99  # cosine: correspondences with normals further apart are dropped
     effective_samples: int = 200  # independent measurements a pairwise overlap is worth
     normal_radius: float = 2.5  # [voxels] neighbourhood of the normals (when estimated)
-    own_normals: bool = True  # the clouds' own normals averaged per voxel, estimated only where missing
+    # the clouds' own normals averaged per voxel (estimated only where missing) instead of
+    # normals estimated on the down-sampled copies: faster, but the per-pixel normals of the
+    # noisy full-resolution scans let pairs slide along large flat faces (the wood block's
+    # scans ended 1.8 mm apart from 0.16 mm at their board poses), so off by default
+    own_normals: bool = False
     rounds: int = 1  # graph built and optimized this many times
     method: str = "point_to_plane"  # pairwise ICP: point_to_plane | point_to_point | colored
 
@@ -88,6 +93,10 @@ class RegisterOptions:
     use_board: bool = True  # False: every pose from kinematics
     min_corners: int = 6
     max_reprojection_px: float = MAX_REPROJECTION_PX  # board poses reprojecting worse: kinematics
+    # [m] board poses whose corners fix the camera position worse than this (standard
+    # deviation from the corners' configuration and residuals: a few bunched corners) are not
+    # trusted either: the pose graph takes every board pose as good to prior_sigma (2 mm)
+    max_board_sigma: float = MAX_BOARD_SIGMA
     # shift every global pose along the board normal so that the board in the scan's own
     # depth image lies at z = 0 of the marker frame (the height from metric depth): a camera
     # whose intrinsics are a little off puts its board poses millimetres off along the

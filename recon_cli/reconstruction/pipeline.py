@@ -236,7 +236,7 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
             step("global registration", k + 1, len(scan_folders))
             continue
         pose = global_pose(scan, board, world_T_marker, options.min_corners, options.use_board,
-                           options.max_reprojection_px, options.board_plane)
+                           options.max_reprojection_px, options.board_plane, options.max_board_sigma)
         if pose is not None and options.perturb is not None:
             pose = replace(pose, marker_T_camera=perturbed(pose.marker_T_camera, *options.perturb, rng))
         rec = ScanRecord(index, pose, folder=scan_folder.name)

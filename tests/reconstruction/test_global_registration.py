@@ -63,3 +63,41 @@ def test_board_plane_refinement_moves_the_height_only():
     assert n > 1000
     assert abs(refined[2, 3] - marker_T_camera[2, 3]) < 5e-5  # the height is the depth's
     assert np.allclose(refined[:2, 3], wrong[:2, 3]) and np.allclose(refined[:3, :3], wrong[:3, :3])
+
+
+def test_board_pose_sigma_grows_with_few_bunched_corners(monkeypatch):
+    """The pose's standard deviation from the corners' configuration: the whole board seen
+    from 0.6 m fixes the camera to a fraction of a millimetre, six bunched corners do not, and
+    such a pose is replaced by the kinematic one with the reason."""
+    import cv2
+
+    from recon_cli.perception.camera_model import Intrinsics
+    from recon_cli.perception.charuco import CharucoDetection, estimate_pose, thesis_board
+    from recon_cli.reconstruction.global_registration import _global_pose
+    from recon_cli.reconstruction.scan_store import Scan
+
+    spec = thesis_board()
+    K = Intrinsics(1600, 1200, 1742.9, 1742.9, 799.5, 599.5)
+    corners3d = spec.board().getChessboardCorners()  # OpenCV board frame
+    rvec, tvec = np.array([0.35, -0.2, 0.05]), np.array([-0.18, -0.1, 0.62])
+    rng = np.random.default_rng(0)
+
+    def detection(ids):
+        px, _ = cv2.projectPoints(corners3d[ids], rvec, tvec, K.matrix(), np.zeros(5))
+        px = px.reshape(-1, 2) + rng.normal(0.0, 0.1, (len(ids), 2))
+        return CharucoDetection(px, np.asarray(ids), np.zeros((0, 4, 2)), np.zeros(0, dtype=int))
+
+    whole = estimate_pose(detection(list(range(len(corners3d)))), spec, K)
+    bunched = estimate_pose(detection([9, 10, 19, 20, 28, 29]), spec, K)
+    assert whole.position_sigma < 0.0002 and whole.rotation_sigma < np.radians(0.02)
+    assert bunched.position_sigma > 10 * whole.position_sigma
+
+    scan = Scan(0, np.zeros((1200, 1600, 3), np.uint8), np.zeros((1200, 1600)), K, {}, np.eye(4))
+    import recon_cli.reconstruction.global_registration as G
+
+    monkeypatch.setattr(G, "detect", lambda image, board: detection([9, 10, 19, 20, 28, 29]))
+    monkeypatch.setattr(G, "estimate_pose", lambda *a, **k: bunched)
+    pose = _global_pose(scan, spec, np.eye(4), 6, True, 1.0, bunched.position_sigma * 0.5)
+    assert pose.source.value == "kinematics" and "corners fix the camera to" in pose.reason
+    pose = _global_pose(scan, spec, np.eye(4), 6, True, 1.0, bunched.position_sigma * 2.0)
+    assert pose.source.value == "charuco"

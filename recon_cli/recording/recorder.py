@@ -87,6 +87,10 @@ class Recorder:
 
     def note(self, text: str, level: str = "INFO") -> None:
         self._at(self.clock)
+        self._line(text, level)
+
+    def _line(self, text: str, level: str = "INFO") -> None:
+        """One line of the event log at the current time."""
         self.rec.log("log", self.rr.TextLog(text, level=level))
 
     # ------------------------------------------------------------------ the cell
@@ -144,8 +148,8 @@ class Recorder:
             path = S.camera_path(self.kin, q)
             self.rec.log(f"world/moves/move_{self.moves:03d}",
                          self.rr.LineStrips3D([path], colors=[S.STATUS_RGB["planned"]], radii=0.002))
-        self.rec.log("log", self.rr.TextLog(f"move {self.moves}: {trajectory.duration:.2f} s trajectory, "
-                                            f"settled after {settle_s:.3f} s"))
+        self._line(f"move {self.moves}: {trajectory.duration:.2f} s trajectory, "
+                   f"settled after {settle_s:.3f} s")
         self.clock += float(trajectory.duration) + float(settle_s)
 
     # ------------------------------------------------------------------ scans
@@ -172,8 +176,8 @@ class Recorder:
                                                                  media_type="image/png", meter=self.depth_scale))
         points, rgb = S.scan_points(depth_m, colour, K, T)
         self.rec.log(f"{name}/cloud", rr.Points3D(points, colors=rgb, radii=0.001))
-        self.rec.log("log", rr.TextLog(f"scan {scan.index}: {len(points)} points shown"
-                                       + (f", {label}" if label else "")))
+        self._line(f"scan {scan.index}: {len(points)} points shown"
+                   + (f", {label}" if label else ""))
 
     def board(self, index: int, image_points: np.ndarray, marker_outlines: np.ndarray, text: str) -> None:
         """Board corners (N, 2) and marker outlines (M, 4, 2) found in a scan's colour image."""
@@ -184,7 +188,7 @@ class Recorder:
         if len(marker_outlines):
             strips = [np.vstack([m, m[:1]]) for m in marker_outlines]
             self.rec.log(f"{entity}/markers", rr.LineStrips2D(strips, colors=[(31, 119, 180)], radii=1.5))
-        self.rec.log("log", rr.TextLog(f"scan {index}: {text}"))
+        self._line(f"scan {index}: {text}")
 
     # ------------------------------------------------------------------ view planning
     def iteration(self, it: int, ellipsoid, views: list[tuple[np.ndarray, str]],
@@ -206,8 +210,8 @@ class Recorder:
             origins, vectors = S.view_arrows(poses)
             self.rec.log(f"viewplan/views/{status}",
                          rr.Arrows3D(origins=origins, vectors=vectors, colors=[S.STATUS_RGB[status]], radii=0.003))
-        self.rec.log("log", rr.TextLog(f"iteration {it}: {len(candidates)} candidate views planned, "
-                                       f"{len(groups['infeasible'])} infeasible so far"))
+        self._line(f"iteration {it}: {len(candidates)} candidate views planned, "
+                   f"{len(groups['infeasible'])} infeasible so far")
 
     # ------------------------------------------------------------------ results
     def registration(self, result) -> None:
@@ -228,7 +232,7 @@ class Recorder:
                 self.rec.log(f"registration/{stage}/scan_{rec.index:04d}", rr.Points3D(w.astype(np.float32),
                                                                                       radii=0.0006))
             source = rec.pose.source.value if rec.pose is not None else "-"
-            self.rec.log("log", rr.TextLog(f"scan {rec.index}: pose from {source}"))
+            self._line(f"scan {rec.index}: pose from {source}")
 
     def mesh(self, entity: str, mesh, color=(200, 200, 205), static: bool = False) -> None:
         """An Open3D triangle mesh (normals computed when missing)."""
@@ -246,9 +250,9 @@ class Recorder:
         self._at(self.clock)
         self.rec.log("reconstruction/distances",
                      self.rr.Points3D(np.asarray(points, np.float32), colors=S.distance_colors(d), radii=0.0006))
-        self.rec.log("log", self.rr.TextLog(
+        self._line(
             f"signed distances to the ground truth: mean {np.mean(d) * 1e3:+.3f} mm, std {np.std(d) * 1e3:.3f} mm "
-            f"(colours: blue -{S.DISTANCE_RANGE_M * 1e3:.1f} mm, white 0, red +{S.DISTANCE_RANGE_M * 1e3:.1f} mm)"))
+            f"(colours: blue -{S.DISTANCE_RANGE_M * 1e3:.1f} mm, white 0, red +{S.DISTANCE_RANGE_M * 1e3:.1f} mm)")
 
     # ------------------------------------------------------------------ end
     def close(self) -> None:

@@ -6,8 +6,8 @@ import typer
 from typer.core import TyperGroup
 
 #: the order of the commands in ``recon --help``: from looking at the cell to benchmarks
-ORDER = ("cell", "ik", "objects", "capture", "register", "evaluate", "validate", "run", "autoscan", "view", "batch",
-         "report", "station", "replay", "calibrate", "bench")
+ORDER = ("cell", "ik", "objects", "capture", "register", "evaluate", "validate", "run", "autoscan", "report", "view",
+         "batch", "station", "replay", "calibrate", "bench")
 
 
 class _Ordered(TyperGroup):

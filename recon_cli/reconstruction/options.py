@@ -23,7 +23,15 @@ MAX_BOARD_SIGMA = 0.002  # [m]
 class SurfaceOptions:
     voxel: float = 0.001  # [m] voxel of the fused cloud
     normal_radius: float = 0.004  # [m] neighbourhood of the normal estimation
-    outlier_neighbors: int = 50  # statistical outlier removal (thesis: 50 neighbours, 3 sigma)
+    # outliers of the fused cloud: "radius" drops points with fewer than outlier_min_points
+    # neighbours within outlier_radius voxels (isolated points only); "statistical" is the thesis'
+    # filter (outlier_neighbors, outlier_std_ratio sigma of the mean neighbour distance), which
+    # also drops whole patches of a face that lies in one layer of the voxel grid while the
+    # faces around it straddle two (a box's top face: 4.7 % of the wood block)
+    outlier_filter: str = "radius"
+    outlier_radius: float = 3.0  # [voxels]
+    outlier_min_points: int = 8
+    outlier_neighbors: int = 50
     outlier_std_ratio: float = 3.0
     poisson_depth: int = 9  # octree depth (thesis: 8)
     density_quantile: float = 0.02  # drop mesh vertices below this quantile of Poisson density

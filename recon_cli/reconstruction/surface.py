@@ -27,15 +27,19 @@ def oriented_cloud(cloud, camera_position: np.ndarray, options: SurfaceOptions):
 
 def fuse(clouds: list, options: SurfaceOptions):
     """Merge posed clouds (with oriented normals), down-sample on a voxel grid (which
-    averages points, colours and normals per voxel) and remove statistical outliers."""
+    averages points, colours and normals per voxel) and remove outliers (options.outlier_filter)."""
     import open3d as o3d
 
     merged = o3d.geometry.PointCloud()
     for c in clouds:
         merged += c
     fused = merged.voxel_down_sample(options.voxel)
-    if len(fused.points) > options.outlier_neighbors:
+    if options.outlier_filter == "radius":
+        fused, _ = fused.remove_radius_outlier(options.outlier_min_points, options.outlier_radius * options.voxel)
+    elif options.outlier_filter == "statistical" and len(fused.points) > options.outlier_neighbors:
         fused, _ = fused.remove_statistical_outlier(options.outlier_neighbors, options.outlier_std_ratio)
+    elif options.outlier_filter not in ("radius", "statistical", "none"):
+        raise ValueError(f"outlier_filter must be 'radius', 'statistical' or 'none', not {options.outlier_filter!r}")
     if fused.has_normals():
         fused.normalize_normals()
     return fused

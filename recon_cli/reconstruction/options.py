@@ -30,7 +30,7 @@ class SurfaceOptions:
     # faces around it straddle two (a box's top face: 4.7 % of the wood block)
     outlier_filter: str = "radius"
     outlier_radius: float = 3.0  # [voxels]
-    outlier_min_points: int = 8
+    outlier_min_points: int = 4
     outlier_neighbors: int = 50
     outlier_std_ratio: float = 3.0
     poisson_depth: int = 9  # octree depth (thesis: 8)

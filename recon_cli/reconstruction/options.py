@@ -24,12 +24,13 @@ class SurfaceOptions:
     voxel: float = 0.001  # [m] voxel of the fused cloud
     normal_radius: float = 0.004  # [m] neighbourhood of the normal estimation
     # outliers of the fused cloud: "radius" drops points with fewer than outlier_min_points
-    # neighbours within outlier_radius voxels (isolated points only); "statistical" is the thesis'
+    # neighbours within outlier_radius voxels (or point spacings, where the cloud is sparser
+    # than the voxel; isolated points only); "statistical" is the thesis'
     # filter (outlier_neighbors, outlier_std_ratio sigma of the mean neighbour distance), which
     # also drops whole patches of a face that lies in one layer of the voxel grid while the
     # faces around it straddle two (a box's top face: 4.7 % of the wood block)
     outlier_filter: str = "radius"
-    outlier_radius: float = 3.0  # [voxels]
+    outlier_radius: float = 3.0  # [voxels, or the median point spacing where larger]
     outlier_min_points: int = 4
     outlier_neighbors: int = 50
     outlier_std_ratio: float = 3.0

@@ -34,8 +34,11 @@ def fuse(clouds: list, options: SurfaceOptions):
     for c in clouds:
         merged += c
     fused = merged.voxel_down_sample(options.voxel)
-    if options.outlier_filter == "radius":
-        fused, _ = fused.remove_radius_outlier(options.outlier_min_points, options.outlier_radius * options.voxel)
+    if options.outlier_filter == "radius" and len(fused.points) > options.outlier_min_points:
+        # in units of the cloud's own spacing where it is sparser than the voxel (low image
+        # resolution): a fixed radius would call every point of a sparse cloud isolated
+        spacing = max(options.voxel, float(np.median(np.asarray(fused.compute_nearest_neighbor_distance()))))
+        fused, _ = fused.remove_radius_outlier(options.outlier_min_points, options.outlier_radius * spacing)
     elif options.outlier_filter == "statistical" and len(fused.points) > options.outlier_neighbors:
         fused, _ = fused.remove_statistical_outlier(options.outlier_neighbors, options.outlier_std_ratio)
     elif options.outlier_filter not in ("radius", "statistical", "none"):

@@ -18,8 +18,11 @@ import numpy as np
 from recon_cli.reconstruction.scan_store import ScanStore
 
 
-def record_registration(recorder, result, store_root: Path) -> None:
-    """Board detections, clouds before/after registration, mesh, signed distances."""
+def record_registration(recorder, result, store_root: Path,
+                        distances: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+    """Board detections, clouds before/after registration, mesh, signed distances (the
+    fused cloud's points and their distances when the caller has them, else computed
+    against the store's simulated object)."""
     import open3d as o3d
 
     from recon_cli.perception.charuco import detect, thesis_board
@@ -45,6 +48,9 @@ def record_registration(recorder, result, store_root: Path) -> None:
     recorder.registration(result)
     if result.mesh is not None:
         recorder.mesh("reconstruction/mesh", o3d.io.read_triangle_mesh(str(result.mesh)))
+    if distances is not None:
+        recorder.distances(*distances)
+        return
     truth = _truth_mesh(Path(store_root))
     if truth is not None:
         from recon_cli.reconstruction.evaluation import signed_distances

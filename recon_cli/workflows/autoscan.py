@@ -316,15 +316,15 @@ class Autoscan:
                 error = exc
             else:
                 cloud, mesh = reg.cloud, reg.mesh
-                if self.recorder is not None:
-                    from recon_cli.recording.results import record_registration
-
-                    record_registration(self.recorder, reg, opt.out)
                 import open3d as o3d
 
                 pts = np.asarray(o3d.io.read_point_cloud(str(cloud)).points)
                 coverage = surface_coverage(self.obj, pts, 0.001, np.random.default_rng(cfg.seed))
                 d = signed_distances(pts, self.obj.mesh_world())
+                if self.recorder is not None:
+                    from recon_cli.recording.results import record_registration
+
+                    record_registration(self.recorder, reg, opt.out, distances=(pts, d))
                 accuracy = Accuracy(float(d.mean() * 1e3), float(d.std() * 1e3), len(pts), within_shares(d))
                 histogram_png(cloud.parent / f"{cloud.stem}_distances.png", {cloud.stem: d},
                               f"{cloud.name} vs the true {self.obj.name}")

@@ -153,11 +153,11 @@ class Recorder:
         self.clock += float(trajectory.duration) + float(settle_s)
 
     # ------------------------------------------------------------------ scans
-    def scan(self, scan, world_T_camera: np.ndarray | None = None, label: str = "") -> None:
+    def scan(self, scan) -> None:
         """A scan at the current time: frustum, images (at the pose by forward kinematics, or
         ``world_T_camera``) and its points in the world."""
         rr = self.rr
-        T = scan.world_T_camera_fk if world_T_camera is None else world_T_camera
+        T = scan.world_T_camera_fk
         self._at(self.clock, scan.index)
         self.scans.append(scan.index)
         K = scan.intrinsics
@@ -176,8 +176,7 @@ class Recorder:
                                                                  media_type="image/png", meter=self.depth_scale))
         points, rgb = S.scan_points(depth_m, colour, K, T)
         self.rec.log(f"{name}/cloud", rr.Points3D(points, colors=rgb, radii=0.001))
-        self._line(f"scan {scan.index}: {len(points)} points shown"
-                   + (f", {label}" if label else ""))
+        self._line(f"scan {scan.index}: {len(points)} points shown")
 
     def board(self, index: int, image_points: np.ndarray, marker_outlines: np.ndarray, text: str) -> None:
         """Board corners (N, 2) and marker outlines (M, 4, 2) found in a scan's colour image."""

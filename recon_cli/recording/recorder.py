@@ -154,8 +154,8 @@ class Recorder:
 
     # ------------------------------------------------------------------ scans
     def scan(self, scan) -> None:
-        """A scan at the current time: frustum, images (at the pose by forward kinematics, or
-        ``world_T_camera``) and its points in the world."""
+        """A scan at the current time: frustum and images at the pose by forward kinematics,
+        and its points in the world."""
         rr = self.rr
         T = scan.world_T_camera_fk
         self._at(self.clock, scan.index)

@@ -7,8 +7,10 @@ Shared by ``recon validate`` and ``recon run`` (which checks before it opens the
 * scan and fragment names are unique; registration, reconstruction, exports and
   evaluation come after a scan (and exports/evaluation after what they need);
 * fragments are defined (scanned, loaded or added) before they are used;
-* files a script reads (object meshes, reference meshes, loaded images and clouds) lie
-  inside the script's folder or scripts_xml/ and exist.
+* files a script reads (realism profiles, object meshes, reference meshes, loaded images
+  and clouds) lie inside the script's folder or scripts_xml/ and exist (the rule of
+  :func:`recon_cli.scripts.sandbox.readable`, which the commands apply again when they run);
+  a realism profile file also parses.
 """
 
 from __future__ import annotations
@@ -19,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from recon_cli.errors import JointLimitError, ScriptError
-from recon_cli.paths import SCRIPTS_DIR
+from recon_cli.errors import JointLimitError, ReconError, ScriptError
 from recon_cli.scripts import commands as C
+from recon_cli.scripts.sandbox import readable
 
 SETUP = (C.SetCell, C.SetObject)
 ACTIONS = (C.Move, C.MoveJoints, C.MoveHome, C.Scan)
@@ -34,24 +36,35 @@ def tag(cmd: C.Command) -> str:
 
 
 def readable_file(script: C.Script, name: str, src: C.Source, what: str) -> Path:
-    """A file a script reads: a relative path resolved beside the script (or in
-    scripts_xml/), which must stay inside those folders after resolving links."""
-    roots = (Path(script.path).resolve().parent, SCRIPTS_DIR.resolve())
-    p = Path(name)
-    if not p.is_absolute():
-        for base in roots:
-            candidate = (base / p).resolve()
-            if candidate.exists() and any(candidate.is_relative_to(r) for r in roots):
-                if not candidate.is_file():
-                    break
-                return candidate
-    inside = not p.is_absolute() and any((r / p).resolve().is_relative_to(r) for r in roots)
-    if not inside:
-        raise ScriptError(f"{src}: {what} {name!r} is outside the script's folder and scripts_xml/",
-                          hint="scripts read files only from their own folder or scripts_xml/; copy the file "
-                               "beside the script and give a relative path")
-    raise ScriptError(f"{src}: {what} {name!r} does not exist beside the script or in scripts_xml/",
-                      hint="check the file name")
+    """A file a script reads, by the rule of :func:`recon_cli.scripts.sandbox.readable`:
+    a relative path beside the script (or in scripts_xml/) that stays inside those folders
+    after resolving links."""
+    return readable(name, Path(script.path).resolve().parent, src, what)
+
+
+def script_realism(script: C.Script, cmd: C.SetCell) -> str | Path:
+    """The realism profile of a ``<cell>``: a built-in name, or the profile file it names
+    (a readable file, see :func:`readable_file`)."""
+    from recon_cli.realism import BUILT_IN
+
+    if cmd.realism in BUILT_IN:
+        return cmd.realism
+    if not is_file_name(cmd.realism):
+        raise ScriptError(f"{cmd.source}: unknown realism profile {cmd.realism!r}",
+                          hint=f"choose one of: {', '.join(BUILT_IN)}, or a profile FILE.yaml beside the script",
+                          source=str(cmd.source))
+    return readable_file(script, cmd.realism, cmd.source, "realism profile")
+
+
+def _check_realism(script: C.Script, cmd: C.SetCell) -> None:
+    from recon_cli.realism import load_profile
+
+    try:
+        load_profile(script_realism(script, cmd))
+    except ScriptError:
+        raise
+    except ReconError as exc:
+        raise ScriptError(f"{cmd.source}: {exc.message}", hint=exc.hint, source=str(cmd.source)) from None
 
 
 def is_file_name(name: str) -> bool:
@@ -123,6 +136,7 @@ def check_script(script: C.Script, *, object_override: str | None = None) -> Non
                               hint="choose the cell and the object at the top of the script")
         if isinstance(cmd, C.SetCell):
             kind = cmd.kind
+            _check_realism(script, cmd)
         elif isinstance(cmd, C.SetObject) and object_override is None:
             _check_object(script, cmd)
         elif isinstance(cmd, C.MoveJoints):

@@ -20,7 +20,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from recon_cli.errors import LimitError
+from recon_cli.errors import LimitError, ScriptError
 
 
 @dataclass(frozen=True)
@@ -317,7 +317,7 @@ class _CallableSet:
         return id(f) in _allowed
 
 
-def symbol_table(script_dir: Path, roots: tuple[Path, ...]) -> dict:
+def symbol_table(script_dir: Path) -> dict:
     """xacro's global symbols, restricted: pure builtins, math, and a confined load_yaml."""
     import builtins
 
@@ -337,7 +337,7 @@ def symbol_table(script_dir: Path, roots: tuple[Path, ...]) -> dict:
             m[name] = getattr(math, name)
             table[name] = m[name]
     x = xacro.NameSpace()
-    x["load_yaml"] = table["load_yaml"] = _confined_load_yaml(script_dir, roots)
+    x["load_yaml"] = table["load_yaml"] = _confined_load_yaml(script_dir)
     x["dotify"] = table["dotify"] = xacro.YamlDictWrapper
     x["tokenize"] = xacro.tokenize
     x["arg"] = lambda name: xacro.substitution_args_context["arg"][name]
@@ -361,25 +361,27 @@ def _fatal(*args):
     raise SandboxError("xacro.fatal: " + " ".join(map(str, args)), hint="the script stopped itself")
 
 
-def _confined_load_yaml(script_dir: Path, roots: tuple[Path, ...]):
+def _confined_load_yaml(script_dir: Path):
     def load_yaml(filename):
         import xacro
 
+        from recon_cli.scripts.sandbox import readable
+
         name = str(filename)
-        path = Path(name)
-        if path.is_absolute() or any(ch in name for ch in "$(){}"):
+        if any(ch in name for ch in "$(){}"):
             raise SandboxError(f"xacro.load_yaml({name!r}): scripts may load YAML files only by a plain relative "
                                "path beside the script or in scripts_xml/", hint="copy the file beside the script")
-        for base in (script_dir, *roots[1:]):
-            candidate = (base / path).resolve()
-            if candidate.is_file() and any(candidate.is_relative_to(r.resolve()) for r in roots):
-                size = candidate.stat().st_size
-                if size > current_guard().limits.max_file_bytes:
-                    raise SandboxError(f"xacro.load_yaml({name!r}): {size} bytes exceeds the limit of "
-                                       f"{current_guard().limits.max_file_bytes} bytes", hint="use a smaller file")
-                return current_guard().value(xacro.load_yaml(str(candidate)))
-        raise SandboxError(f"xacro.load_yaml({name!r}): no such file beside the script or in scripts_xml/",
-                           hint="scripts may load YAML files only from their own folder or scripts_xml/")
+        try:
+            path = readable(name, script_dir, None, "YAML file")
+        except LimitError:
+            raise
+        except ScriptError as exc:
+            raise SandboxError(f"xacro.load_yaml({name!r}): {exc.message}", hint=exc.hint) from None
+        size = path.stat().st_size
+        if size > current_guard().limits.max_file_bytes:
+            raise SandboxError(f"xacro.load_yaml({name!r}): {size} bytes exceeds the limit of "
+                               f"{current_guard().limits.max_file_bytes} bytes", hint="use a smaller file")
+        return current_guard().value(xacro.load_yaml(str(path)))
 
     return load_yaml
 

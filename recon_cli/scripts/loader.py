@@ -2,8 +2,9 @@
 
 1. The file is parsed by lxml with entities, DTDs and network access off; a DOCTYPE is
    refused (scripts need none; it is where entity bombs and external entities live).
-2. ``xacro:include`` files must be plain relative paths found beside the script or in
-   scripts_xml/ (no substitutions, nothing outside those folders); they get the same checks.
+2. ``xacro:include`` files must be plain relative paths found beside the including file or
+   in scripts_xml/, inside the script's folder or scripts_xml/ (no substitutions; the rule of
+   ``sandbox.readable``); they get the same checks.
 3. Every element is tagged with its file and line, xacro expands macros and properties
    (its expression evaluator refuses names like ``__import__``), and the tags are taken off
    again before validation, so each error names the line the user wrote (for elements made
@@ -25,7 +26,7 @@ from recon_cli.errors import FileError, LimitError, ScriptError
 from recon_cli.paths import SCHEMA_DIR, SCRIPTS_DIR
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.build import as_bool, build_recon, build_thesis
-from recon_cli.scripts.sandbox import LIMITS, PI_TARGET, SandboxError, sandboxed
+from recon_cli.scripts.sandbox import LIMITS, PI_TARGET, SandboxError, readable, sandboxed
 
 XACRO_NS = "http://www.ros.org/wiki/xacro"
 SRC_ATTR = "recon_source"
@@ -56,27 +57,22 @@ def _parse_file(path: Path) -> etree._ElementTree:
     return tree
 
 
-def _resolve_include(name: str, here: Path, where: str) -> Path:
-    if not name or any(ch in name for ch in "$(){}") or Path(name).is_absolute():
+def _resolve_include(name: str, here: Path, script_dir: Path, where: str) -> Path:
+    if any(ch in name for ch in "$(){}"):
         raise ScriptError(f"{where}: xacro:include filename {name!r} must be a plain relative path",
-                          hint="include files beside the script or in scripts_xml/, e.g. macros.xml")
-    for base in (here, SCRIPTS_DIR):
-        candidate = (base / name).resolve()
-        if candidate.is_file() and (candidate.is_relative_to(here.resolve())
-                                    or candidate.is_relative_to(SCRIPTS_DIR.resolve())):
-            return candidate
-    raise ScriptError(f"{where}: included file {name!r} not found beside the script or in scripts_xml/",
-                      hint="check the filename")
+                          hint="include files beside the script or in scripts_xml/, e.g. macros.xml", source=where)
+    return readable(name, script_dir, where, "included file", beside=here)
 
 
 # xacro directives; every other xacro:NAME element is a macro call
 _DIRECTIVES = {"macro", "property", "include", "arg", "if", "unless", "insert_block", "element", "attribute"}
 
 
-def _annotate(path: Path, out_dir: Path, copies: dict[Path, Path], display: dict[Path, str]) -> Path:
+def _annotate(path: Path, out_dir: Path, copies: dict[Path, Path], display: dict[Path, str],
+              script_dir: Path) -> Path:
     """Copy ``path`` into out_dir with every element tagged file:line, every macro call
     preceded by a ``<?recon-src file:line?>`` instruction, and includes resolved to their
-    tagged copies. Returns the copy's path."""
+    tagged copies (``script_dir``: the folder of the script being loaded). Returns the copy's path."""
     path = path.resolve()
     if path in copies:
         return copies[path]
@@ -92,9 +88,9 @@ def _annotate(path: Path, out_dir: Path, copies: dict[Path, Path], display: dict
             continue
         if el.tag == f"{{{XACRO_NS}}}include":
             where = f"{label}:{el.sourceline}"
-            included = _resolve_include(el.get("filename", ""), path.parent, where)
+            included = _resolve_include(el.get("filename", ""), path.parent, script_dir, where)
             display.setdefault(included, included.name)
-            el.set("filename", str(_annotate(included, out_dir, copies, display)))
+            el.set("filename", str(_annotate(included, out_dir, copies, display, script_dir)))
         elif not el.tag.startswith(f"{{{XACRO_NS}}}"):
             el.set(SRC_ATTR, f"{label}:{el.sourceline}")
         elif etree.QName(el).localname not in _DIRECTIVES and el.getparent() is not None:
@@ -111,11 +107,10 @@ def expand(path: Path) -> tuple[etree._Element, dict[etree._Element, C.Source], 
     path = Path(path)
     tmp = Path(tempfile.mkdtemp(prefix="recon-script-"))
     try:
-        main = _annotate(path, tmp, {}, {path.resolve(): path.name})
-        roots = (path.resolve().parent, SCRIPTS_DIR.resolve())
+        main = _annotate(path, tmp, {}, {path.resolve(): path.name}, path.resolve().parent)
         frames = None
         try:
-            with sandboxed(roots[0], roots) as frames:
+            with sandboxed(path.resolve().parent) as frames:
                 doc = xacro.process_file(str(main))
                 text = doc.toxml()
         except Exception as exc:  # xacro reports macro/property errors as exceptions

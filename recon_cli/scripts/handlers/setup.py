@@ -6,7 +6,7 @@ from dataclasses import replace
 
 from recon_cli.config import SceneConfig, SensorConfig
 from recon_cli.scripts import commands as C
-from recon_cli.scripts.checks import is_file_name, readable_file
+from recon_cli.scripts.checks import is_file_name, readable_file, script_realism
 from recon_cli.scripts.handlers import handles
 from recon_cli.scripts.state import CommandReport, RunState
 from recon_cli.session import Backend
@@ -17,7 +17,7 @@ def set_cell(state: RunState, cmd: C.SetCell, report: CommandReport) -> None:
     from recon_cli.realism import load_profile
     from recon_cli.robot.description import CellConfig, CellKind
 
-    realism = state.options.realism or load_profile(cmd.realism)
+    realism = state.options.realism or load_profile(script_realism(state.script, cmd))
     state.set_config(cell=CellConfig(kind=CellKind.parse(cmd.kind), safety_distance=cmd.safety_distance),
                      sensor=SensorConfig(noise=cmd.noise, resolution=cmd.resolution), realism=realism)
     state.backend = state.options.backend or Backend(cmd.backend)

@@ -94,28 +94,15 @@ def camera_config(adapter: str, mapping: dict, where: str):
 
 
 def load_station(path: Path) -> StationFile:
-    """Read and check a station file."""
-    import yaml
+    """Read and check a station file (the one YAML reader, then schemas/station.schema.json,
+    then the adapters' own checks)."""
+    from recon_cli.inputs.schema import check
+    from recon_cli.inputs.yamlfile import line_of, read_yaml
 
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise FileError(f"station file {path} does not exist", hint="see docs/hardware.md for an example") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FileError(f"cannot read the station file {path} ({getattr(exc, 'strerror', None) or exc})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
-        raise InputError(f"{where}: not valid YAML ({getattr(exc, 'problem', None) or exc})") from None
+    data = read_yaml(path, "station file", hint="see docs/hardware.md for an example")
     w = str(path)
-    _known_keys(data, w, TOP_KEYS)
-    fmt = data.get("format", STATION_FORMAT)
-    if fmt != STATION_FORMAT:
-        raise InputError(f"{w}: format {fmt!r} is not {STATION_FORMAT}", hint="this recon reads station files "
-                                                                               f"of format {STATION_FORMAT}")
+    check(data, "station", w)
     cell_map = data.get("cell", {}) or {}
     _known_keys(cell_map, f"{w}: cell", ("kind", "safety_distance", "table_lift", "ceiling_xy"))
     hand_eye = data.get("hand_eye")
@@ -136,7 +123,9 @@ def load_station(path: Path) -> StationFile:
     except (TypeError, ValueError) as exc:
         raise InputError(f"{w}: cell: {exc}", hint="see docs/hardware.md") from None
     except InputError as exc:
-        raise InputError(f"{w}: {exc.message}", hint=exc.hint) from None
+        key = "hand_eye" if "hand-eye" in exc.message else "cell"
+        line = line_of(data, key)
+        raise InputError(f"{w}:{line}: {exc.message}" if line else f"{w}: {exc.message}", hint=exc.hint) from None
 
     robot_map = data.get("robot")
     if robot_map is None:
@@ -149,7 +138,8 @@ def load_station(path: Path) -> StationFile:
     if robot_adapter == "ads":
         from recon_cli.backends.hardware.ads import AdsConfig
 
-        robot = AdsConfig.from_mapping(robot_map.get("ads") or {}, f"{w}: robot.ads")
+        line = line_of(robot_map, "ads")
+        robot = AdsConfig.from_mapping(robot_map.get("ads") or {}, f"{w}:{line}: robot.ads" if line else f"{w}: robot.ads")
 
     camera_map = data.get("camera")
     if camera_map is None:
@@ -158,6 +148,8 @@ def load_station(path: Path) -> StationFile:
     camera_adapter = str(camera_map.get("adapter", ""))
     if camera_adapter not in CAMERA_ADAPTERS:
         raise UnknownNameError("camera adapter", camera_adapter, CAMERA_ADAPTERS)
-    camera = camera_config(camera_adapter, camera_map.get(camera_adapter) or {}, f"{w}: camera.{camera_adapter}")
+    line = line_of(camera_map, camera_adapter) or line_of(data, "camera")
+    camera = camera_config(camera_adapter, camera_map.get(camera_adapter) or {},
+                           f"{w}:{line}: camera.{camera_adapter}" if line else f"{w}: camera.{camera_adapter}")
     return StationFile(path, str(data.get("name", path.stem)), cell, robot_adapter, robot, camera_adapter, camera,
                        data)

@@ -72,18 +72,8 @@ class CellConfig:
         if self.mount_T_base is not None:
             object.__setattr__(self, "mount_T_base", _rigid(self.mount_T_base, "the robot base pose mount_T_base"))
         if self.flange_T_camera is not None:
-            m = [float(v) for v in self.flange_T_camera]
-            R = [m[0:3], m[4:7], m[8:11]]
-            ok = len(m) == 16 and all(math.isfinite(v) for v in m) and m[12:] == [0.0, 0.0, 0.0, 1.0]
-            if ok:  # orthonormal rotation
-                for i in range(3):
-                    for j in range(3):
-                        dot = sum(R[k][i] * R[k][j] for k in range(3))
-                        ok = ok and abs(dot - (1.0 if i == j else 0.0)) < 1e-6
-            if not ok:
-                raise InputError("the hand-eye transform flange_T_camera is not a rigid 4 x 4 transform",
-                                 hint="give 16 numbers row by row with an orthonormal rotation and 0 0 0 1 last")
-            object.__setattr__(self, "flange_T_camera", tuple(m))
+            object.__setattr__(self, "flange_T_camera",
+                               _rigid(self.flange_T_camera, "the hand-eye transform flange_T_camera"))
         if not isinstance(self.kind, CellKind):
             object.__setattr__(self, "kind", CellKind.parse(self.kind))
         if not (math.isfinite(self.safety_distance) and 0.0 <= self.safety_distance <= 0.2):
@@ -141,9 +131,13 @@ def _rigid(values, what: str) -> tuple[float, ...]:
         R = [m[0:3], m[4:7], m[8:11]]
         ok = all(abs(sum(R[k][i] * R[k][j] for k in range(3)) - (1.0 if i == j else 0.0)) < 1e-6
                  for i in range(3) for j in range(3))
+        det = (R[0][0] * (R[1][1] * R[2][2] - R[1][2] * R[2][1]) - R[0][1] * (R[1][0] * R[2][2] - R[1][2] * R[2][0])
+               + R[0][2] * (R[1][0] * R[2][1] - R[1][1] * R[2][0]))
+        ok = ok and det > 0  # a mirror is orthonormal too, but no pose
     if not ok:
         raise InputError(f"{what} is not a rigid 4 x 4 transform",
-                         hint="give 16 numbers row by row with an orthonormal rotation and 0 0 0 1 last")
+                         hint="give 16 numbers row by row with a rotation (orthonormal, determinant +1) "
+                              "and 0 0 0 1 last")
     return tuple(m)
 
 

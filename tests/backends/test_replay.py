@@ -151,7 +151,7 @@ def test_station_file_with_a_replay_camera(tmp_path, store):
     station = load_station(path)
     assert station.camera == ReplayConfig(str(store), loop=True)
     path.write_text("format: 1\nrobot: {adapter: sim}\ncamera:\n  adapter: replay\n  replay: {source: x, fsp: 3}\n")
-    with pytest.raises(InputError, match=r"cell.yaml: camera.replay.fsp is not a known key"):
+    with pytest.raises(InputError, match=r"cell.yaml:5: camera.replay.fsp is not a known key"):
         load_station(path)
 
 

@@ -113,12 +113,12 @@ def test_plc_fault_mid_run_stops_and_keeps_scans(plc, files, tmp_path, capsys):
 
 @pytest.mark.parametrize("text, message", [
     ("format: 1\nrobot: {adapter: ads}\n", "no camera section"),
-    ("format: 1\nrobot: {adapter: kuka}\ncamera: {adapter: sim}\n", "unknown robot adapter 'kuka'"),
+    ("format: 1\nrobot: {adapter: kuka}\ncamera: {adapter: sim}\n", "robot.adapter = 'kuka' is not one of ads, sim"),
     ("format: 1\nrobot: {adapter: sim}\ncamera: {adapter: sim}\nspeed: 3\n", "speed is not a known key"),
     ("format: 1\nrobot: {adapter: ads, ads: {poll: -1}}\ncamera: {adapter: sim}\n", "robot.ads.poll = -1.0"),
-    ("format: 1\nrobot: [adapter\n", r"station.yaml:3: not valid YAML \(expected ',' or ']'"),
+    ("format: 1\nrobot: [adapter\n", r"station.yaml:3: not valid YAML \(did not find expected ',' or ']'"),
     ("format: 1\nhand_eye: [[1, 0], [0, 1]]\nrobot: {adapter: sim}\ncamera: {adapter: sim}\n",
-     "hand_eye is not 4 rows of 4 numbers"),
+     "hand_eye has 2 items, 4 expected"),
     ("format: 1\nhand_eye: [[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]\nrobot: {adapter: sim}\n"
      "camera: {adapter: sim}\n", "not a rigid 4 x 4 transform"),
 ])

@@ -80,7 +80,7 @@ def readable(name: str, script_dir: Path, source: object | None, what: str, *, b
         try:
             if real.is_file():
                 return real
-            exists = real.exists()
+            exists = real.exists() or real.is_symlink()  # a link loop left unresolved
         except OSError:
             exists = True
         not_a_file |= exists

@@ -170,13 +170,10 @@ def load_profile(name_or_path: str | Path) -> RealismProfile:
         path = Path(text)
         if path.suffix.lower() not in (".yaml", ".yml") and not path.exists():
             raise UnknownNameError("realism profile", text, [*BUILT_IN, "FILE.yaml"])
-    try:
-        raw = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"realism profile {path} does not exist",
-                         hint=f"use {', '.join(BUILT_IN)} or a YAML file (docs/simulation.md)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read the realism profile {path} ({getattr(exc, 'strerror', None) or exc})") from None
+    from recon_cli.inputs.yamlfile import read_text
+
+    raw = read_text(path, "realism profile",
+                    hint=f"use {', '.join(BUILT_IN)} or a YAML file (docs/simulation.md)")
     profile = parse_profile(raw, str(path))
     if text in BUILT_IN:  # recorded by name, not by this machine's path
         profile = dataclasses.replace(profile, source=f"robot/realism/{text}.yaml")
@@ -185,14 +182,11 @@ def load_profile(name_or_path: str | Path) -> RealismProfile:
 
 def parse_profile(text: str, where: str = "<profile>") -> RealismProfile:
     """Parse a profile's YAML text; ``where`` names it in errors."""
-    import yaml
+    from recon_cli.inputs.schema import check
+    from recon_cli.inputs.yamlfile import parse_yaml
 
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        at = f"{where}:{mark.line + 1}" if mark is not None else where
-        raise InputError(f"{at}: not valid YAML ({getattr(exc, 'problem', None) or exc})") from None
+    data = parse_yaml(text, where)
+    check(data, "realism", where)
     r = _Reader(where)
     d = r.mapping(data if data is not None else {}, "", ("format", "name", "kinematics", "camera", "depth", "image"))
     fmt = d.get("format", PROFILE_FORMAT)

@@ -101,15 +101,21 @@ jobs:
      ":4 jobs[0].expect.min_coverage_pct: a capture job does not measure this"),
     ("jobs:\n  - run: nothere.xml\n", ":2 jobs[0].run: script nothere.xml not found"),
     ("jobs:\n  - run: smoke.xml\n    options: {out: x}\n", ":3 jobs[0].options.out: option 'out' cannot be set"),
-    ("jobs:\n  - run: smoke.xml\n    expect: {max_std_mm: -1}\n", ":3 jobs[0].expect.max_std_mm: -1 is not a number"),
-    ("jobs:\n  - run: smoke.xml\n    expect: {max_std: 1}\n", ":3 jobs[0].expect.max_std: unknown key"),
+    ("jobs:\n  - run: smoke.xml\n    expect: {max_std_mm: -1}\n", ":3: jobs[0].expect.max_std_mm = -1 mm is outside [0, 1000] mm"),
+    ("jobs:\n  - run: smoke.xml\n    expect: {max_std: 1}\n", ":3: jobs[0].expect.max_std is not a known key"),
     ("jobs:\n  - run: smoke.xml\n    matrix: {foo: [a]}\n", ":3 jobs[0].matrix.foo: 'foo' is no option of recon run"),
     ("jobs:\n  - run: smoke.xml\n  - run: smoke.xml\n", "job name 'smoke' is used twice"),
     ("jobs:\n  - run: smoke.xml\n    autoscan: {}\n", "a job names exactly one command"),
-    ("jobs:\n  - run: smoke.xml\n    timeout_s: 0\n", ":3 jobs[0].timeout_s: 0 is not a number > 0"),
+    ("jobs:\n  - run: smoke.xml\n    timeout_s: 0\n", ":3: jobs[0].timeout_s = 0 s is outside [1, 604800] s"),
     ("jobs: [\n", "not valid YAML"),
-    ("jobs: []\n", "jobs: needs a non-empty list of jobs"),
-    ("jobz: []\n", ":1 jobz: unknown key"),
+    ("jobs: []\n", ":1: jobs has 0 items, 1 to 10000 expected"),
+    ("jobz: []\n", ":1: jobz is not a known key"),
+    ("jobs:\n  - run: smoke.xml\n    timeout_s: 1.0e-300\n", ":3: jobs[0].timeout_s = 1e-300 s is outside [1, 604800] s"),
+    ("jobs:\n  - run: smoke.xml\n    env: {PYTHONPATH: .}\n", ":3 jobs[0].env.PYTHONPATH: a job may not set PYTHONPATH"),
+    ("jobs:\n  - run: smoke.xml\n    env: {LD_PRELOAD: ./x.so}\n", "a job may not set LD_PRELOAD"),
+    ("defaults:\n  env: {PATH: .}\njobs:\n  - run: smoke.xml\n", ":2 defaults.env.PATH: a job may not set PATH"),
+    ("jobs:\n  - run: smoke.xml\n    name: j{a}{b}{c}\n    matrix: {a: [%s], b: [%s], c: [%s]}\n"
+     % ((",".join(map(str, range(1000))),) * 3), ":4 jobs[0].matrix: expands to 1,000,000,000 combinations"),
 ])
 def test_batch_file_errors_are_one_line_with_file_line_and_key(tmp_path, text, needle):
     path = write(tmp_path, text)

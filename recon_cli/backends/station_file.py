@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from recon_cli.errors import FileError, InputError, UnknownNameError
+from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.robot.description import CellConfig, CellKind
 
 STATION_FORMAT = 1
@@ -139,7 +139,8 @@ def load_station(path: Path) -> StationFile:
         from recon_cli.backends.hardware.ads import AdsConfig
 
         line = line_of(robot_map, "ads")
-        robot = AdsConfig.from_mapping(robot_map.get("ads") or {}, f"{w}:{line}: robot.ads" if line else f"{w}: robot.ads")
+        robot = AdsConfig.from_mapping(robot_map.get("ads") or {},
+                                       f"{w}:{line}: robot.ads" if line else f"{w}: robot.ads")
 
     camera_map = data.get("camera")
     if camera_map is None:

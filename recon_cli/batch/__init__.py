@@ -1,7 +1,6 @@
 """Batches: many isolated ``recon`` runs with pass criteria, for CI and for clusters.
 
     spec.py          the batch file (YAML): typed jobs, matrix expansion, checks with file:line
-    yamlfile.py      YAML with the line of every key
     expectations.py  what a job's reports measured, checked against its bounds
     job.py           one job: its process, timeout, retries for infrastructure failures, verdict
     child.py         the job's process: recon, ended with the batch

@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import glob
 import itertools
+import math
 import re
 import sys
 from dataclasses import dataclass, field
@@ -36,8 +37,8 @@ from enum import StrEnum
 from functools import cache
 from pathlib import Path
 
-from recon_cli.batch.yamlfile import Map, load_yaml
 from recon_cli.errors import FileError, InputError
+from recon_cli.inputs.yamlfile import Map, read_yaml
 
 MAX_JOBS = 10_000
 DEFAULT_TIMEOUT_S = 3600.0  # [s] per job attempt
@@ -306,13 +307,38 @@ def _expectations(value, loc: Loc, kind: JobKind | None) -> Expectations:
     return Expectations(**bounds)
 
 
+#: environment variables a job may not set: they choose which code the interpreter, the
+#: dynamic loader or a library loads and runs (a batch file would run code from anywhere)
+FORBIDDEN_ENV = ("PATH", "GCONV_PATH", "LOCPATH", "NLSPATH", "HOSTALIASES", "RESOLV_HOST_CONF", "OPENSSL_CONF",
+                 "OPENSSL_ENGINES", "BASH_ENV", "ENV", "IFS", "SHELLOPTS", "RECON_HOME", "MUJOCO_PLUGIN_DIR",
+                 "GENICAM_GENTL64_PATH", "GENICAM_GENTL32_PATH", "TCL_LIBRARY", "MPLCONFIGDIR", "MPLBACKEND")
+#: ... and every name with one of these prefixes
+FORBIDDEN_ENV_PREFIXES = ("PYTHON", "LD_", "DYLD_", "MALLOC_", "GLIBC_", "__EGL", "__GL", "LIBGL_", "MESA_",
+                          "GALLIUM_", "VK_", "PYDEVD", "COV_CORE", "DASK_")
+
+
+def env_refusal(name: str) -> str | None:
+    """Why a job may not set the environment variable ``name`` (None: it may)."""
+    upper = name.upper()
+    if upper in FORBIDDEN_ENV or upper.startswith(FORBIDDEN_ENV_PREFIXES):
+        return ("it chooses which code the interpreter, the loader or a library runs; set it for the whole "
+                "batch in the shell that starts recon batch, if at all")
+    return None
+
+
 def _env(value, loc: Loc) -> tuple[tuple[str, str], ...]:
     m = _mapping(value, loc, "env")
     out = []
     for k, v in m.items():
         if not isinstance(k, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", k) or isinstance(v, dict | list):
             raise InputError(f"{loc.at(m, k)}: not an environment variable (NAME: value)")
-        out.append((k, _format_number(v)))
+        why = env_refusal(k)
+        if why:
+            raise InputError(f"{loc.at(m, k)}: a job may not set {k}", hint=why)
+        text = _format_number(v)
+        if "\0" in text:
+            raise InputError(f"{loc.at(m, k)}: the value holds a NUL character")
+        out.append((k, text))
     return tuple(out)
 
 
@@ -401,6 +427,10 @@ def _expand(path: Path, entry: Map, loc: Loc, defaults: dict, overrides: Overrid
             if k not in matrix:
                 raise InputError(f"{ex_loc}: '{k}' is not a matrix key")
     keys = [str(k) for k in matrix]
+    count = math.prod(len(v) for v in matrix.values())
+    if count - len(excludes) > MAX_JOBS:  # counted before anything is expanded
+        raise InputError(f"{mat_loc}: expands to {count:,} combinations (at most {MAX_JOBS:,} jobs)",
+                         hint="split the batch or use fewer matrix values")
     combos = [dict(zip(keys, vals, strict=True)) for vals in itertools.product(*matrix.values())]
     combos = [c for c in combos if not any(all(_format_number(c[k]) == _format_number(v) for k, v in x.items())
                                            for x in excludes)]
@@ -460,8 +490,11 @@ def _expand(path: Path, entry: Map, loc: Loc, defaults: dict, overrides: Overrid
 
 def load_batch_file(path: Path, overrides: Overrides = Overrides()) -> BatchSpec:
     """Read, expand and check a batch file."""
+    from recon_cli.inputs.schema import check
+
     path = Path(path)
-    data = load_yaml(path)
+    data = read_yaml(path, "batch file", hint="see docs/batch.md for the format")
+    check(data, "batch", path)
     top = Loc(path)
     if not isinstance(data, dict):
         raise InputError(f"{path}: a batch file is a mapping with 'jobs:'", hint="see docs/batch.md")
@@ -489,6 +522,9 @@ def load_batch_file(path: Path, overrides: Overrides = Overrides()) -> BatchSpec
         if not isinstance(entry, dict):
             raise InputError(f"{loc}: a job is a mapping, e.g. '- run: smoke.xml'")
         jobs += _expand(path, entry, loc, defaults, overrides)
+        if len(jobs) > MAX_JOBS:  # before the next entry is expanded
+            raise InputError(f"{loc}: the batch has more than {MAX_JOBS:,} jobs with this entry",
+                             hint="split the batch")
     name = data.get("name", path.stem)
     return BatchSpec(_job_name(str(name), top.at(data, "name")), _unique(jobs), (str(path),))
 

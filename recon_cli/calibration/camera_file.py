@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from recon_cli.errors import FileError, InputError
+from recon_cli.errors import InputError
 from recon_cli.perception.camera_model import Intrinsics
 
 CAMERA_FILE_FORMAT = 1
@@ -113,25 +113,14 @@ def write_camera_file(path: Path, camera: CameraCalibration, calibration: dict |
 
 def load_camera_file(path: Path) -> CameraCalibration:
     """Read a camera file (see the module docstring); errors name ``FILE: key``."""
-    import yaml
+    from recon_cli.inputs.schema import check
+    from recon_cli.inputs.yamlfile import line_of, read_yaml
 
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise FileError(f"camera file {path} does not exist",
-                        hint="write one with recon calibrate intrinsics (its intrinsics.yaml)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FileError(f"cannot read the camera file {path} ({getattr(exc, 'strerror', None) or exc})") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
-        raise InputError(f"{where}: not valid YAML ({getattr(exc, 'problem', None) or exc})") from None
-    if not isinstance(data, dict) or "camera" not in data:
-        raise InputError(f"{path}: no camera section", hint="camera: {width, height, fx, fy, cx, cy, distortion}")
-    if data.get("format", CAMERA_FILE_FORMAT) != CAMERA_FILE_FORMAT:
-        raise InputError(f"{path}: format {data.get('format')!r} is not {CAMERA_FILE_FORMAT}")
-    return CameraCalibration.from_mapping(data["camera"], f"{path}: camera")
+    data = read_yaml(path, "camera file", hint="write one with recon calibrate intrinsics (its intrinsics.yaml)")
+    check(data, "camera", path)
+    line = line_of(data, "camera")
+    return CameraCalibration.from_mapping(data["camera"], f"{path}:{line}: camera" if line else f"{path}: camera")
 
 
 def write_calibrated_profile(profile: str | Path, camera: CameraCalibration, path: Path) -> Path:
@@ -140,17 +129,12 @@ def write_calibrated_profile(profile: str | Path, camera: CameraCalibration, pat
     with the calibration instead of the nominal camera."""
     import yaml
 
+    from recon_cli.inputs.yamlfile import plain, read_yaml
     from recon_cli.outputs import atomic_write_text
     from recon_cli.realism import BUILT_IN, REALISM_DIR, parse_profile
 
     source = REALISM_DIR / f"{profile}.yaml" if str(profile) in BUILT_IN else Path(profile)
-    try:
-        data = yaml.safe_load(source.read_text(encoding="utf-8")) or {}
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FileError(f"cannot read the realism profile {source} ({getattr(exc, 'strerror', None) or exc})",
-                        hint="give ideal, thesis or a profile YAML file") from None
-    except yaml.YAMLError:
-        raise InputError(f"{source}: not valid YAML", hint="check it with recon capture --realism FILE") from None
+    data = plain(read_yaml(source, "realism profile", hint="give ideal, thesis or a profile YAML file")) or {}
     if not isinstance(data, dict):
         raise InputError(f"{source}: the profile is not a mapping", hint="see docs/simulation.md")
     camera_section = data.get("camera") if isinstance(data.get("camera"), dict) else {}

@@ -21,6 +21,7 @@ end as one line on stderr and a non-zero exit code, without a traceback (:func:`
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 
@@ -46,11 +47,40 @@ from recon_cli.errors import ReconError
 __all__ = ["app", "bench_app", "entry", "main", "parse_vector"]
 
 
+def _non_finite(value) -> bool:
+    if isinstance(value, float):
+        return not math.isfinite(value)
+    if isinstance(value, tuple | list):
+        return any(_non_finite(v) for v in value)
+    return False
+
+
+def refuse_non_finite(command) -> None:
+    """Every number option of ``command`` and its subcommands refuses NaN and infinity (a
+    range such as ``min=1`` lets NaN through: every comparison with it is false)."""
+    for param in getattr(command, "params", ()):
+        if getattr(param, "_recon_finite", False):
+            continue
+        process = param.process_value
+
+        def process_value(ctx, value, _process=process, _param=param):
+            value = _process(ctx, value)
+            if _non_finite(value):
+                raise typer.BadParameter(f"{value!r} is not a finite number", ctx=ctx, param=_param)
+            return value
+
+        param.process_value = process_value
+        param._recon_finite = True
+    for sub in getattr(command, "commands", {}).values():
+        refuse_non_finite(sub)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the app and return the exit code; user errors become one line on stderr."""
     from recon_cli.console import err_console
 
     command = typer.main.get_command(app)
+    refuse_non_finite(command)
     try:
         result = command.main(args=argv, prog_name="recon", standalone_mode=False)
     except ReconError as exc:

@@ -212,7 +212,8 @@ def read_text(path: Path, what: str, *, hint: str | None = None, limits: YamlLim
     except OSError as exc:
         raise FileError(f"cannot read the {what} {path} ({exc.strerror or exc})", hint=hint) from None
     if len(data) > limits.max_bytes:
-        raise FileError(f"{what} {path} is larger than {limits.max_bytes:,} bytes", hint="this is not a recon input file")
+        raise FileError(f"{what} {path} is larger than {limits.max_bytes:,} bytes",
+                        hint="this is not a recon input file")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -233,3 +234,12 @@ def line_of(container, key) -> int | None:
     if isinstance(lines, list) and isinstance(key, int) and 0 <= key < len(lines):
         return lines[key]
     return getattr(container, "line", None) or None
+
+
+def plain(doc):
+    """``doc`` with plain dicts and lists (for writing it out again with yaml.safe_dump)."""
+    if isinstance(doc, dict):
+        return {k: plain(v) for k, v in doc.items()}
+    if isinstance(doc, list):
+        return [plain(v) for v in doc]
+    return doc

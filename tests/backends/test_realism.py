@@ -14,7 +14,7 @@ from recon_cli.backends.sim.camera import render_rgbd
 from recon_cli.backends.sim.station import SimStation
 from recon_cli.bench.scenarios import eq_4_1_views
 from recon_cli.config import DEFAULTS
-from recon_cli.errors import InputError
+from recon_cli.errors import FileError, InputError
 from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.objects import load_object
 from recon_cli.perception import sensor as fx
@@ -173,13 +173,13 @@ def test_depth_artefacts(gantry, view_q, thesis):
 # --------------------------------------------------------------------- profile files
 @pytest.mark.parametrize("text, where", [
     ("kinematics: {joint_offset_deg: 0.1}", "kinematics.joint_offset_deg is not a known key"),
-    ("kinematics: {base_error: {translation_mm: fast}}", "kinematics.base_error.translation_mm is 'fast'"),
-    ("camera: {actual: {fx: 1700, fy: 1700, cx: 800}}", "camera.actual.cy is missing"),
+    ("kinematics: {base_error: {translation_mm: fast}}", "kinematics.base_error.translation_mm = 'fast' is not a number"),
+    ("camera: {actual: {fx: 1700, fy: 1700, cx: 800}}", "camera.actual lacks cy"),
     ("camera: {actual: {fx: 1700, fy: 1700, cx: 800, cy: 600, distortion: [1, 2]}}", "camera.actual.distortion"),
     ("depth: {grazing_dropout_deg: [80, 60]}", "depth.grazing_dropout_deg"),
     ("image: {exposure: -1}", "image.exposure = -1"),
-    ("format: 2", "format is 2"),
-    ("depth: [1, 2", "broken.yaml:1"),
+    ("format: 2", "format = 2 is not 1"),
+    ("depth: [1, 2", "broken.yaml:2: not valid YAML"),
 ])
 def test_profile_errors_are_one_line(text, where):
     with pytest.raises(InputError) as exc:
@@ -189,7 +189,7 @@ def test_profile_errors_are_one_line(text, where):
 
 
 def test_profile_file_errors(tmp_path, gantry):
-    with pytest.raises(InputError, match="does not exist"):
+    with pytest.raises(FileError, match="does not exist"):
         load_profile(tmp_path / "missing.yaml")
     with pytest.raises(InputError, match="unknown realism profile 'perfect'"):
         load_profile("perfect")

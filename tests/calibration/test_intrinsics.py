@@ -96,7 +96,7 @@ def test_user_errors_are_one_line(tmp_path):
     with pytest.raises(FileError, match="does not exist"):
         load_camera_file(tmp_path / "none.yaml")
     (tmp_path / "bad.yaml").write_text("format: 1\ncamera: {width: 640, height: 480, fx: -1, fy: 1, cx: 1, cy: 1}\n")
-    with pytest.raises(InputError, match=r"bad.yaml: camera.fx is -1"):
+    with pytest.raises(InputError, match=r"bad.yaml:2: camera.fx = -1 px is outside \[1, 100000\] px"):
         load_camera_file(tmp_path / "bad.yaml")
 
 

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-import yaml
 
+from recon_cli.inputs.yamlfile import read_yaml
 from recon_cli.paths import ROBOT_DIR
 from recon_cli.perception.camera_model import Intrinsics
 
@@ -52,8 +52,7 @@ class BoardSpec:
 
 @functools.lru_cache(maxsize=1)
 def thesis_board() -> BoardSpec:
-    with open(ROBOT_DIR / "board.yaml") as f:
-        d = yaml.safe_load(f)
+    d = read_yaml(ROBOT_DIR / "board.yaml", "board file")
     return BoardSpec(int(d["squares_x"]), int(d["squares_y"]), float(d["square_length"]),
                      float(d["marker_length"]), str(d["dictionary"]))
 

@@ -15,8 +15,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import yaml
 
+from recon_cli.inputs.yamlfile import read_yaml
 from recon_cli.paths import ROBOT_DIR
 from recon_cli.perception.camera_model import Intrinsics, fovy_from_hfov, intrinsics_from_fovy
 
@@ -101,8 +101,7 @@ def _incidence_cos(depth: np.ndarray, K: Intrinsics) -> tuple[np.ndarray, np.nda
 
 @functools.lru_cache(maxsize=1)
 def motioncam_3d_m() -> SensorModel:
-    with open(ROBOT_DIR / "camera.yaml") as f:
-        d = yaml.safe_load(f)
+    d = read_yaml(ROBOT_DIR / "camera.yaml", "camera file")
     return SensorModel(
         name=d["name"], width=int(d["width"]), height=int(d["height"]),
         hfov=math.radians(float(d["hfov_deg"])), z_min=float(d["z_min"]), z_max=float(d["z_max"]),

@@ -28,10 +28,10 @@ from dataclasses import dataclass
 import fcl
 import numpy as np
 import pinocchio as pin
-import yaml
 from lxml import etree
 
 from recon_cli.geometry.transforms import pose_from_xyz_rpy
+from recon_cli.inputs.yamlfile import read_yaml
 from recon_cli.paths import ROBOT_DIR
 from recon_cli.robot.batch_fk import BatchFK
 from recon_cli.robot.kinematics import Kinematics
@@ -165,16 +165,14 @@ def shapes_from_urdf(urdf: str, kin: Kinematics) -> list[CollisionShape]:
 
 @functools.lru_cache(maxsize=1)
 def _declared_allowed() -> tuple[frozenset[str], ...]:
-    with open(ROBOT_DIR / "collision.yaml") as f:
-        entries = yaml.safe_load(f)["allowed"]
+    entries = read_yaml(ROBOT_DIR / "collision.yaml", "collision file")["allowed"]
     return tuple(frozenset(e["links"]) for e in entries)
 
 
 @functools.lru_cache(maxsize=1)
 def allowed_shape_pairs() -> frozenset[frozenset[str]]:
     """Shape pairs ("link/shape" labels) never checked, from robot/collision.yaml."""
-    with open(ROBOT_DIR / "collision.yaml") as f:
-        entries = yaml.safe_load(f).get("shapes", [])
+    entries = read_yaml(ROBOT_DIR / "collision.yaml", "collision file").get("shapes", [])
     return frozenset(frozenset(pair) for pair in entries)
 
 

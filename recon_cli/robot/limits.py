@@ -12,9 +12,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import yaml
 from lxml import etree
 
+from recon_cli.inputs.yamlfile import read_yaml
 from recon_cli.paths import ROBOT_DIR
 
 
@@ -58,8 +58,7 @@ class JointLimits:
 
 @functools.lru_cache(maxsize=1)
 def _limits_yaml() -> dict:
-    with open(ROBOT_DIR / "limits.yaml") as f:
-        return yaml.safe_load(f)
+    return read_yaml(ROBOT_DIR / "limits.yaml", "limits file")
 
 
 def acceleration_limit(joint: str) -> float:

@@ -6,17 +6,16 @@ import functools
 import math
 
 import numpy as np
-import yaml
 
 from recon_cli.errors import UnknownNameError
+from recon_cli.inputs.yamlfile import read_yaml
 from recon_cli.paths import ROBOT_DIR
 from recon_cli.robot.description import CellKind
 
 
 @functools.lru_cache(maxsize=1)
 def _poses() -> dict:
-    with open(ROBOT_DIR / "poses.yaml") as f:
-        return yaml.safe_load(f)
+    return read_yaml(ROBOT_DIR / "poses.yaml", "poses file")
 
 
 def named_configuration(kind: CellKind, name: str, joint_names: tuple[str, ...]) -> np.ndarray:

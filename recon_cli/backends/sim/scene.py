@@ -16,7 +16,6 @@ import os
 from dataclasses import dataclass
 
 import numpy as np
-import yaml
 from lxml import etree
 
 from recon_cli.objects import SceneObject
@@ -30,6 +29,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import mujoco  # noqa: E402  (MUJOCO_GL must be set before the import)
 
+from recon_cli.inputs.yamlfile import read_yaml
+
 CAMERA_NAME = "depth_camera"
 OBJECT_NAME = "scan_object"
 BOARD_PIXELS_PER_METRE = 8000.0  # texture resolution of the printed board (0.125 mm per texel)
@@ -37,8 +38,7 @@ BOARD_PIXELS_PER_METRE = 8000.0  # texture resolution of the printed board (0.12
 
 @functools.lru_cache(maxsize=1)
 def drives() -> dict:
-    with open(ROBOT_DIR / "drives.yaml") as f:
-        return yaml.safe_load(f)
+    return read_yaml(ROBOT_DIR / "drives.yaml", "drives file")
 
 
 @dataclass

@@ -1,15 +1,38 @@
 """Opening a run's recording: rerun's viewer where there is a display, its web viewer served
-from here on request, otherwise the commands that open it elsewhere."""
+from here on request, otherwise the commands that open it elsewhere.
+
+The viewer is rerun's own program (the ``rerun`` binary of rerun-sdk), run as a child of
+recon: ``--bind`` goes to it (the web viewer's HTTP server and the gRPC server that feeds
+it listen on 127.0.0.1 unless the user says otherwise), its output is kept off the
+terminal (recon prints the address itself), and it ends with recon: Ctrl-C and SIGTERM stop
+it and wait for it, and on Linux it also gets SIGTERM should recon die without cleaning up.
+"""
 
 from __future__ import annotations
 
+import ipaddress
 import os
+import signal
+import socket
 import subprocess
 import sys
+import tempfile
+import time
+from collections.abc import Callable
 from pathlib import Path
+from urllib.parse import quote
 
-from recon_cli.errors import FileError
+from recon_cli.errors import FileError, InputError, ReconError
+from recon_cli.interrupts import signal_name, stop_signals
 from recon_cli.recording import RECORDING_FILE, RERUN_VERSION, require_rerun
+
+#: where the web viewer listens unless ``--bind`` says otherwise: this machine only
+DEFAULT_BIND = "127.0.0.1"
+#: the web viewer's HTTP port unless ``--port`` says otherwise (rerun's default)
+WEB_PORT = 9090
+START_TIMEOUT_S = 30.0  # until the web viewer answers
+STOP_TIMEOUT_S = 5.0  # after SIGTERM, before SIGKILL
+_STOP = (signal.SIGINT, signal.SIGTERM)
 
 
 def find_recording(target: Path) -> Path:
@@ -40,17 +63,203 @@ def elsewhere(path: Path) -> str:
             f"or serve it from here: recon view {path} --web (then open the printed address)")
 
 
-def _rerun(*args: str) -> list[str]:
-    return [sys.executable, "-m", "rerun", *args]
+# ------------------------------------------------------------------ addresses and ports
+def check_bind(address: str) -> str:
+    """``--bind``: an IPv4 or IPv6 address (normalized), or a one-line error."""
+    try:
+        return str(ipaddress.ip_address(address.strip().strip("[]")))
+    except ValueError:
+        raise InputError(f"--bind {address!r} is not an IP address",
+                         hint="give 127.0.0.1 (this machine only, the default), 0.0.0.0 (every IPv4 interface), "
+                              ":: (every interface) or one address of this machine") from None
 
 
-def open_viewer(path: Path, web: bool = False, port: int | None = None) -> int:
-    """Open the recording in rerun's viewer (blocks until it is closed) or serve the web
-    viewer (blocks until Ctrl-C); rerun's viewer analytics are switched off first."""
+def _family(address: str) -> socket.AddressFamily:
+    return socket.AF_INET6 if ipaddress.ip_address(address).version == 6 else socket.AF_INET
+
+
+def _wildcard(address: str) -> bool:
+    return ipaddress.ip_address(address).is_unspecified
+
+
+def _port_free(address: str, port: int) -> bool:
+    """Nothing listens on ``address:port`` (bound the way rerun binds, with SO_REUSEADDR)."""
+    with socket.socket(_family(address), socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((address, port))
+        except OSError:
+            return False
+    return True
+
+
+def _free_port(address: str) -> int:
+    """A port nothing listens on at ``address`` (for the gRPC server behind the web viewer)."""
+    with socket.socket(_family(address), socket.SOCK_STREAM) as s:
+        s.bind((address, 0))
+        return s.getsockname()[1]
+
+
+def _local_address(address: str) -> str:
+    """Where this machine reaches a server listening on ``address``."""
+    if not _wildcard(address):
+        return address
+    return "::1" if _family(address) == socket.AF_INET6 else "127.0.0.1"
+
+
+def _outward_address() -> str:
+    """This machine's address toward the network (no packet is sent), else its name."""
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.connect(("192.0.2.1", 9))  # TEST-NET-1: only selects the outgoing interface
+            return s.getsockname()[0]
+    except OSError:
+        return socket.gethostname()
+
+
+def viewer_url(address: str, web_port: int, grpc_port: int) -> str:
+    """The address to open: rerun's web viewer, told where its data comes from."""
+    host = _outward_address() if _wildcard(address) else address
+    if ":" in host:
+        host = f"[{host}]"
+    return f"http://{host}:{web_port}/?url=" + quote(f"rerun+http://{host}:{grpc_port}/proxy", safe="")
+
+
+def _answers(address: str, port: int) -> bool:
+    try:
+        with socket.create_connection((address, port), timeout=0.5):
+            return True
+    except OSError:
+        return False
+
+
+# ------------------------------------------------------------------ rerun's program
+def _rerun_command() -> list[str]:
+    """rerun's own program (rerun-sdk's ``rerun_cli/rerun``), started directly so that
+    stopping it stops the server (``python -m rerun`` would be one more process between)."""
+    try:
+        import rerun_cli
+    except ImportError:
+        return [sys.executable, "-m", "rerun"]
+    folder = Path(rerun_cli.__file__).parent
+    name = "rerun.exe" if sys.platform.startswith("win") else "rerun"
+    candidates = [Path(os.environ["RERUN_CLI_PATH"])] if os.environ.get("RERUN_CLI_PATH") else []
+    candidates += [folder / "Rerun.app" / "Contents" / "MacOS" / "Rerun", folder / name]
+    for c in candidates:
+        if c.is_file():
+            return [str(c)]
+    return [sys.executable, "-m", "rerun"]
+
+
+def _child_setup() -> Callable[[], None]:
+    """What the child does between fork and exec: signals as usual again (the parent blocks
+    them while it starts the child) and, on Linux, SIGTERM when recon ends without stopping
+    it. Everything it needs is looked up here, in the parent."""
+    prctl = None
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            prctl = ctypes.CDLL(None, use_errno=True).prctl
+        except (OSError, AttributeError):
+            prctl = None
+    term, unblock, stop = int(signal.SIGTERM), signal.pthread_sigmask, _STOP
+
+    def setup() -> None:  # pragma: no cover - runs in the child
+        if prctl is not None:
+            prctl(1, term)  # PR_SET_PDEATHSIG
+        unblock(signal.SIG_UNBLOCK, stop)
+
+    return setup
+
+
+def _start(command: list[str], log) -> subprocess.Popen:
+    """Start rerun with stop signals held back, so that a Ctrl-C cannot fall between the
+    start and the moment recon knows the child it has to stop."""
+    if sys.platform == "win32":  # pragma: no cover
+        return subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
+    setup = _child_setup()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP)
+    try:
+        return subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                                preexec_fn=setup)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def _stop(child: subprocess.Popen) -> None:
+    """SIGTERM, then SIGKILL after STOP_TIMEOUT_S; always waits (no process is left behind)."""
+    if child.poll() is None:
+        child.terminate()
+        try:
+            child.wait(STOP_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            child.kill()
+    while True:
+        try:
+            child.wait()
+            return
+        except KeyboardInterrupt:  # a second Ctrl-C: keep waiting for the child, it is ending
+            child.kill()
+
+
+def _last_line(log) -> str:
+    log.flush()
+    log.seek(0)
+    lines = [ln.strip() for ln in log.read().decode("utf-8", "replace").splitlines() if ln.strip()]
+    return lines[-1] if lines else "no output"
+
+
+def _wait_until_listening(child: subprocess.Popen, address: str, ports: tuple[int, ...], log) -> None:
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while not all(_answers(address, p) for p in ports):
+        if child.poll() is not None:
+            raise ReconError(f"rerun's web viewer ended at its start (exit code {child.returncode}): "
+                             f"{_last_line(log)}", hint="try another --port, or run rerun --serve-web yourself")
+        if time.monotonic() > deadline:
+            raise ReconError(f"rerun's web viewer did not answer on {address} within {START_TIMEOUT_S:g} s",
+                             hint="try another --port")
+        time.sleep(0.1)
+
+
+def open_viewer(path: Path, web: bool = False, port: int | None = None, bind: str = DEFAULT_BIND,
+                say: Callable[[str], None] = print) -> int:
+    """Open the recording in rerun's viewer (until its window is closed), or serve the web
+    viewer on ``bind`` (until Ctrl-C or SIGTERM; ``say`` gets the address to open). Either
+    way rerun's program ends before this returns; rerun's viewer analytics are switched off
+    first. Returns 0 (also after a stop signal)."""
     require_rerun()
-    subprocess.run(_rerun("analytics", "disable"), check=False, capture_output=True)
+    bind = check_bind(bind)
+    command = _rerun_command()
+    subprocess.run([*command, "analytics", "disable"], check=False, capture_output=True, timeout=60)
     if web:
-        args = ["--serve-web", *(["--web-viewer-port", str(port)] if port else []), str(path)]
+        web_port = port or WEB_PORT
+        if not _port_free(bind, web_port):
+            raise InputError(f"port {web_port} is in use on {bind}", hint="choose another --port")
+        grpc_port = _free_port(bind)
+        args = ["--serve-web", "--bind", bind, "--web-viewer-port", str(web_port), "--port", str(grpc_port)]
     else:
-        args = [str(path)]
-    return subprocess.run(_rerun(*args), check=False).returncode
+        args = ["--bind", bind]
+    stopped_by = None
+    with tempfile.TemporaryFile() as log, stop_signals():
+        try:
+            child = _start([*command, *args, str(path)], log)
+        except OSError as exc:
+            raise ReconError(f"cannot start rerun's viewer ({exc.strerror or exc})",
+                             hint=f"pip install rerun-sdk=={RERUN_VERSION}") from None
+        try:
+            if web:
+                _wait_until_listening(child, _local_address(bind), (web_port, grpc_port), log)
+                say(f"web viewer: {viewer_url(bind, web_port, grpc_port)} (listening on {bind}; Ctrl-C stops it)")
+            code = child.wait()
+        except KeyboardInterrupt as exc:
+            stopped_by = signal_name(exc)
+        finally:
+            _stop(child)
+        if stopped_by is not None:
+            say(f"viewer stopped ({stopped_by})")
+            return 0
+        if code != 0:
+            raise ReconError(f"rerun's viewer ended with exit code {code}: {_last_line(log)}",
+                             hint="recon view --web serves it to a browser instead")
+    return 0

@@ -19,7 +19,7 @@ are unchanged and runs the others again from an empty folder.
 from __future__ import annotations
 
 import json
-import shutil
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -43,6 +43,7 @@ class BatchOptions:
     junit: Path | None = None  # extra copies of the reports
     json: Path | None = None
     markdown: Path | None = None
+    force: bool = False  # a used --out: remove what recon wrote there first (recon_cli.outputs)
 
 
 @dataclass(frozen=True)
@@ -79,17 +80,21 @@ class BatchResult:
 
 
 def _folder(options: BatchOptions) -> Path:
-    from recon_cli.console import run_folder
+    """The batch folder, claimed (recon_cli.outputs): new or empty, the folder of the batch to
+    resume (no link anywhere in it), or with --force what recon wrote there removed first."""
+    from recon_cli.outputs import OutputMode, claim_output
 
-    if options.resume and options.out is None:
-        raise FileError("--resume needs the folder of the batch to resume", hint="give it with --out")
+    mode = OutputMode.of(options.resume, options.force, append_option="--resume")
     out = options.out
-    if out is not None and not options.resume and out.is_dir() and any(out.iterdir()):
-        raise FileError(f"batch folder {out} is not empty",
-                        hint="choose a new folder with --out, or pass --resume to finish the batch in it")
+    if options.resume and out is None:
+        raise FileError("--resume needs the folder of the batch to resume", hint="give it with --out")
     if out is not None and options.resume and not (out / "batch.json").is_file():
         raise FileError(f"{out} holds no batch to resume (no batch.json)", hint="run it without --resume first")
-    return run_folder(out, "batch")
+    claim = dict(command="batch", append="--resume to finish the batch in it")
+    if mode is OutputMode.FORCE and out is not None and out.is_dir() and not (out / ".lock").is_symlink():
+        with _Lock(out):  # not while another batch runs in it
+            return claim_output(out, mode, **claim).path
+    return claim_output(out, mode, **claim).path
 
 
 class _Lock:
@@ -104,7 +109,12 @@ class _Lock:
             import fcntl
         except ImportError:  # not POSIX: no lock
             return self
-        self.file = open(self.path, "w")  # noqa: SIM115 (held for the batch)
+        try:
+            fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW, 0o666)
+        except OSError as exc:
+            raise FileError(f"cannot lock {self.path} ({'it is a link' if self.path.is_symlink() else exc.strerror})",
+                            hint="remove it, or choose another folder with --out") from None
+        self.file = os.fdopen(fd, "w")  # held for the batch
         try:
             fcntl.flock(self.file, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
@@ -147,6 +157,7 @@ def run_batch(spec: BatchSpec, options: BatchOptions,
     from recon_cli.batch.reports import write_reports
     from recon_cli.console import write_json
     from recon_cli.interrupts import signal_name
+    from recon_cli.outputs import remove_inside
 
     out = _folder(options)
     t0, started = time.monotonic(), time.time()
@@ -161,8 +172,7 @@ def run_batch(spec: BatchSpec, options: BatchOptions,
             if earlier is not None:
                 results[job.name] = earlier
                 continue
-            if folder.exists():
-                shutil.rmtree(folder)  # a job that did not finish, or another job of the same name
+            remove_inside(out, Path("jobs") / job.name)  # a job that did not finish, or another of the same name
             todo.append((job, folder))
         total, done = len(spec.jobs), len(results)
         for r in results.values():

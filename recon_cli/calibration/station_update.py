@@ -4,11 +4,14 @@
 with ``--station`` plans and computes forward kinematics with (it becomes arguments of the
 one cell description). The file is edited as text: only the ``hand_eye`` block is replaced
 (or appended), comments and the rest stay as the user wrote them; the edited file must load
-before it replaces the old one, which is kept as ``FILE.bak``.
+before it replaces the old one, which is kept as ``FILE.bak``. A station file reached through
+a link is updated where the link points (the file, its backup beside it, atomically); the
+link stays a link.
 """
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 from pathlib import Path
@@ -47,25 +50,27 @@ def replace_hand_eye(text: str, block: str) -> str:
 def write_station_hand_eye(path: Path, flange_T_camera: np.ndarray, comment: str = "") -> Path:
     """Put flange_T_camera into a station file (see the module docstring); returns the backup."""
     from recon_cli.backends.station_file import load_station
-    from recon_cli.outputs import atomic_write_text
+    from recon_cli.outputs import atomic_write, atomic_write_text
 
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+        real = path.resolve(strict=True)  # a link: the file it points to is updated, the link stays
+        text = real.read_text(encoding="utf-8")
+        mode = real.stat().st_mode & 0o7777
+    except (OSError, RuntimeError, UnicodeDecodeError) as exc:
         raise FileError(f"cannot read the station file {path} ({getattr(exc, 'strerror', None) or exc})",
                         hint="check the path given with --station") from None
     new = replace_hand_eye(text, hand_eye_block(flange_T_camera, comment))
-    probe = path.with_name(f".{path.name}.calibrated")
+    probe = real.with_name(f".{real.name}.calibrated")
     try:
         atomic_write_text(probe, new)
         try:
             load_station(probe)  # the edited file must be a valid station file
         except InputError as exc:
             raise InputError(exc.message.replace(str(probe), str(path)), hint=exc.hint) from None
-        backup = path.with_name(path.name + ".bak")
-        shutil.copy2(path, backup)
-        probe.replace(path)
+        backup = atomic_write(real.with_name(real.name + ".bak"), lambda tmp: shutil.copyfile(real, tmp), mode)
+        os.chmod(probe, mode)
+        os.replace(probe, real)
     except OSError as exc:
         raise FileError(f"cannot write the station file {path} ({exc.strerror})",
                         hint="make the file writable or pass --no-write and copy hand_eye.yaml by hand") from None

@@ -11,6 +11,7 @@ from recon_cli.cli.app import app
 from recon_cli.cli.options import (
     CellOpt,
     D,
+    ForceOpt,
     RealismOpt,
     RecordOpt,
     ResolutionOpt,
@@ -18,6 +19,7 @@ from recon_cli.cli.options import (
     SeedOpt,
     check_record,
     make_view,
+    output_folder,
     parse_vector,
     realism_profile,
 )
@@ -47,12 +49,13 @@ def autoscan(
                                                       "(docs/hardware.md); default: the simulation.")] = None,
     realism: RealismOpt = D.realism.name,
     record: RecordOpt = False,
+    force: ForceOpt = False,
 ) -> None:
     """Scan an unknown object autonomously: the ellipsoid view planner of the thesis."""
     from dataclasses import replace
 
     from recon_cli.config import SceneConfig
-    from recon_cli.console import console, progress_bar, run_folder
+    from recon_cli.console import console, progress_bar
     from recon_cli.robot.description import CellConfig, CellKind
     from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions
 
@@ -61,7 +64,6 @@ def autoscan(
         cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
         scene=SceneConfig(object_name, scale), sensor=replace(D.sensor, resolution=resolution), seed=seed,
         viewplan=replace(_V, n=n, d_c=dc, m=m, sigma=sigma), realism=realism_profile(realism))
-    folder = run_folder(out, "autoscan")
     view = None
     if initial is not None:
         theta, phi = parse_vector(initial, 2, "--initial", "degrees")
@@ -69,6 +71,8 @@ def autoscan(
 
         center, _ = load_object(object_name, scale).crop_box(config.scene.box_margin)
         view = make_view(",".join(map(str, center)), dc + 0.1, theta, phi, 0.0, "world")
+    folder = output_folder(out, "autoscan", force=force,
+                           inputs=(station, Path(realism), Path(object_name))).path
     opts = AutoscanOptions(folder, config, view, pictures=pictures, run={"command": "autoscan"}, station=station,
                            record=record)
     with progress_bar() as update:

@@ -37,6 +37,10 @@ def batch(
     = None,
     resume: Annotated[bool, typer.Option("--resume", help="Go on with the batch in --out: keep the jobs that "
                                                           "finished, run the others.")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Use a non-empty --out: first remove what recon wrote "
+                                                        "there (links only as links; the rest stays; "
+                                                        "docs/architecture.md); without it (or --resume) --out must "
+                                                        "be new or empty.")] = False,
     junit: Annotated[Path | None, typer.Option(help="Also write the JUnit XML here.")] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="Also write the JSON summary here.")] = None,
     markdown: Annotated[Path | None, typer.Option(help="Also write the Markdown summary here (e.g. "
@@ -78,7 +82,7 @@ def batch(
         console.print(styled(f"[{done}/{total}] {what}", style[r.status.value],
                              f" {r.name} in {r.wall_s:.1f} s" + (f": {r.reason}" if r.reason else "")))
 
-    options = BatchOptions(out, workers, scheduler, cluster, resume, junit, json_out, markdown)
+    options = BatchOptions(out, workers, scheduler, cluster, resume, junit, json_out, markdown, force)
     with stop_signals(), progress_bar() as update:
         result = run_batch(spec, options, update, on_result)
     _print_table(result)

@@ -14,6 +14,7 @@ from recon_cli.cli.app import bench_app
 from recon_cli.cli.options import (
     CellOpt,
     D,
+    ForceOpt,
     RealismOpt,
     ResolutionOpt,
     SafetyOpt,
@@ -21,6 +22,7 @@ from recon_cli.cli.options import (
     choices,
     make_cell,
     one_of,
+    output_folder,
     realism_profile,
 )
 
@@ -36,13 +38,14 @@ def bench_ik(
     safety: SafetyOpt = D.cell.safety_distance,
     seed: SeedOpt = D.seed,
     out: OutOpt = None,
+    force: ForceOpt = False,
 ) -> None:
     """IK success rate and time on random reachable camera poses around the table."""
     from recon_cli.bench import render
     from recon_cli.bench.ik import IKBenchConfig, run_ik_bench
-    from recon_cli.console import console, progress_bar, run_folder, write_json
+    from recon_cli.console import console, progress_bar, write_json
 
-    folder = run_folder(out, "bench-ik")
+    folder = output_folder(out, "bench ik", force=force).path
     c = make_cell(cell, safety)
     cfg = IKBenchConfig(n_poses=n, solutions=solutions, seed=seed)
     with progress_bar() as update:
@@ -59,15 +62,16 @@ def bench_sim(
     object_name: Annotated[str, typer.Option("--object", help="Object on the board.")] = "drill",
     seed: SeedOpt = D.seed,
     out: OutOpt = None,
+    force: ForceOpt = False,
 ) -> None:
     """Board detection in the 24 views of eq. 4.1, capture time, execution precision."""
     from dataclasses import asdict
 
     from recon_cli.bench import render
     from recon_cli.bench.sim import run_sim_bench
-    from recon_cli.console import console, progress_bar, run_folder, write_json
+    from recon_cli.console import console, progress_bar, write_json
 
-    folder = run_folder(out, "bench-sim")
+    folder = output_folder(out, "bench sim", force=force).path
     with progress_bar() as update:
         result = run_sim_bench(folder, object_name, seed, update)
     write_json(folder / "bench_sim.json", {"object": result.object_name, "views": [asdict(r) for r in result.rows],
@@ -86,14 +90,15 @@ def bench_registration(
     seed: SeedOpt = D.seed,
     realism: RealismOpt = D.realism.name,
     out: OutOpt = None,
+    force: ForceOpt = False,
 ) -> None:
     """Thesis 4.2: ChArUco pose errors (Table 4.2) and global vs local registration accuracy."""
     from recon_cli.bench import render
     from recon_cli.bench.registration import run_registration_bench
-    from recon_cli.console import console, progress_bar, run_folder, write_json
+    from recon_cli.console import console, progress_bar, write_json
 
     profile = realism_profile(realism)
-    folder = run_folder(out, "bench-registration")
+    folder = output_folder(out, "bench registration", force=force, inputs=(Path(realism),)).path
     with progress_bar() as update:
         data = run_registration_bench(folder, object_name, seed, resolution, update, profile)
     write_json(folder / "bench_registration.json", data)
@@ -111,16 +116,17 @@ def bench_sequence(
                                             "default order).")] = "A,B,C,D,A0",
     seed: SeedOpt = D.seed,
     out: OutOpt = None,
+    force: ForceOpt = False,
 ) -> None:
     """Thesis 4.3: total trajectory time and planning requests of the 24 views of eq. 4.1."""
     from dataclasses import asdict
 
     from recon_cli.bench import render
     from recon_cli.bench.sequence import CASES, ecdf_png, run_sequence_bench, summarize
-    from recon_cli.console import console, progress_bar, run_folder, write_json
+    from recon_cli.console import console, progress_bar, write_json
 
     chosen = choices(cases, CASES, "case")
-    folder = run_folder(out, "bench-sequence")
+    folder = output_folder(out, "bench sequence", force=force).path
     n = 3 if quick else runs
     plan = D.planner
     with progress_bar() as update:
@@ -149,19 +155,20 @@ def bench_viewplan(
     seed: SeedOpt = D.seed,
     realism: RealismOpt = D.realism.name,
     out: OutOpt = None,
+    force: ForceOpt = False,
 ) -> None:
     """Thesis 4.4: ellipsoid view planner vs evenly spread and random views, every object."""
     from dataclasses import asdict
 
     from recon_cli.bench import render
     from recon_cli.bench.viewplan import coverage_png, run_viewplan_bench
-    from recon_cli.console import console, progress_bar, run_folder, write_json
+    from recon_cli.console import console, progress_bar, write_json
     from recon_cli.robot.description import CellConfig, CellKind
     from recon_cli.workflows.autoscan import METHODS
 
     chosen = choices(methods, METHODS, "method")
     profile = realism_profile(realism)
-    folder = run_folder(out, "bench-viewplan")
+    folder = output_folder(out, "bench viewplan", force=force, inputs=(Path(realism),)).path
     with progress_bar() as update:
         rows = run_viewplan_bench(folder, [o.strip() for o in objects.split(",") if o.strip()], chosen, n, dc, seed,
                                   resolution, CellConfig(kind=CellKind.parse(cell)), update, profile)
@@ -187,13 +194,14 @@ def bench_planners(
     = D.planner.shortcut_rounds,
     seed: SeedOpt = D.seed,
     out: OutOpt = None,
+    force: ForceOpt = False,
 ) -> None:
     """The Table 4.1 planning benchmark (thesis 4.1): success, plan times, path lengths."""
     from dataclasses import replace
 
     from recon_cli.bench import render
     from recon_cli.bench.planners import DEFAULT_PLANNERS, run_planner_bench, thesis_times, write_results
-    from recon_cli.console import console, progress_bar, run_folder
+    from recon_cli.console import console, progress_bar
     from recon_cli.planning.options import PLANNERS
 
     one_of(peer, ("none", "mplib"), "peer")
@@ -201,7 +209,7 @@ def bench_planners(
     names = list(DEFAULT_PLANNERS) if planners == "default" else choices(planners, PLANNERS, "planner")
     if quick:
         names, n = ["RRTConnect", "RRT"], min(n, 10)
-    folder = run_folder(out, "bench-planners")
+    folder = output_folder(out, "bench planners", force=force).path
     with progress_bar() as update:
         rows = run_planner_bench(names, n, time_limit, seed, update, options)
     peer_summary = None

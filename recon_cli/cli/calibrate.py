@@ -9,7 +9,17 @@ from typing import Annotated
 import typer
 
 from recon_cli.cli.app import app
-from recon_cli.cli.options import CellOpt, D, RealismOpt, ResolutionOpt, SafetyOpt, SeedOpt, one_of
+from recon_cli.cli.options import (
+    CellOpt,
+    D,
+    ForceOpt,
+    RealismOpt,
+    ResolutionOpt,
+    SafetyOpt,
+    SeedOpt,
+    one_of,
+    output_folder,
+)
 from recon_cli.errors import InputError, UnknownNameError
 
 calibrate_app = typer.Typer(help="Calibration from views of the ChArUco board: camera intrinsics and distortion, "
@@ -78,6 +88,11 @@ def handeye(
     safety: SafetyOpt = D.cell.safety_distance,
     seed: SeedOpt = D.seed,
     realism: RealismOpt = D.realism.name,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="Use a non-empty --out: first remove what recon "
+                                                                "wrote there (links only as links; the rest stays; "
+                                                                "docs/architecture.md); without it --out must be "
+                                                                "new or empty (--force is about the station file).")]
+    = False,
 ) -> None:
     """Hand-eye calibration: flange_T_camera (and the board in the world) from board views."""
     import numpy as np
@@ -86,16 +101,18 @@ def handeye(
     from recon_cli.calibration.views import BoardViewOptions
     from recon_cli.cli.options import realism_profile
     from recon_cli.config import SensorConfig
-    from recon_cli.console import console, progress_bar, run_folder, styled
+    from recon_cli.console import console, progress_bar, styled
     from recon_cli.robot.description import CellConfig, CellKind
     from recon_cli.workflows.calibrate import HandEyeOptions, run_handeye
 
     one_of(method, METHODS, "hand-eye method")
     config = D.replace(cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
                        sensor=SensorConfig(noise, resolution), seed=seed, realism=realism_profile(realism))
-    options = HandEyeOptions(run_folder(out, "handeye", fresh=scans is None), config, scans,
-                             BoardViewOptions(n=views), HandEyeMethod(method), refine, intrinsics, station, write,
-                             force, parse_board(board))
+    spec = parse_board(board)
+    folder = output_folder(out, "calibrate handeye", default="handeye", force=overwrite, force_option="--overwrite",
+                           inputs=(scans, intrinsics, station, Path(realism))).path
+    options = HandEyeOptions(folder, config, scans, BoardViewOptions(n=views), HandEyeMethod(method), refine,
+                             intrinsics, station, write, force, spec)
     with progress_bar() as update:
         r = run_handeye(options, update)
     if r.recorded is not None:
@@ -130,7 +147,7 @@ def handeye(
     for _, message in r.diversity.issues:
         console.print(styled("warning:", "yellow", f" {message}"))
     if r.station_written is not None:
-        console.print(f"written into {r.station_written} (hand_eye; the old file is {r.station_written}.bak)")
+        console.print(f"written into {r.station_written} (hand_eye; the old file is {r.station_backup})")
     elif station is not None and write:
         console.print(styled("not written", "yellow", f" into {station}: the views are poorly posed (see the "
                                                       "warnings); record more views or pass --force"))
@@ -151,17 +168,21 @@ def intrinsics(
                                                      "<out>/realism.yaml with the calibration as its assumed camera "
                                                      "(simulated sessions then use it: --realism that file).")]
     = None,
+    force: ForceOpt = False,
 ) -> None:
     """Camera calibration (intrinsics and lens distortion) from images of the ChArUco board."""
     import numpy as np
 
     from recon_cli.calibration.intrinsics import DistortionModel
-    from recon_cli.console import console, run_folder, styled
+    from recon_cli.console import console, styled
     from recon_cli.workflows.calibrate import IntrinsicsOptions, run_intrinsics
 
     one_of(model, MODELS, "distortion model")
-    run = run_intrinsics(IntrinsicsOptions(Path(source), run_folder(out, "intrinsics"), parse_board(board), pattern,
-                                           DistortionModel(model), min_corners, profile))
+    spec = parse_board(board)
+    folder = output_folder(out, "calibrate intrinsics", default="intrinsics", force=force,
+                           inputs=(source, None if profile is None else Path(profile))).path
+    run = run_intrinsics(IntrinsicsOptions(Path(source), folder, spec, pattern, DistortionModel(model), min_corners,
+                                           profile))
     r = run.result
     K = r.camera.intrinsics
     for s in r.skipped:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -31,6 +32,10 @@ ResolutionOpt = Annotated[float, typer.Option(min=0.05, max=1.0, help="Image siz
 RealismOpt = Annotated[str, typer.Option("--realism", help="How real the simulated cell is: 'ideal' (the model "
                                                            "itself), 'thesis' (errors of the thesis' cell) or a "
                                                            "profile FILE.yaml (docs/simulation.md).")]
+ForceOpt = Annotated[bool, typer.Option("--force", help="Use a non-empty --out: first remove what recon wrote there "
+                                                      "(links only as links; the rest stays; "
+                                                      "docs/architecture.md); without it --out must be new or "
+                                                      "empty.")]
 RecordOpt = Annotated[bool, typer.Option("--record", help="Also write a 3D recording of the run (recording.rrd "
                                                          "in the output folder; recon view opens it; needs "
                                                          "recon-cli[viz]).")]
@@ -53,6 +58,16 @@ def parse_vector(text: str, n: int, option: str, unit: str) -> tuple[float, ...]
         raise InputError(f"{option} '{text}' is not {n} numbers",
                          hint=f"write {n} comma-separated values in {unit}, e.g. {example}")
     return values
+
+
+def output_folder(out: Path | None, command: str, *, append: bool = False, force: bool = False,
+                  append_hint: str | None = None, force_option: str = "--force", **claim):
+    """Claim the output folder of a command (:func:`recon_cli.outputs.claim_output`) from its
+    ``--out``, ``--append`` and ``--force``; before any planning, robot or registration work."""
+    from recon_cli.outputs import OutputMode, claim_output
+
+    mode = OutputMode.of(append, force, force_option=force_option)
+    return claim_output(out, mode, command=command, append=append_hint, force=force_option, **claim)
 
 
 def check_record(record: bool) -> None:

@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from recon_cli.cli.app import app
-from recon_cli.cli.options import parse_vector
+from recon_cli.cli.options import ForceOpt, output_folder, parse_vector
 
 
 @app.command()
@@ -26,18 +26,19 @@ def replay(
                                                         "intrinsics.json).")] = None,
     local: Annotated[bool, typer.Option("--local/--global-only", help="Pose-graph local registration.")] = True,
     mesh: Annotated[bool, typer.Option("--mesh/--no-mesh", help="Poisson mesh of the fused cloud.")] = False,
+    force: ForceOpt = False,
 ) -> None:
     """Register a recording at its recorded poses; overlap residuals between frames before and after."""
     from recon_cli.backends.hardware.replay import ReplayConfig
-    from recon_cli.console import console, progress_bar, run_folder
+    from recon_cli.console import console, progress_bar
     from recon_cli.workflows.replay import ReplayOptions, run_replay
 
-    folder = run_folder(out, "replay")
     mapping = {"source": str(source), "depth_scale": depth_scale}
     if intrinsics is not None:
         mapping["intrinsics"] = dict(zip(("fx", "fy", "cx", "cy"),
                                          parse_vector(intrinsics, 4, "--intrinsics", "pixels"), strict=True))
     cfg = ReplayConfig.from_mapping(mapping, "recon replay")
+    folder = output_folder(out, "replay", force=force, inputs=(source,)).path
     with progress_bar() as update:
         result = run_replay(ReplayOptions(cfg, folder, voxel=voxel, local=local, mesh=mesh), update)
     s = result.summary

@@ -28,9 +28,12 @@ def report(
     from dataclasses import replace
 
     from recon_cli.console import console, styled
+    from recon_cli.outputs import OutputMode, claim_output
     from recon_cli.report import write_page
+    from recon_cli.report.page import PAGE, PAGE_FILES
 
-    page = write_page(run_folder, replace(_R, render=render, image_width=width))
+    folder = claim_output(run_folder, OutputMode.APPEND, command="report", names=(PAGE, PAGE_FILES))
+    page = write_page(folder.path, replace(_R, render=render, image_width=width))
     console.print(f"{page.kind.value} folder, status {page.status}: {len(page.pictures)} pictures"
                   + (f", the mesh from {len(page.mesh_views)} directions" if page.mesh_views else ""))
     for line in page.notes:

@@ -17,6 +17,7 @@ from recon_cli.cli.options import (
     CellOpt,
     D,
     FocusOpt,
+    ForceOpt,
     FrameOpt,
     PhiOpt,
     RadiusOpt,
@@ -30,11 +31,12 @@ from recon_cli.cli.options import (
     index_list,
     make_view,
     one_of,
+    output_folder,
     parse_vector,
     positive,
     realism_profile,
 )
-from recon_cli.errors import InputError
+from recon_cli.errors import FileError, InputError
 
 VIEW_SETS = ("single", "eq-4.1")
 
@@ -68,6 +70,10 @@ def capture(
                                                       "(docs/hardware.md); default: the simulation.")] = None,
     realism: RealismOpt = D.realism.name,
     record: RecordOpt = False,
+    append: Annotated[bool, typer.Option("--append", help="Add this capture's scans to the scan store already in "
+                                                          "--out (same cell and object); without it --out must be "
+                                                          "new or empty.")] = False,
+    force: ForceOpt = False,
 ) -> None:
     """Move the simulated robot through views and write one scan per view into a scan store."""
     from dataclasses import replace
@@ -75,7 +81,7 @@ def capture(
     import numpy as np
 
     from recon_cli.config import SceneConfig, SensorConfig
-    from recon_cli.console import console, progress_bar, run_folder, styled
+    from recon_cli.console import console, progress_bar, styled
     from recon_cli.robot.description import CellConfig, CellKind
     from recon_cli.session import resolve_object_name
     from recon_cli.workflows.capture import CaptureOptions, run_capture
@@ -94,10 +100,12 @@ def capture(
         cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
         scene=SceneConfig(object_name, scale), sensor=SensorConfig(noise, resolution), seed=seed,
         planner=replace(D.planner, planner=planner, time_limit=planning_time), realism=realism_profile(realism))
-    folder = run_folder(out, "capture")
+    folder = output_folder(out, "capture", append=append, force=force,
+                           append_hint="--append to add this capture's scans to the scan store in it",
+                           inputs=(station, Path(realism), Path(object_name))).path
     options = CaptureOptions(views=view_list, out=folder, config=config, cover_board=frozenset(covered),
                              run={"command": "capture", "views": views}, station=station,
-                             record=record)
+                             record=record, append=append)
     with progress_bar() as update:
         result = run_capture(options, update)
     for m, scan, n_points, t_cap in zip(result.moves, result.scans, result.points, result.capture_seconds,
@@ -140,11 +148,12 @@ def register(
     trim: Annotated[float, typer.Option(min=0.0, max=0.5, help="Poisson density quantile trimmed.")]
     = _R.surface.density_quantile,
     record: RecordOpt = False,
+    force: ForceOpt = False,
 ) -> None:
     """Register all scans of a folder (ChArUco or kinematics, pose-graph ICP), fuse, mesh.
 
-    Scans that cannot be read are skipped with their reason; the run fails only when no scan
-    is usable."""
+    Scans that cannot be read, or are links out of the folder, are skipped with their reason;
+    the run fails only when no scan is usable."""
     from dataclasses import replace
 
     import numpy as np
@@ -168,8 +177,12 @@ def register(
     options = replace(_R, box=crop, box_frame=box_frame, use_board=board, local=local,
                       multiway=replace(_R.multiway, loop_closure_init=loop_closures),
                       surface=replace(_R.surface, voxel=voxel, poisson_depth=depth, density_quantile=trim))
-    with progress_bar() as update:
-        result = register_folder(folder, out or Path(folder) / "reconstruction", options, record, update)
+    if not Path(folder).is_dir():
+        raise FileError(f"{folder} is not a folder", hint="point to a scan store (a folder of scan_NNNN)")
+    target = output_folder(out or Path(folder) / "reconstruction", "register", force=force,
+                           nested_in=None if out else Path(folder), inputs=(folder,), make=False)
+    with progress_bar() as update:  # the folder is made when there is something to write
+        result = register_folder(folder, target, options, record, update)
     page = write_pages_after_register(result.folder)
     sources = {k: v for k, v in result.pose_sources.items() if v}
     skipped = len(result.scans) - len(result.used)

@@ -8,7 +8,16 @@ from typing import Annotated
 import typer
 
 from recon_cli.cli.app import app
-from recon_cli.cli.options import D, RecordOpt, SeedOpt, check_record, one_of, realism_profile
+from recon_cli.cli.options import (
+    D,
+    ForceOpt,
+    RecordOpt,
+    SeedOpt,
+    check_record,
+    one_of,
+    output_folder,
+    realism_profile,
+)
 
 BACKENDS = ("sim", "hardware")
 SEQUENCE_METHODS = ("ours", "thesis")
@@ -64,9 +73,10 @@ def run_script(
                                                                   "script's <cell realism=...>; docs/simulation.md)."
                                                 )] = None,
     record: RecordOpt = False,
+    force: ForceOpt = False,
 ) -> None:
     """Run an automation script: moves, scans, registration, reconstruction, exports."""
-    from recon_cli.console import console, progress_bar, run_folder, styled
+    from recon_cli.console import console, progress_bar, styled
     from recon_cli.interrupts import stop_signals
     from recon_cli.scripts.checks import check_backend, check_script
     from recon_cli.scripts.loader import load_script
@@ -82,7 +92,9 @@ def run_script(
     check_script(s, object_override=object_name)  # before the output folder is made
     check_backend(s, backend, station, dry_run)
     profile = None if realism is None else realism_profile(realism)
-    folder = run_folder(out, "run", fresh=not append)
+    folder = output_folder(out, "run", append=append, force=force,
+                           append_hint="--append to add this run's scans to the scan store in it",
+                           inputs=(script, station, None if realism is None else Path(realism))).path
     options = RunOptions(folder, None if backend is None else Backend(backend), seed, dry_run, object_name, optimize,
                          SequenceMethod(sequence_method), append, station, profile, record)
     with stop_signals(), progress_bar() as update:

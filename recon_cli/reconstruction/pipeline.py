@@ -20,6 +20,7 @@ import numpy as np
 
 from recon_cli.errors import FileError, InputError, MetadataError
 from recon_cli.geometry.transforms import invert, pose_error
+from recon_cli.outputs import OutputFolder
 from recon_cli.perception.charuco import thesis_board
 from recon_cli.reconstruction.crop import CropBox, box_pixels, crop_cloud
 from recon_cli.reconstruction.global_registration import (
@@ -190,9 +191,12 @@ def crop_box_marker(options: RegisterOptions, session: SessionInfo) -> CropBox:
     return _crop_box(options, session, session.world_T_marker)
 
 
-def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOptions(),  # noqa: B008
+def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOptions = RegisterOptions(),  # noqa: B008
                  progress: Progress | None = None) -> RegisterResult:
-
+    """Register the scan store ``folder`` into ``out`` (a folder, or one a command claimed:
+    it is made, and what ``--force`` removes is removed, only when there is something to
+    write). Scans that cannot be read, or that are links out of the store, are skipped with
+    their reason."""
     from recon_cli.console import write_json
 
     t0 = time.perf_counter()
@@ -205,6 +209,7 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
     if not scan_folders:
         raise FileError(f"{folder} holds no scans (no scan_NNNN folder)",
                         hint="record scans first, e.g. recon capture --views eq-4.1")
+    store.check_inside(folder / "session.json")
     session = store.session()
     world_T_marker = session.world_T_marker
     box = _crop_box(options, session, world_T_marker)
@@ -230,6 +235,7 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
     deferred: list[tuple[int, Path]] = []
     for k, (index, scan_folder) in enumerate(scan_folders):
         try:
+            store.check_inside(scan_folder)
             scan = read_scan(scan_folder)
         except MetadataError as exc:  # a bad scan is skipped with its reason, the others go on
             records.append(ScanRecord(index, None, skipped=exc.one_line(), folder=scan_folder.name))
@@ -276,7 +282,7 @@ def run_register(folder: Path, out: Path, options: RegisterOptions = RegisterOpt
                               "is recorded")
     t_global = time.perf_counter()
 
-    out = Path(out)
+    out = out.make() if isinstance(out, OutputFolder) else Path(out)
     out.mkdir(parents=True, exist_ok=True)
     frame = "world" if world_T_marker is not None else "marker"
     to_out = world_T_marker if world_T_marker is not None else np.eye(4)

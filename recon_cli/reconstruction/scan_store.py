@@ -30,6 +30,7 @@ import numpy as np
 
 from recon_cli.errors import FileError, MetadataError
 from recon_cli.geometry.transforms import transform_points
+from recon_cli.outputs import atomic_write, remove_inside
 from recon_cli.perception.camera_model import Intrinsics, backproject
 from recon_cli.reconstruction.metadata import SCAN_FORMAT, SessionInfo, load_json, read_scan_meta, read_session
 from recon_cli.serialization import to_jsonable
@@ -126,9 +127,7 @@ class ScanStore:
             root.mkdir(parents=True, exist_ok=True)
             store = cls(root)
             info = {"format": FORMAT_VERSION, "created": time.time(), **session}
-            tmp = root / ".session.json.tmp"
-            _write_json(tmp, info)
-            os.replace(tmp, root / "session.json")
+            atomic_write(root / "session.json", lambda tmp: _write_json(tmp, info))
         except OSError as exc:
             raise FileError(f"cannot write the scan store {root} ({exc.strerror})",
                             hint="choose a writable output folder") from None
@@ -138,11 +137,10 @@ class ScanStore:
         """Write a scan atomically (temporary folder, then rename). Returns its folder."""
         final = self.root / f"scan_{scan.index:04d}"
         tmp = self.root / f".scan_{scan.index:04d}.tmp-{os.getpid()}"
-        if final.exists():
+        if final.exists() or final.is_symlink():
             raise FileError(f"scan {final} already exists", hint="use a new session folder")
         try:
-            if tmp.exists():
-                shutil.rmtree(tmp)
+            remove_inside(self.root, tmp.name)  # left by a crash (a link: only the link)
             tmp.mkdir()
             if scan.color is not None:
                 _write_png(tmp / "color.png", cv2.cvtColor(scan.color, cv2.COLOR_RGB2BGR))
@@ -198,6 +196,23 @@ class ScanStore:
     def indices(self) -> list[int]:
         """Indices of the scan folders that hold a scan.json."""
         return [i for i, folder in self.scan_folders() if (folder / "scan.json").exists()]
+
+    def check_inside(self, path: Path) -> None:
+        """Refuse (MetadataError) a file or scan folder of the store that is a link leading out
+        of the store, or a scan folder holding one: what is read from a store lies inside it."""
+        real_root = self.root.resolve()
+        path = Path(path)
+        for p in (path, *(sorted(path.iterdir()) if path.is_dir() else ())):
+            if not p.is_symlink():
+                continue
+            try:
+                target = p.resolve(strict=True)
+            except (OSError, RuntimeError):
+                raise MetadataError(f"{p} is a link to {os.readlink(p)}, which does not resolve", path=str(p),
+                                    hint="remove the link") from None
+            if not target.is_relative_to(real_root):
+                raise MetadataError(f"{p} is a link to {target}, outside the scan store {self.root}", path=str(p),
+                                    hint="copy the scan into the store, or remove the link")
 
     def next_index(self) -> int:
         return max((i for i, _ in self.scan_folders()), default=-1) + 1

@@ -146,6 +146,7 @@ class HandEyeResult:
     recorded: BoardViewsResult | None
     station_written: Path | None
     seconds: float
+    station_backup: Path | None = None  # the station file as it was (beside the file a link points to)
 
     @property
     def views(self) -> int:
@@ -239,7 +240,7 @@ def run_handeye(opt: HandEyeOptions, progress: Progress | None = None) -> HandEy
     from recon_cli.calibration.refine import corrected, refine_hand_eye
     from recon_cli.calibration.station_update import hand_eye_block, write_station_hand_eye
     from recon_cli.console import write_json
-    from recon_cli.outputs import atomic_write_text
+    from recon_cli.outputs import atomic_write, atomic_write_text
 
     t0 = time.perf_counter()
     out = Path(opt.out)
@@ -283,15 +284,15 @@ def run_handeye(opt: HandEyeOptions, progress: Progress | None = None) -> HandEy
                f"{' refined' if opt.refine else ''}, {len(obs)} views, "
                f"residual RMS {1e3 * np.sqrt(np.mean([r.translation**2 for r in residuals])):.3f} mm")
     atomic_write_text(out / "hand_eye.yaml", hand_eye_block(solution.flange_T_camera, comment))
-    written = None
+    written = backup = None
     if opt.station is not None and opt.write and (status is HandEyeStatus.OK or opt.force):
-        write_station_hand_eye(opt.station, solution.flange_T_camera, comment)
+        backup = write_station_hand_eye(opt.station, solution.flange_T_camera, comment)
         written = Path(opt.station)
     result = HandEyeResult(out, Path(scans), status, solution, residuals, opt.refine, base_rotation, methods,
                            diversity, found.skipped, model_X, kin.world_T_marker(), truth, recorded, written,
-                           time.perf_counter() - t0)
+                           time.perf_counter() - t0, backup)
     write_json(out / "handeye.json", result.to_dict())
-    plot_handeye_residuals(result, out / "handeye_residuals.png")
+    atomic_write(out / "handeye_residuals.png", lambda tmp: plot_handeye_residuals(result, tmp))
     return result
 
 
@@ -379,6 +380,7 @@ def run_intrinsics(opt: IntrinsicsOptions) -> IntrinsicsRun:
     from recon_cli.calibration.camera_file import write_camera_file
     from recon_cli.calibration.intrinsics import calibrate_intrinsics, find_boards, plot_reprojection
     from recon_cli.console import write_json
+    from recon_cli.outputs import atomic_write
 
     t0 = time.perf_counter()
     out = Path(opt.out)
@@ -397,8 +399,7 @@ def run_intrinsics(opt: IntrinsicsOptions) -> IntrinsicsRun:
     report = out / "intrinsics.json"
     write_json(report, {**result.to_dict(), "source": str(opt.source), "board": dataclasses.asdict(board),
                         "images": len(images)})
-    figure = out / "intrinsics_reprojection.png"
-    plot_reprojection(result, figure)
+    figure = atomic_write(out / "intrinsics_reprojection.png", lambda tmp: plot_reprojection(result, tmp))
     profile = None
     if opt.profile is not None:
         from recon_cli.calibration.camera_file import write_calibrated_profile

@@ -40,6 +40,7 @@ class CaptureOptions:
     station: Path | None = None  # a station file (robot and camera adapters)
     record: bool = False  # write a 3D recording of the run (recording.rrd in ``out``)
     page: bool = True  # write the report page (report.html) at the end
+    append: bool = False  # add to the scan store in ``out`` (same cell and object); earlier reports kept as NAME-1
 
 
 class CaptureStatus(StrEnum):
@@ -78,9 +79,14 @@ def run_capture(opt: CaptureOptions, progress: Callable[[str, int, int], None] |
     n = len(opt.views)
     step = (lambda k: progress("capture", k, n)) if progress else (lambda k: None)
     scans, moves, failures, capture_seconds = [], [], [], []
+    if opt.append:
+        from recon_cli.outputs import keep_earlier, refuse_links
+
+        refuse_links(opt.out)
+        keep_earlier(opt.out, "capture_report.json", "config.yaml", "recording.rrd")
     recorder = open_recorder(opt.out, "recon capture") if opt.record else None
     spec = SessionSpec(opt.out, opt.config, Mode.CAPTURE, opt.backend, run=opt.run, station=opt.station,
-                       recorder=recorder)
+                       recorder=recorder, append=opt.append)
     ended: CaptureStatus | None = None
     error = report = page = session = None
     try:

@@ -10,14 +10,16 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
+from recon_cli.outputs import OutputFolder
 from recon_cli.reconstruction.options import RegisterOptions
 from recon_cli.reconstruction.pipeline import RegisterResult, run_register
 
 
-def register_folder(folder: Path, out: Path, options: RegisterOptions, record: bool = False,
+def register_folder(folder: Path, out: Path | OutputFolder, options: RegisterOptions, record: bool = False,
                     progress: Callable[[str, int, int], None] | None = None) -> RegisterResult:
     """Register the scan store ``folder`` into ``out`` (and record it into
-    ``out/recording.rrd`` with ``record``)."""
+    ``out/recording.rrd`` with ``record``); a claimed output folder is made when the
+    pipeline writes, or first with ``record``."""
     if not record:
         return run_register(folder, out, options, progress)
     from recon_cli.recording import closing, open_recorder
@@ -26,6 +28,8 @@ def register_folder(folder: Path, out: Path, options: RegisterOptions, record: b
     folder = Path(folder)
     if not folder.is_dir():
         return run_register(folder, out, options, progress)  # the pipeline's one-line error
+    if isinstance(out, OutputFolder):
+        out = out.make()
     recorder = open_recorder(out, f"recon register {folder.name}")
     with closing(recorder):
         record_store(recorder, folder)

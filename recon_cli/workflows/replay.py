@@ -89,6 +89,7 @@ def run_replay(opt: ReplayOptions, progress: Callable[[str, int, int], None] | N
     import open3d as o3d
 
     from recon_cli.geometry.transforms import invert
+    from recon_cli.outputs import atomic_write, atomic_write_text
     from recon_cli.reconstruction.crop import CropBox
     from recon_cli.reconstruction.pipeline import run_register
 
@@ -113,10 +114,11 @@ def run_replay(opt: ReplayOptions, progress: Callable[[str, int, int], None] | N
     res_before = overlap_residuals(before, gate, voxel=opt.voxel / 2)
     res_after = res_before if before is after else overlap_residuals(after, gate, voxel=opt.voxel / 2)
     first = result.used[0].final_marker_T_camera
-    picture = cloud_png(out / "cloud.png", o3d.io.read_point_cloud(str(result.cloud)),
-                        invert(result.out_T_marker @ first),
-                        title=f"{Path(str(opt.source.source)).name}: {len(result.used)} recorded frames, "
-                              f"{'recorded poses + pose graph' if result.multiway else 'recorded poses'}")
+    fused = o3d.io.read_point_cloud(str(result.cloud))
+    title = (f"{Path(str(opt.source.source)).name}: {len(result.used)} recorded frames, "
+             f"{'recorded poses + pose graph' if result.multiway else 'recorded poses'}")
+    picture = atomic_write(out / "cloud.png",
+                           lambda tmp: cloud_png(tmp, fused, invert(result.out_T_marker @ first), title=title))
     report = out / "consistency.json"
     data = {"source": str(opt.source.source), "frames": len(imported.scans), "voxel_m": opt.voxel,
             "prior": {"translation_m": opt.prior[0], "rotation_deg": opt.prior[1]},
@@ -125,5 +127,5 @@ def run_replay(opt: ReplayOptions, progress: Callable[[str, int, int], None] | N
             "after": {"summary": summary(res_after), "pairs": [r.to_dict() for r in res_after]},
             "corrections": [camera_correction(r) for r in result.used],
             "outputs": {"store": "store", "reconstruction": "reconstruction", "picture": picture.name}}
-    report.write_text(json.dumps(data, indent=2) + "\n")
+    atomic_write_text(report, json.dumps(data, indent=2) + "\n")
     return ReplayResult(imported, result, res_before, res_after, picture, report)

@@ -147,13 +147,9 @@ class ScriptRunner:
 
     def _keep_earlier(self, *names: str) -> None:
         """--append: an earlier run's report, script and configuration stay, as NAME-1, NAME-2, ..."""
-        for name in names:
-            path = self.out / name
-            if path.exists():
-                k = 1
-                while (self.out / f"{path.stem}-{k}{path.suffix}").exists():
-                    k += 1
-                path.rename(self.out / f"{path.stem}-{k}{path.suffix}")
+        from recon_cli.outputs import keep_earlier
+
+        keep_earlier(self.out, *names)
 
     def _interruption(self, signal: str) -> Interruption:
         cmd = self.current

@@ -30,6 +30,7 @@ import numpy as np
 
 from recon_cli.errors import FileError, MetadataError
 from recon_cli.geometry.transforms import transform_points
+from recon_cli.inputs.images import COLOR, DEPTH, read_image
 from recon_cli.outputs import atomic_write, remove_inside
 from recon_cli.perception.camera_model import Intrinsics, backproject
 from recon_cli.reconstruction.metadata import SCAN_FORMAT, SessionInfo, load_json, read_scan_meta, read_session
@@ -229,14 +230,15 @@ class ScanStore:
 
 
 def _read_image(path: Path, flags: int, what: str) -> np.ndarray:
+    """A scan's PNG through the guarded reader (colour: 8-bit BGR, else 16-bit grey); a bad
+    image is a MetadataError, so that registration skips the scan with the reason."""
     if not path.exists():
         raise MetadataError(f"{path}: {what} is missing", path=str(path))
-    data = np.fromfile(path, dtype=np.uint8) if path.stat().st_size else np.zeros(0, np.uint8)
-    image = cv2.imdecode(data, flags) if data.size else None
-    if image is None:
-        raise MetadataError(f"{path}: {what} cannot be decoded (truncated or not a PNG)", path=str(path),
-                            hint="re-record the scan or remove its folder")
-    return image
+    try:
+        return read_image(path, COLOR if flags == cv2.IMREAD_COLOR else DEPTH, what, formats=("png",),
+                          hint="re-record the scan or remove its folder")
+    except FileError as exc:
+        raise MetadataError(exc.message, path=str(path), hint=exc.hint) from None
 
 
 def read_scan(folder: Path) -> Scan:

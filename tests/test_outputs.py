@@ -339,6 +339,17 @@ def test_the_report_page_is_not_written_through_a_link(tmp_path, outside, capsys
     assert snapshot(outside) == far
 
 
+def test_evaluate_writes_beside_the_reconstruction_but_not_through_a_link(tmp_path, outside, capsys):
+    rec = tmp_path / "rec"
+    rec.mkdir()
+    (rec / "cloud.ply").write_text("ply")
+    (rec / "cloud_distances.png").symlink_to(outside / "victim.txt")
+    far = snapshot(outside)
+    assert main(["evaluate", str(rec / "cloud.ply"), "--reference", str(tmp_path / "ref.ply")]) == 1
+    assert "cloud_distances.png is a link to" in one_error_line(capsys)
+    assert snapshot(outside) == far
+
+
 # ----------------------------------------------------------------------------- capture, end to end
 CAPTURE = ["capture", "--object", "bottle", "--resolution", "0.1", "--no-noise"]
 

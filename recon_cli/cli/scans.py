@@ -233,8 +233,14 @@ def evaluate(
     from recon_cli.reconstruction.assessment import run_evaluate
 
     one_of(align, ALIGNMENTS, "alignment")
-    result = run_evaluate(reconstruction, reference, tolerance, views, align, samples,
-                          out or reconstruction.parent)
+    target = out or reconstruction.parent
+    if target.is_dir():  # beside another command's results: only its two files, never through a link
+        from recon_cli.outputs import OutputMode, claim_output
+
+        stem = reconstruction.stem
+        claim_output(target, OutputMode.APPEND, command="evaluate",
+                     names=(f"{stem}_evaluation.json", f"{stem}_distances.png"))
+    result = run_evaluate(reconstruction, reference, tolerance, views, align, samples, target)
     e = result.evaluation
     console.print(f"{e.points} points: signed distance mean {e.mean * 1e3:+.4f} mm, std {e.std * 1e3:.4f} mm, "
                   f"RMS {e.rms * 1e3:.4f} mm; " + ", ".join(f"{k}: {v * 100:.1f} %" for k, v in e.within.items()))

@@ -215,24 +215,13 @@ def available_objects() -> dict[str, str]:
     return out
 
 
-def _read_mesh(path: Path):
-    import open3d as o3d
+def _read_mesh(path: Path, scale: float = 1.0):
+    """The mesh of an OBJ, PLY or STL file through the guarded reader (extent limits after
+    ``scale``)."""
+    from recon_cli.inputs.meshes import read_mesh
 
-    if not path.exists():
-        raise FileError(f"mesh file {path} does not exist", hint="give an OBJ, PLY or STL file")
-    if path.suffix.lower() not in {".obj", ".ply", ".stl", ".off", ".gltf", ".glb"}:
-        raise FileError(f"mesh file {path} has an unknown type '{path.suffix}'",
-                        hint="give an OBJ, PLY or STL file")
-    level = o3d.utility.get_verbosity_level()
-    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)  # texture warnings
-    try:
-        mesh = o3d.io.read_triangle_mesh(str(path), enable_post_processing=False)
-    finally:
-        o3d.utility.set_verbosity_level(level)
-    if len(mesh.triangles) == 0:
-        raise FileError(f"mesh file {path} has no triangles (unreadable or empty)",
-                        hint="check the file with a mesh viewer")
-    return mesh
+    return read_mesh(path, "mesh file", scale=scale,
+                     units_hint="pass a scale, e.g. --scale 0.001 for millimetres, or convert it to metres")
 
 
 def _standing(name: str, description: str, vertices: np.ndarray, triangles: np.ndarray,
@@ -248,7 +237,7 @@ def load_mesh_file(path: Path, scale: float = 1.0) -> SceneObject:
     """An object from a mesh file, scaled by ``scale`` (e.g. 0.001 for millimetres)."""
     if not (math.isfinite(scale) and scale > 0):
         raise InputError(f"mesh scale {scale} is not a positive number", hint="e.g. --scale 0.001 for mm")
-    mesh = _read_mesh(Path(path))
+    mesh = _read_mesh(Path(path), scale)
     v = np.asarray(mesh.vertices) * scale
     size = float(np.max(v.max(axis=0) - v.min(axis=0)))
     if size > 0.6:

@@ -15,6 +15,7 @@ import numpy as np
 
 from recon_cli.errors import FileError
 from recon_cli.geometry.transforms import pose_error
+from recon_cli.inputs.meshes import CLOUD_SUFFIXES, MESH_SUFFIXES, read_cloud, read_mesh
 from recon_cli.reconstruction.evaluation import CameraView, Evaluation, evaluate, histogram_png, signed_distances
 from recon_cli.reconstruction.scan_store import ScanStore
 
@@ -28,36 +29,25 @@ class EvaluateResult:
 
 
 def load_points(path: Path, samples: int = 500_000, seed: int = 0) -> np.ndarray:
-    """Points of a cloud file, or uniform samples of a mesh file's surface (Open3D's
-    generator seeded with ``seed``)."""
+    """Points of a cloud file (PLY, PCD), or uniform samples of a mesh file's surface (PLY,
+    OBJ, STL; Open3D's generator seeded with ``seed``); a file of vertices only gives its
+    vertices. Both through the guarded readers."""
     import open3d as o3d
 
     path = Path(path)
-    if not path.is_file():
-        raise FileError(f"{path} does not exist", hint="give a PLY/PCD/OBJ/STL file")
-    mesh = o3d.geometry.TriangleMesh()
-    if path.suffix.lower() in (".ply", ".obj", ".stl", ".off"):
-        with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-            mesh = o3d.io.read_triangle_mesh(str(path))
+    if path.suffix.lower() not in (*MESH_SUFFIXES, *CLOUD_SUFFIXES):
+        raise FileError(f"{path}: reconstruction has the type '{path.suffix}'", hint="give a PLY, PCD, OBJ or STL file")
+    if path.suffix.lower() in CLOUD_SUFFIXES and path.suffix.lower() not in MESH_SUFFIXES:
+        return np.asarray(read_cloud(path, "reconstruction").points)
+    mesh = read_mesh(path, "reconstruction", triangles=False)
     if len(mesh.triangles):
         o3d.utility.random.seed(seed)
         return np.asarray(mesh.sample_points_uniformly(number_of_points=samples).points)
-    cloud = o3d.io.read_point_cloud(str(path))
-    if len(cloud.points) == 0:
-        raise FileError(f"{path} holds no points", hint="give a non-empty point cloud or mesh")
-    return np.asarray(cloud.points)
+    return np.asarray(mesh.vertices)
 
 
 def load_mesh(path: Path):
-    import open3d as o3d
-
-    path = Path(path)
-    if not path.is_file():
-        raise FileError(f"reference {path} does not exist", hint="give the ground-truth mesh file")
-    mesh = o3d.io.read_triangle_mesh(str(path))
-    if len(mesh.triangles) == 0:
-        raise FileError(f"reference {path} has no triangles", hint="the reference must be a mesh")
-    return mesh
+    return read_mesh(path, "reference mesh")
 
 
 def camera_views(folder: Path) -> list[CameraView]:

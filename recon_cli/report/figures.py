@@ -4,6 +4,7 @@ colour images. Each function writes one file and returns its path."""
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import numpy as np
@@ -150,12 +151,17 @@ def thumbnail(path: Path, scan: Scan, width: int) -> Path | None:
     None when neither can be read."""
     import cv2
 
-    image = None
+    from recon_cli.errors import ReconError
+    from recon_cli.inputs.images import read_color, read_depth
+
+    image = depth = None
     if scan.color is not None:
-        image = cv2.imread(str(scan.color), cv2.IMREAD_COLOR)
+        with contextlib.suppress(ReconError):
+            image = read_color(scan.color)
     if image is None and scan.depth is not None:
-        depth = cv2.imread(str(scan.depth), cv2.IMREAD_UNCHANGED)
-        if depth is not None and depth.ndim == 2:
+        with contextlib.suppress(ReconError):
+            depth = read_depth(scan.depth)
+        if depth is not None:
             valid = depth > 0
             image = np.zeros(depth.shape, np.uint8)
             if valid.any():

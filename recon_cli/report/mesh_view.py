@@ -135,11 +135,12 @@ def render_mesh(mesh_path: Path, out_dir: Path, views: tuple[str, ...] = tuple(M
     import open3d as o3d
 
     from recon_cli.errors import FileError
+    from recon_cli.inputs.meshes import read_mesh
 
-    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-        mesh = o3d.io.read_triangle_mesh(str(mesh_path))
-    if len(mesh.triangles) == 0:
-        raise FileError(f"{mesh_path} holds no triangles", hint="rebuild the mesh (recon register)")
+    if not Path(mesh_path).is_file():
+        raise FileError(f"{mesh_path} holds no triangles (there is no such file)",
+                        hint="rebuild the mesh (recon register)")
+    mesh = read_mesh(mesh_path, "mesh", hint="rebuild the mesh (recon register)")
     if not mesh.has_vertex_normals():
         mesh.compute_vertex_normals()
     vertices = np.asarray(mesh.vertices)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from recon_cli.backends.base import CameraBackend, ExecutionReport, RobotBackend
-from recon_cli.errors import PlanningError
+from recon_cli.errors import PlanningError, RobotFault
 from recon_cli.geometry.transforms import pose_error
 from recon_cli.geometry.view import View
 from recon_cli.planning.planner import MotionPlanner, PlanOptions, PlanResult
@@ -86,9 +86,26 @@ class Acquisition:
             raise PlanningError(f"cannot move to the {what}: {plan.status.value} ({plan.message})",
                                 hint="try another view, a longer planning time or another planner", status=plan.status)
         execution = self.robot.execute(plan.trajectory)
+        if not execution.settled:
+            raise self._not_settled(execution, what)
         q = self.robot.measured_joints()
         dp, dr = pose_error(self.cell.kin.world_T_camera(q), self.cell.kin.world_T_camera(plan.trajectory.goal))
         return MoveReport(plan, execution, dp, dr)
+
+    def _not_settled(self, execution: ExecutionReport, what: str) -> RobotFault:
+        """A robot that has not settled at the goal is not scanned: stop it and say how far
+        off each joint is (the largest three)."""
+        stop = getattr(self.robot, "stop", None)
+        stopped = bool(stop()) if callable(stop) else True  # a robot without stop() holds still
+        err = np.asarray(execution.final_error, dtype=float)
+        worst = np.argsort(-err)[:3]
+        names = self.cell.joint_names
+        prismatic = self.cell.kin.limits.prismatic
+        errors = ", ".join(f"{names[j]} {err[j]:.3g} {'m' if prismatic[j] else 'rad'}" for j in worst)
+        return RobotFault(f"the robot did not settle after the move to the {what} within its settling time "
+                          f"(final error {errors}); no scan was taken",
+                          kind="settle", joint=names[int(worst[0])], value=float(err[worst[0]]), stopped=stopped,
+                          hint="check the drives and the settling tolerance; completed scans are kept")
 
     def scan(self, planned: dict, move: MoveReport | None = None, name: str | None = None) -> Scan:
         """Capture a frame at the settled robot and write it as the next scan (``name``, when

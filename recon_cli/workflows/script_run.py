@@ -178,7 +178,7 @@ class ScriptRunner:
             if self.on_failure is OnFailure.ABORT or isinstance(exc, RobotFault):
                 report.seconds = time.perf_counter() - t
                 self.reports.append(report)
-                why = ("the robot was stopped" if isinstance(exc, RobotFault)
+                why = ("a robot fault ends the run" if isinstance(exc, RobotFault)
                        else "the script says on_failure=\"abort\"")
                 raise ScriptAborted(f"{cmd.source}: {exc.one_line()}", source=str(cmd.source),
                                     hint=f"{why}; earlier scans are kept") from None

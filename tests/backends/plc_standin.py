@@ -41,11 +41,19 @@ class _CycleHandler(AdvancedHandler):
 class Faults:
     """Injected faults, as fractions of the trajectory (None: off)."""
 
-    fault_at: float | None = None  # the PLC raises its error flag
+    fault_at: float | None = None  # the PLC raises its error flag ...
+    error_id: int = NC_FOLLOWING_ERROR  # ... with this error id
     freeze_at: float | None = None  # the drive stops moving, the PLC stays "moving"
     drift_at: float | None = None  # the drive stops following (tracking error grows)
+    settle_offset: float | None = None  # at the goal the last axis holds this far off (it never settles)
     ignore_chunks: bool = False
     motion: int | None = None  # only during this motion (1-based); None: every motion
+    # garbage: from this fraction of a motion on (0: from the start, also at rest) the PLC publishes
+    garbage_at: float | None = None
+    measured_value: float | None = None  # ... this value as measured[measured_axis]
+    measured_axis: int = 0
+    state_value: int | None = None  # ... this state while it moves
+    index_value: int | None = None  # ... this setpoint index while it moves
 
 
 class PLCStandIn:
@@ -57,9 +65,14 @@ class PLCStandIn:
         self.faults = Faults()
         self.buffer = np.zeros((max_points, n))
         self.measured = np.asarray(start, dtype=float).copy()
-        self.log: list[tuple[float, int, np.ndarray]] = []  # (sim time, index, measured) while moving
+        self.clock = 0.0  # [s] robot time: advances speedup x the cycle every PLC cycle
+        self.log: list[tuple[float, int, np.ndarray, float]] = []  # (trajectory time, index, measured, clock) moving
+        self.events: list[tuple[float, float, str]] = []  # (clock, time.monotonic(), what)
+        self.received: list[np.ndarray] = []  # the setpoints of every started motion (PLC units and axis order)
+        self.beats = 0  # heartbeat changes seen
         self.started = 0  # motions started
         self.crash: str | None = None
+        self._garbage = False
         L, S16, D, U, B = constants.ADST_REAL64, constants.ADST_INT16, constants.ADST_INT32, constants.ADST_UINT32, \
             constants.ADST_BIT
         spec = {"chunk": (bytes(8 * chunk_points * n), L), "chunk_offset": (0, D), "chunk_count": (0, D),
@@ -115,9 +128,45 @@ class PLCStandIn:
         self._thread.join(timeout=2.0)
         self.server.stop()
 
+    def mark(self, what: str) -> None:
+        """Record an event at the current robot time."""
+        with self.lock:
+            self.events.append((self.clock, time.monotonic(), what))
+
+    def event(self, what: str) -> tuple[float, float] | None:
+        """(clock, monotonic time) of the first event ``what``, or None."""
+        return next(((c, w) for c, w, e in self.events if e == what), None)
+
     def drop_connection(self) -> None:
         """The network goes away: the server closes its sockets and stops listening."""
+        self.mark("dropped")
         self.server.stop()
+
+    def restore_connection(self) -> None:
+        """The network comes back: a server on the same port answers again."""
+        deadline = time.monotonic() + 10.0
+        while True:
+            try:
+                self.server = AdsTestServer(handler=self.handler, logging=False, ip_address="127.0.0.1", port=self.port)
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.02)
+        self.server.start()
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", self.port), timeout=0.2).close()
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.01)
+        self.mark("restored")
+
+    def last_motion(self) -> float | None:
+        """Robot time (clock) of the last cycle in which the axes moved, or None."""
+        return self.log[-1][3] if self.log else None
 
     # ------------------------------------------------------------------ the PLC cycle
     def _loop(self) -> None:
@@ -138,6 +187,7 @@ class PLCStandIn:
 
     def _cycle(self, cycle, state, t, beat, beat_time, frozen_q, hold):
         now = time.monotonic()
+        self.clock += cycle * self.speedup
         seq, = self.get("chunk_seq", "I")
         ack, = self.get("chunk_ack", "I")
         if seq != ack and not self.faults.ignore_chunks:
@@ -152,30 +202,37 @@ class PLCStandIn:
         hb, = self.get("heartbeat", "I")
         if hb != beat:
             beat, beat_time = hb, now
+            self.beats += 1
         watchdog, = self.get("watchdog", "d")
         count, = self.get("count", "i")
         period, = self.get("period", "d")
+        f = self.faults
         if job != job_ack and count > 0 and not stop and state in (0, 2, 3):
             state, t, frozen_q = 1, 0.0, None
             self.started += 1
             self.log.clear()
+            self.received.append(self.buffer[:count].copy())
+            self.events.append((self.clock, now, f"started {self.started}"))
             self.set("index", "i", 0)
             self.set("job_ack", "I", job)
+        if f.motion is not None and f.motion != self.started:
+            f = Faults()
+        frac = 0.0
         if state == 1:
+            duration = (count - 1) * period
+            frac = t / duration if duration > 0 else 1.0
             if stop:
                 state = 3
+                self.events.append((self.clock, now, "stopped by stop"))
             elif now - beat_time > watchdog:
                 state = 3  # heartbeat lost: the axes stop
+                self.events.append((self.clock, now, "stopped by watchdog"))
             else:
-                duration = (count - 1) * period
-                frac = t / duration if duration > 0 else 1.0
-                f = self.faults
-                if f.motion is not None and f.motion != self.started:
-                    f = Faults()
                 if f.fault_at is not None and frac >= f.fault_at:
                     self.set("error", "B", 1)
-                    self.set("error_id", "I", NC_FOLLOWING_ERROR)
+                    self.set("error_id", "I", f.error_id)
                     state = 4
+                    self.events.append((self.clock, now, "fault"))
                 elif f.freeze_at is not None and frac >= f.freeze_at:
                     pass  # stuck: neither time nor the axes move on
                 else:
@@ -191,12 +248,25 @@ class PLCStandIn:
                     alpha = 1.0 - np.exp(-cycle * self.speedup / self.tau)
                     self.measured = self.measured + alpha * (q_d - self.measured)
                     self.set("index", "i", k)
-                    self.log.append((t, k, self.measured.copy()))
+                    self.log.append((t, k, self.measured.copy(), self.clock))
                     if t >= duration:
                         state, hold = 2, self.buffer[count - 1].copy()
+                        if f.settle_offset is not None:
+                            hold[-1] += f.settle_offset
+                        self.events.append((self.clock, now, "done"))
         elif state == 2:  # hold the goal: the axes converge
             alpha = 1.0 - np.exp(-cycle * self.speedup / self.tau)
             self.measured = self.measured + alpha * (hold - self.measured)
-        self.set("state", "h", state)
-        self.set("measured", f"{self.n}d", *self.measured)
+        if f.garbage_at is not None and (f.garbage_at == 0 or (state == 1 and frac >= f.garbage_at)):
+            self._garbage = True
+        published_state, measured = state, self.measured.copy()
+        if self._garbage and f.garbage_at is not None:
+            if f.measured_value is not None:
+                measured[f.measured_axis] = f.measured_value
+            if state == 1 and f.state_value is not None:
+                published_state = f.state_value
+            if state == 1 and f.index_value is not None:
+                self.set("index", "i", f.index_value)
+        self.set("state", "h", published_state)
+        self.set("measured", f"{self.n}d", *measured)
         return state, t, beat, beat_time, frozen_q, hold

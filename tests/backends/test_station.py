@@ -5,7 +5,11 @@ PLC measures; a PLC fault in the middle of a run stops it and keeps the complete
 from __future__ import annotations
 
 import json
+import os
+import signal
 import textwrap
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +33,7 @@ cell: {kind: gantry, safety_distance: 0.03}
 robot:
   adapter: ads
   ads: {ams_net_id: 127.0.0.1.1.1, ip: 127.0.0.1, port: 851, poll: 0.005, timeout: 1.0, watchdog: 2.0,
-        time_margin: 2.0}
+        time_margin: 2.0, settle_timeout: 1.0}
 camera:
   adapter: sim
   sim: {noise: true, resolution: 0.25}
@@ -61,6 +65,22 @@ def plc():
     yield stand_in
     stand_in.close()
     assert stand_in.crash is None, stand_in.crash
+
+
+def _when(condition, action, timeout: float = 120.0) -> threading.Thread:
+    """Run ``action`` (in a thread) as soon as ``condition()`` holds."""
+
+    def watch():
+        deadline = time.monotonic() + timeout
+        while not condition():
+            if time.monotonic() > deadline:
+                return
+            time.sleep(0.002)
+        action()
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    return thread
 
 
 @pytest.fixture()
@@ -115,7 +135,7 @@ def test_plc_fault_mid_run_stops_and_keeps_scans(plc, files, tmp_path, capsys):
     ("format: 1\nrobot: {adapter: ads}\n", "no camera section"),
     ("format: 1\nrobot: {adapter: kuka}\ncamera: {adapter: sim}\n", "robot.adapter = 'kuka' is not one of ads, sim"),
     ("format: 1\nrobot: {adapter: sim}\ncamera: {adapter: sim}\nspeed: 3\n", "speed is not a known key"),
-    ("format: 1\nrobot: {adapter: ads, ads: {poll: -1}}\ncamera: {adapter: sim}\n", "robot.ads.poll = -1.0"),
+    ("format: 1\nrobot: {adapter: ads, ads: {poll: -1}}\ncamera: {adapter: sim}\n", "robot.ads.poll = -1 s is outside"),
     ("format: 1\nrobot: [adapter\n", r"station.yaml:3: not valid YAML \(did not find expected ',' or ']'"),
     ("format: 1\nhand_eye: [[1, 0], [0, 1]]\nrobot: {adapter: sim}\ncamera: {adapter: sim}\n",
      "hand_eye has 2 items, 4 expected"),
@@ -156,3 +176,73 @@ def test_station_check_ads_and_software_gentl_camera(plc, tmp_path, monkeypatch,
     out = capsys.readouterr().out
     assert "robot ads, camera genicam" in out and "base_joint_1 -1.0000 m" in out
     assert "frame: 400 x 400 px" in out and "station ok" in out
+
+
+def test_robot_that_never_settles_ends_the_run_before_its_scan(plc, files, tmp_path, capsys):
+    """The second move ends 0.01 rad off its goal: no scan there, the robot stopped, exit 4,
+    the first scan kept."""
+    station, script = files
+    plc.faults.settle_offset, plc.faults.motion = 0.01, 2
+    out = tmp_path / "run"
+    code = main(["run", str(script), "--out", str(out), "--station", str(station)])
+    err = capsys.readouterr().err
+    assert code == 4 and err.count("\n") == 1 and "Traceback" not in err, err
+    assert "the robot did not settle at the goal within 1 s (final error arm_joint_7 0.01 rad" in err
+    assert "no scan was taken; the robot was stopped (confirmed by the PLC after" in err
+    assert [json.loads(s.read_text())["name"] for s in (out / "scans").glob("scan_*/scan.json")] == ["a"]
+    report = json.loads((out / "run_report.json").read_text())
+    assert report["status"] == "aborted" and "did not settle" in report["aborted"]
+    assert plc.get("stop", "B")[0] == 1 and plc.started == 2
+
+
+def test_connection_loss_mid_run_says_what_happened(plc, files, tmp_path, capsys):
+    """The network goes away during the second move and stays away: one line that says the
+    stop could not be confirmed (and nothing about a stopped robot); the PLC's watchdog stops
+    the axes within `watchdog` (2 s, + a poll and two PLC cycles, in robot time / speedup)."""
+    station, script = files
+    _when(lambda: plc.started == 2, plc.drop_connection)
+    out = tmp_path / "run"
+    code = main(["run", str(script), "--out", str(out), "--station", str(station)])
+    err = capsys.readouterr().err
+    assert code == 4 and err.count("\n") == 1 and "Traceback" not in err, err
+    assert "lost the connection to the PLC" in err and "robot was stopped" not in err
+    assert "the stop could not be confirmed within 2 s; the PLC watchdog stops the axes after 2 s without a " \
+           "heartbeat" in err
+    assert len(list((out / "scans").glob("scan_*/scan.json"))) == 1
+    dropped, _ = plc.event("dropped")
+    assert plc.last_motion() - dropped <= (2.0 + 0.005 + 0.004) * plc.speedup
+
+
+def test_sigterm_mid_move_stops_the_robot_and_keeps_scans(plc, files, tmp_path, capsys):
+    """SIGTERM during the second move: the robot is stopped before the run ends (exit 143),
+    the first scan is kept and the report says what was interrupted; the axes stop within
+    0.1 s (x speedup in robot time) of the signal."""
+    station, script = files
+
+    def terminate():
+        time.sleep(0.05)
+        plc.mark("signal")
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    _when(lambda: plc.started == 2, terminate)
+    out = tmp_path / "run"
+    code = main(["run", str(script), "--out", str(out), "--station", str(station)])
+    err = capsys.readouterr().err
+    assert code == 143 and err.count("\n") == 1 and "interrupted by SIGTERM" in err, err
+    assert plc.event("stopped by stop") is not None and plc.event("done") is not None  # move 1 done
+    sent, _ = plc.event("signal")
+    assert 0 <= plc.last_motion() - sent <= 0.1 * plc.speedup and plc.started == 2
+    assert len(list((out / "scans").glob("scan_*/scan.json"))) == 1
+    report = json.loads((out / "run_report.json").read_text())
+    assert "SIGTERM" in report["aborted"]
+
+
+def test_station_check_refuses_a_nan_measurement(plc, files, capsys):
+    station, _ = files
+    plc.faults.garbage_at, plc.faults.measured_axis, plc.faults.measured_value = 0.0, 2, float("nan")
+    time.sleep(0.02)
+    assert main(["station", "check", str(station)]) == 4
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert "the PLC reports the measured position of arm_joint_1 (axis 2) as nan, not a finite number" in err
+    assert plc.get("stop", "B")[0] == 1

@@ -2,9 +2,9 @@
 TwinCAT; recon sends commands over ADS from the reconstruction computer).
 
 recon sends only trajectories its planner has checked, sampled at a fixed period, and
-checks them again before sending: every setpoint within the joint limits, every step
-within the velocity limits (times the speed override). The PLC program is the cell's own
-(the thesis does not publish it); what recon needs from it is the symbol contract below,
+checks them again before sending: every setpoint finite and within the joint limits, every
+step within the velocity limits (times the speed override). The PLC program is the cell's
+own (the thesis does not publish it); what recon needs from it is the symbol contract below,
 whose names are configuration (``robot.ads.symbols`` of the station file). Units: recon's
 (rad, m) times ``scale`` per joint, in the PLC's axis order ``axes``.
 
@@ -18,30 +18,44 @@ whose names are configuration (``robot.ads.symbols`` of the station file). Units
     job          UDINT   recon increments it to run the downloaded trajectory ...
     job_ack      UDINT   ... the PLC echoes it when it has started that trajectory; state and
                          index belong to the current trajectory only once job_ack = job
-    stop         BOOL    TRUE: decelerate and hold; recon sets it on every fault and on close
-    heartbeat    UDINT   recon increments it every poll; the PLC stops the axes when it
-                         stalls for longer than ``watchdog`` (written at connect)
-    watchdog     LREAL   [s]
+    stop         BOOL    TRUE: decelerate and hold, and leave state 1; recon sets it on every
+                         fault, on Ctrl-C/SIGTERM and on close
+    heartbeat    UDINT   recon increments it every ``poll`` from connect to close; the PLC
+                         stops the axes when it stalls for longer than ``watchdog``
+    watchdog     LREAL   [s] (written at connect)
     state        INT     0 idle, 1 moving, 2 done, 3 stopped, 4 fault
     index        DINT    setpoint being executed
     measured     ARRAY[0..n-1] OF LREAL   measured axis positions
     error        BOOL    PLC fault flag
     error_id     UDINT   the fault's code (TwinCAT NC/ADS codes are printed as text)
 
-Faults stop the robot (``stop`` := TRUE) and raise :class:`~recon_cli.errors.RobotFault`:
-connection loss, the PLC's fault flag, no completion within the time bound, a tracking
-error over its bound; Ctrl-C during a motion stops the robot before it propagates.
+The heartbeat runs in a background thread from connect to close; during a motion it beats
+only while the polling loop is alive, so the PLC's watchdog also catches a stalled recon.
+Every access to the connection holds one lock (a pyads ``Connection`` is not meant to be
+shared by threads without one).
+
+Faults stop the robot and raise :class:`~recon_cli.errors.RobotFault`: connection loss, the
+PLC's fault flag, a motion the PLC stops or ends early, no completion within the time
+bound, a tracking error over its bound, a measurement or status that is not a number or out
+of range, a robot that does not settle. Stopping means: pause the heartbeat, write ``stop``
+(reconnecting when the connection is gone) until the PLC confirms it (``stop`` reads back
+TRUE and ``state`` is 0, 2, 3 or 4) or ``watchdog`` seconds have passed; the fault's message says
+which of the two happened. Ctrl-C and SIGTERM during a motion stop the robot the same way
+before they propagate.
 """
 
 from __future__ import annotations
 
+import re
+import threading
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 
 import numpy as np
 
 from recon_cli.backends.base import ExecutionReport
 from recon_cli.errors import HardwareUnavailable, InputError, RobotFault
+from recon_cli.inputs.numbers import in_range, integer, range_text, real
 from recon_cli.planning.trajectory import Trajectory
 from recon_cli.robot.limits import JointLimits
 
@@ -52,14 +66,177 @@ STATE_NAMES = {-1: "starting", 0: "idle", 1: "moving", 2: "done", 3: "stopped", 
 SYMBOL_KEYS = ("chunk", "chunk_offset", "chunk_count", "chunk_seq", "chunk_ack", "count", "period", "job",
                "job_ack", "stop", "heartbeat", "watchdog", "state", "index", "measured", "error", "error_id")
 
+#: poll is at most watchdog / POLLS_PER_WATCHDOG: the PLC sees several beats per watchdog window
+POLLS_PER_WATCHDOG = 5
+#: settled: every joint within settle_tolerance of the goal on this many consecutive polls
+SETTLE_POLLS = 3
+
 
 def default_symbols(prefix: str = "MAIN.recon") -> dict[str, str]:
     return {k: f"{prefix}.{k}" for k in SYMBOL_KEYS}
 
 
+# --------------------------------------------------------------------- the safety values' ranges
+@dataclass(frozen=True)
+class Range:
+    """The documented range of one numeric value of ``robot.ads``."""
+
+    lo: float
+    hi: float
+    lo_open: bool = False
+    unit: str = ""
+    whole: bool = False  # a whole number
+
+    def text(self) -> str:
+        return range_text(self.lo, self.hi, lo_open=self.lo_open, unit=self.unit)
+
+    def check(self, value: object, where: str) -> float | int:
+        """``value`` if it is a (whole) number in the range, else InputError naming ``where``."""
+        if self.whole:
+            return integer(value, where, int(self.lo), int(self.hi), hint=f"write a whole number in {self.text()}")
+        real(value, where, hint=f"write a number in {self.text()}")
+        return in_range(value, where, self.lo, self.hi, lo_open=self.lo_open, unit=self.unit,
+                        hint="docs/hardware.md gives the range of every safety value")
+
+
+#: every numeric value of robot.ads: (range per element (rad, m for the pairs), also required, meaning).
+#: docs/hardware.md carries the same table (tests/backends/test_ads_config.py compares them).
+RANGES: dict[str, tuple[tuple[Range, ...], str, str]] = {
+    "port": ((Range(1, 65535, whole=True),), "", "ADS port of the PLC runtime (851: TwinCAT 3 PLC 1)"),
+    "period": ((Range(0.0005, 0.1, unit="s"),), "", "setpoint period"),
+    "chunk_points": ((Range(1, 1000, whole=True),), "", "setpoint rows per download chunk"),
+    "max_points": ((Range(2, 1_000_000, whole=True),), "", "size of the PLC's trajectory buffer"),
+    "poll": ((Range(0.001, 0.1, unit="s"),), f"at most `watchdog` / {POLLS_PER_WATCHDOG}",
+             "status polling and heartbeat period"),
+    "watchdog": ((Range(0.01, 5.0, unit="s"),), f"at least {POLLS_PER_WATCHDOG} × `poll`",
+                 "the PLC stops the axes when the heartbeat stalls this long; bound of a stop's confirmation"),
+    "timeout": ((Range(0.01, 30.0, unit="s"),), "", "one ADS request, one chunk handshake"),
+    "speed_override": ((Range(0.0, 1.0, lo_open=True),), "", "share of the planned speed"),
+    "time_margin": ((Range(0.0, 600.0, lo_open=True, unit="s"),), "",
+                    "beyond the duration before \"did not complete\""),
+    "tracking_bound": ((Range(0.0, 0.2, lo_open=True, unit="rad"), Range(0.0, 0.05, lo_open=True, unit="m")), "",
+                       "largest \\|measured − setpoint\\| in a motion; widens the joint limits for measurements"),
+    "settle_tolerance": ((Range(0.0, 0.01, lo_open=True, unit="rad"), Range(0.0, 0.005, lo_open=True, unit="m")),
+                         "at most `tracking_bound`", "\\|measured − goal\\| before a scan"),
+    "settle_timeout": ((Range(0.0, 60.0, lo_open=True, unit="s"),), "", "longest wait for settling"),
+    "limit_tolerance": ((Range(0.0, 0.2),), "", "relative slack of the velocity re-check"),
+    "scale": ((Range(1e-6, 1e6),), "one per axis; of \\|scale\\|, the sign is the axis direction",
+              "PLC unit per recon unit"),
+}
+PAIRS = ("tracking_bound", "settle_tolerance")
+
+
+def range_rows() -> list[str]:
+    """The rows of the ranges table of docs/hardware.md."""
+    rows = []
+    for key, (ranges, also, meaning) in RANGES.items():
+        text = " and ".join(r.text() for r in ranges)
+        rows.append(f"| `{key}` | {text} | {also} | {meaning} |")
+    return rows
+
+
+_AMS_NET_ID = re.compile(r"\d{1,3}(\.\d{1,3}){5}")
+_HOST = re.compile(r"[A-Za-z0-9.:\-]{1,253}")
+_SYMBOL = re.compile(r"[^\s]{1,255}")
+_WHERE = re.compile(r"(.*?)(?::\d+)?: (.*)")
+
+
+def _at(d: object, key: str, where: str) -> str:
+    """``where.key``, as ``file:line: where.key`` when the mapping knows the key's line."""
+    lines = getattr(d, "lines", None)
+    line = lines.get(key) if isinstance(lines, dict) else None
+    m = _WHERE.fullmatch(where)
+    if line and m:
+        return f"{m.group(1)}:{line}: {m.group(2)}.{key}"
+    return f"{where}.{key}"
+
+
+def _number(key: str, value: object, where: str) -> float | int | tuple[float, ...]:
+    ranges, _, _ = RANGES[key]
+    if key in PAIRS:
+        if isinstance(value, str | bytes) or not isinstance(value, list | tuple) or len(value) != 2:
+            raise InputError(f"{where} is not a pair [rad, m]", hint=f"e.g. {key}: [0.02, 0.005]")
+        return tuple(float(ranges[i].check(v, f"{where}[{i}]")) for i, v in enumerate(value))
+    if key == "scale":
+        if isinstance(value, str | bytes) or not isinstance(value, list | tuple) or len(value) > 64:
+            raise InputError(f"{where} is not a list of numbers", hint="one per axis, e.g. [1000, 57.29578, ...]")
+        out = []
+        r = ranges[0]
+        for i, v in enumerate(value):
+            x = real(v, f"{where}[{i}]", hint="PLC unit per recon unit, e.g. 1000 for mm")
+            if not r.lo <= abs(x) <= r.hi:
+                raise InputError(f"{where}[{i}] = {x:g} is outside ±{r.text()}",
+                                 hint="PLC unit per recon unit, e.g. 1000 for mm; the sign is the axis direction")
+            out.append(x)
+        return tuple(out)
+    return ranges[0].check(value, where)
+
+
+def _symbols(value: object, where: str) -> dict[str, str]:
+    """``symbols`` of the station file ({prefix, key: name}) as the full symbol table."""
+    if not isinstance(value, dict):
+        raise InputError(f"{where} is not a mapping", hint="e.g. symbols: {prefix: MAIN.recon}")
+    prefix = value.get("prefix", "MAIN.recon")
+    if not isinstance(prefix, str) or not _SYMBOL.fullmatch(prefix):
+        raise InputError(f"{where}.prefix = {prefix!r} is not a symbol name", hint="e.g. prefix: MAIN.recon")
+    merged = default_symbols(prefix)
+    for key, name in value.items():
+        if key == "prefix":
+            continue
+        if not isinstance(key, str) or key not in SYMBOL_KEYS:
+            raise InputError(f"{where}.{key} is not a symbol of the contract",
+                             hint=f"symbols: prefix, {', '.join(SYMBOL_KEYS)}")
+        if not isinstance(name, str) or not _SYMBOL.fullmatch(name):
+            raise InputError(f"{where}.{key} = {name!r} is not a symbol name", hint="e.g. GVL.cell.stop")
+        merged[key] = name
+    return merged
+
+
+def _field(key: str, value: object, where: str):
+    """One value of robot.ads, checked and converted (InputError naming ``where``)."""
+    if key == "ams_net_id":
+        ok = isinstance(value, str) and _AMS_NET_ID.fullmatch(value) and all(int(p) <= 255 for p in value.split("."))
+        if not ok:
+            raise InputError(f"{where} = {value!r} is not an AMS Net ID", hint="six numbers 0-255 with dots, "
+                             "e.g. 5.80.201.232.1.1 (TwinCAT shows it under System > Routes)")
+        return value
+    if key == "ip":
+        if not isinstance(value, str) or not _HOST.fullmatch(value):
+            raise InputError(f"{where} = {value!r} is not an address", hint="the PLC's IP address, e.g. 192.168.10.2")
+        return value
+    if key == "symbols":
+        return _symbols(value, where)
+    if key == "axes":
+        if isinstance(value, str | bytes) or not isinstance(value, list | tuple) or len(value) > 64 \
+                or not all(isinstance(a, str) for a in value):
+            raise InputError(f"{where} is not a list of joint names", hint="e.g. [base_joint_1, arm_joint_1, ...]")
+        if len(set(value)) != len(value):
+            raise InputError(f"{where} names a joint twice", hint="list each joint once, in the PLC's axis order")
+        return tuple(value)
+    return _number(key, value, where)
+
+
+def _together(values: dict, at) -> None:
+    """The checks between values (``at(key)`` names a key)."""
+    poll, watchdog = values["poll"], values["watchdog"]
+    if poll * POLLS_PER_WATCHDOG > watchdog * (1 + 1e-9):
+        raise InputError(f"{at('poll')} = {poll:g} s is more than watchdog / {POLLS_PER_WATCHDOG} "
+                         f"= {watchdog / POLLS_PER_WATCHDOG:g} s",
+                         hint="the PLC must see several heartbeats per watchdog window: lower poll or raise watchdog")
+    for k, unit in enumerate(("rad", "m")):
+        if values["settle_tolerance"][k] > values["tracking_bound"][k]:
+            raise InputError(f"{at('settle_tolerance')}[{k}] = {values['settle_tolerance'][k]:g} {unit} is more "
+                             f"than tracking_bound[{k}] = {values['tracking_bound'][k]:g} {unit}",
+                             hint="settling is the tighter bound; lower settle_tolerance")
+    axes, scale = values["axes"], values["scale"]
+    if axes and scale and len(axes) != len(scale):
+        raise InputError(f"{at('scale')} has {len(scale)} numbers for {len(axes)} axes",
+                         hint="one scale per axis, in the order of axes")
+
+
 @dataclass(frozen=True)
 class AdsConfig:
-    """The ``robot.ads`` section of a station file."""
+    """The ``robot.ads`` section of a station file (ranges: :data:`RANGES`)."""
 
     ams_net_id: str = "127.0.0.1.1.1"  # the PLC's AMS Net ID
     port: int = 851  # TwinCAT 3 PLC runtime 1
@@ -80,54 +257,39 @@ class AdsConfig:
     settle_timeout: float = 3.0  # [s]
     limit_tolerance: float = 0.02  # relative slack of the velocity re-check (sampling)
 
+    def __post_init__(self) -> None:
+        """Every value in its range, whoever built the config."""
+        where = "robot.ads"
+        for f in fields(self):
+            if f.name == "symbols":
+                value = self.symbols
+                if not isinstance(value, dict) or set(value) != set(SYMBOL_KEYS) or \
+                        not all(isinstance(v, str) and _SYMBOL.fullmatch(v) for v in value.values()):
+                    raise InputError(f"{where}.symbols is not a table of the contract's symbols",
+                                     hint="build it with default_symbols() or AdsConfig.from_mapping")
+                continue
+            object.__setattr__(self, f.name, _field(f.name, getattr(self, f.name), f"{where}.{f.name}"))
+        _together({f.name: getattr(self, f.name) for f in fields(self)}, lambda key: f"{where}.{key}")
+
     @classmethod
     def from_mapping(cls, d: dict, where: str = "robot.ads") -> AdsConfig:
         if not isinstance(d, dict):
             raise InputError(f"{where} is not a mapping", hint="write key: value lines under it")
-        known = {f.name for f in fields(cls)}
+        known = [f.name for f in fields(cls)]
         for key in d:
             if key not in known:
-                raise InputError(f"{where}.{key} is not a known key",
-                                 hint=f"known keys: {', '.join(sorted(known))}")
-        kw = dict(d)
-        if "symbols" in kw:
-            sym = kw["symbols"]
-            prefix = sym.get("prefix", "MAIN.recon") if isinstance(sym, dict) else None
-            if prefix is None:
-                raise InputError(f"{where}.symbols is not a mapping", hint="e.g. prefix: MAIN.recon")
-            merged = default_symbols(prefix)
-            for key, name in sym.items():
-                if key == "prefix":
-                    continue
-                if key not in SYMBOL_KEYS:
-                    raise InputError(f"{where}.symbols.{key} is not a symbol of the contract",
-                                     hint=f"symbols: prefix, {', '.join(SYMBOL_KEYS)}")
-                merged[key] = str(name)
-            kw["symbols"] = merged
-        for key in ("axes", "scale", "tracking_bound", "settle_tolerance"):
-            if key in kw:
-                if not isinstance(kw[key], (list, tuple)):
-                    raise InputError(f"{where}.{key} is not a list", hint="write [a, b, ...]")
-                kw[key] = tuple(kw[key])
-        try:
-            cfg = cls(**kw)
-            for key in ("period", "poll", "watchdog", "timeout", "speed_override", "settle_timeout"):
-                value = float(getattr(cfg, key))
-                if not value > 0:
-                    raise InputError(f"{where}.{key} = {value} is not positive", hint="give a positive number")
-            if cfg.speed_override > 1.0:
-                raise InputError(f"{where}.speed_override = {cfg.speed_override} is above 1",
-                                 hint="recon never runs faster than planned; use a value in (0, 1]")
-        except TypeError as exc:
-            raise InputError(f"{where}: {exc}", hint="see docs/hardware.md for the keys") from None
-        return cfg
+                raise InputError(f"{where}.{key} is not a known key", hint=f"known keys: {', '.join(sorted(known))}")
+        kw = {key: _field(key, value, _at(d, key, where)) for key, value in d.items()}
+        values = {f.name: f.default_factory() if f.default is MISSING else f.default for f in fields(cls)}
+        _together({**values, **kw}, lambda key: _at(d, key, where))
+        return cls(**kw)
 
 
 def ads_error_text(exc: Exception) -> str:
     """The readable text of a pyads ADSError (or any error of the connection)."""
     code = getattr(exc, "err_code", None)
     if code is None:
-        return str(exc)
+        return str(exc) or type(exc).__name__
     return f"ADS error {code}: {error_id_text(code)}"
 
 
@@ -150,6 +312,20 @@ def _pyads():
     return pyads
 
 
+class _NotConnected(ConnectionError):
+    """The connection is closed (pyads answers None instead of raising then)."""
+
+
+@dataclass(frozen=True)
+class StopOutcome:
+    """What a stop achieved: confirmed by the PLC (``stop`` reads back TRUE and ``state`` is
+    idle, done, stopped or fault) after ``seconds``, or not within ``bound`` seconds."""
+
+    confirmed: bool
+    seconds: float
+    bound: float
+
+
 class AdsRobot:
     """RobotBackend of a TwinCAT PLC (see the module docstring for the symbol contract)."""
 
@@ -167,27 +343,47 @@ class AdsRobot:
                              hint=f"list each of {', '.join(self.joint_names)} once")
         self._order = np.array([self.joint_names.index(a) for a in axes])  # PLC axis k = recon joint order[k]
         self._scale = np.asarray(config.scale or (1.0,) * n, dtype=float)
-        if self._scale.shape != (n,) or np.any(self._scale == 0):
-            raise InputError(f"robot.ads.scale needs {n} non-zero numbers", hint="1 for rad and m")
-        self._seq = 0
-        self._beat = 0
+        if self._scale.shape != (n,):
+            raise InputError(f"robot.ads.scale has {len(config.scale)} numbers, the cell has {n} joints",
+                             hint="one number per axis, in the order of axes (1 for rad and m)")
+        prismatic = np.asarray(limits.prismatic, dtype=bool)
+        self._units = np.where(prismatic, "m", "rad")
+        self._tracking = np.where(prismatic, config.tracking_bound[1], config.tracking_bound[0])
+        self._settle = np.where(prismatic, config.settle_tolerance[1], config.settle_tolerance[0])
+        # measured positions outside the joint limits widened by the tracking bound are not believed
+        self._measured_lo = np.asarray(limits.lower, dtype=float) - self._tracking
+        self._measured_hi = np.asarray(limits.upper, dtype=float) + self._tracking
+        self._seq = self._job = self._beat = 0
         self._pyads = pyads
         self.sym = config.symbols
+        self._lock = threading.RLock()  # every access to self.plc
+        self._beating = threading.Event()  # the heartbeat thread writes beats
+        self._quit = threading.Event()
+        self._supervising = False  # a motion is being polled ...
+        self._polled = 0.0  # ... last poll [monotonic s]
+        self.beats = 0  # heartbeats written
+        self.beat_failures = 0
         self.plc = connection or pyads.Connection(config.ams_net_id, config.port, config.ip)
         self._lreal_n = pyads.PLCTYPE_LREAL * n
         self._chunk_type = pyads.PLCTYPE_LREAL * (config.chunk_points * n)
         try:
-            if not self.plc.is_open:
-                self.plc.open()
-            self.plc.set_timeout(int(config.timeout * 1000))
-            self._write("watchdog", float(config.watchdog), pyads.PLCTYPE_LREAL)
-            self._seq = int(self._read("chunk_ack", pyads.PLCTYPE_UDINT))
-            self._job = int(self._read("job_ack", pyads.PLCTYPE_UDINT))
+            with self._lock:
+                if not self.plc.is_open:
+                    self.plc.open()
+                self.plc.set_timeout(int(config.timeout * 1000))
+                self._write("watchdog", float(config.watchdog), pyads.PLCTYPE_LREAL)
+                self._seq = int(self._read("chunk_ack", pyads.PLCTYPE_UDINT))
+                self._job = int(self._read("job_ack", pyads.PLCTYPE_UDINT))
+                self._beat = int(self._read("heartbeat", pyads.PLCTYPE_UDINT))
+                self._beat_once()
         except Exception as exc:  # noqa: BLE001 (any failure to reach the PLC)
             self._close_quietly()
             raise RobotFault(f"cannot reach the PLC {config.ams_net_id}:{config.port} at {config.ip} "
                              f"({ads_error_text(exc)})", kind="connection", stopped=False,
                              hint="check the address, the ADS route and that the PLC runs") from None
+        self._beating.set()
+        self._heart = threading.Thread(target=self._beat_loop, name="recon-ads-heartbeat", daemon=True)
+        self._heart.start()
 
     # ------------------------------------------------------------------ units and access
     def to_plc(self, q: np.ndarray) -> np.ndarray:
@@ -201,44 +397,119 @@ class AdsRobot:
         q[..., self._order] = v
         return q
 
+    def _connection(self):
+        if self.plc is None or not self.plc.is_open:
+            raise _NotConnected("the connection is closed")
+        return self.plc
+
     def _read(self, key: str, plc_type):
-        return self.plc.read_by_name(self.sym[key], plc_type)
+        with self._lock:
+            value = self._connection().read_by_name(self.sym[key], plc_type)
+        if value is None:
+            raise _NotConnected("the connection is closed")
+        return value
 
     def _write(self, key: str, value, plc_type) -> None:
-        self.plc.write_by_name(self.sym[key], value, plc_type)
+        with self._lock:
+            self._connection().write_by_name(self.sym[key], value, plc_type)
 
-    def _status(self) -> tuple[int, int, np.ndarray, bool, int]:
-        """state, index, measured (recon order), error flag, error id, read in one ADS sum
-        request (one PLC cycle's values); beats the heartbeat first."""
-        pyads = self._pyads
-        self._beat = (self._beat + 1) % 2**32
-        self._write("heartbeat", self._beat, pyads.PLCTYPE_UDINT)
-        names = [self.sym[k] for k in ("state", "index", "measured", "error", "error_id", "job_ack")]
-        values = self.plc.read_list_by_name(names, structure_defs=None, cache_symbol_info=True)
-        state, index, measured, error, error_id, job_ack = (values[n] for n in names)
-        if int(job_ack) != self._job and not error:
-            state, index = STATE_STARTING, 0  # the PLC has not taken this trajectory yet
-        return (int(state), int(index), self.from_plc(np.asarray(measured, dtype=float)), bool(error),
-                int(error_id) if error else 0)
+    def _read_list(self, keys: tuple[str, ...]) -> list:
+        """Values of several symbols in one ADS sum request (one PLC cycle's values)."""
+        names = [self.sym[k] for k in keys]
+        with self._lock:
+            values = self._connection().read_list_by_name(names, structure_defs=None, cache_symbol_info=True)
+        if not isinstance(values, dict) or any(n not in values for n in names):
+            raise _NotConnected("the status read returned nothing")
+        return [values[n] for n in names]
+
+    def _status(self) -> tuple[int, int, np.ndarray, bool, int, bool]:
+        """state, index, measured (raw PLC axis values), error flag, error id and whether the
+        PLC has taken the current trajectory, read in one ADS sum request."""
+        state, index, measured, error, error_id, job_ack = self._read_list(
+            ("state", "index", "measured", "error", "error_id", "job_ack"))
+        return (int(state), int(index), np.asarray(measured, dtype=float), bool(error), int(error_id),
+                int(job_ack) == self._job)
+
+    # ------------------------------------------------------------------ the heartbeat
+    def _beat_once(self) -> None:
+        with self._lock:
+            self._beat = (self._beat + 1) % 2**32
+            self._write("heartbeat", self._beat, self._pyads.PLCTYPE_UDINT)
+        self.beats += 1
+
+    def _beat_loop(self) -> None:
+        """Beat every ``poll`` while beating is on; during a motion only while the polling loop
+        is alive (a stalled recon then lets the PLC's watchdog stop the axes)."""
+        cfg = self.config
+        while not self._quit.wait(cfg.poll):
+            if not self._beating.is_set():
+                continue
+            if self._supervising and time.monotonic() - self._polled > cfg.watchdog / 2:
+                continue
+            try:
+                self._beat_once()
+            except Exception:  # noqa: BLE001 (the connection is gone: the polling loop or the next request says so)
+                self.beat_failures += 1
 
     # ------------------------------------------------------------------ RobotBackend
     def measured_joints(self) -> np.ndarray:
+        """The measured joints (recon order and units); a value that is not a number or lies
+        outside the joint limits widened by the tracking bound stops the robot and raises
+        RobotFault(kind="measurement")."""
         try:
-            return self.from_plc(np.asarray(self._read("measured", self._lreal_n)))
+            raw = np.asarray(self._read("measured", self._lreal_n), dtype=float)
         except Exception as exc:  # noqa: BLE001
             raise self._lost(exc) from None
+        return self._checked(raw)
+
+    def _checked(self, raw: np.ndarray, at: str = "") -> np.ndarray:
+        n = len(self.joint_names)
+        if raw.shape != (n,):
+            outcome = self._halt()
+            raise RobotFault(f"the PLC's {self.sym['measured']} holds {raw.size} values, the cell has {n} joints"
+                             f"{at}; {self._stop_text(outcome)}", kind="measurement", stopped=outcome.confirmed,
+                             hint="declare it ARRAY[0..n-1] OF LREAL, n the number of axes")
+        q = self.from_plc(raw)
+        bad = ~np.isfinite(q)
+        if np.any(bad):
+            j = int(np.flatnonzero(bad)[0])
+            k = int(np.flatnonzero(self._order == j)[0])
+            outcome = self._halt()
+            raise RobotFault(f"the PLC reports the measured position of {self.joint_names[j]} (axis {k}) as "
+                             f"{raw[k]}, not a finite number{at}; {self._stop_text(outcome)}", kind="measurement",
+                             joint=self.joint_names[j], stopped=outcome.confirmed,
+                             hint="check the drive's encoder and the PLC's measured symbol; completed scans are kept")
+        out = (q < self._measured_lo) | (q > self._measured_hi)
+        if np.any(out):
+            j = int(np.flatnonzero(out)[0])
+            u = self._units[j]
+            outcome = self._halt()
+            raise RobotFault(f"the measured position of {self.joint_names[j]} is {q[j]:.4g} {u}, outside its limits "
+                             f"[{self.limits.lower[j]:.4f}, {self.limits.upper[j]:.4f}] {u} widened by the tracking "
+                             f"bound {self._tracking[j]:g} {u}{at}; {self._stop_text(outcome)}", kind="measurement",
+                             joint=self.joint_names[j], value=float(q[j]),
+                             bound=float(self._measured_hi[j] if q[j] > self._measured_hi[j] else self._measured_lo[j]),
+                             stopped=outcome.confirmed,
+                             hint="check robot.ads.axes and scale against the PLC's axes, and the drive's encoder")
+        return q
 
     def setpoints(self, trajectory: Trajectory) -> tuple[np.ndarray, float]:
         """The trajectory sampled for the PLC (recon order) and its period, checked against
         the joint and velocity limits; raises RobotFault(kind="limit") before anything is sent."""
         cfg = self.config
         duration = trajectory.duration / cfg.speed_override
+        if not np.isfinite(duration) or duration < 0:
+            raise RobotFault(f"the trajectory's duration {trajectory.duration} s is not a finite time; nothing was "
+                             "sent", kind="limit", stopped=False, hint="plan the motion again")
         period = max(cfg.period, duration / max(cfg.max_points - 1, 1))
         k = max(int(np.ceil(duration / period)), 1)
         t = np.minimum(np.arange(k + 1) * period, duration)
         q = trajectory.sample(t * cfg.speed_override)[0]
         lim = self.limits
         for j, name in enumerate(self.joint_names):
+            if not np.all(np.isfinite(q[:, j])):
+                raise RobotFault(f"a setpoint of {name} is not a finite number; nothing was sent", kind="limit",
+                                 joint=name, stopped=False, hint="plan the motion again")
             lo, hi = float(q[:, j].min()), float(q[:, j].max())
             if lo < lim.lower[j] - 1e-9 or hi > lim.upper[j] + 1e-9:
                 bad, bound = (lo, lim.lower[j]) if lo < lim.lower[j] - 1e-9 else (hi, lim.upper[j])
@@ -259,27 +530,35 @@ class AdsRobot:
         return q, period
 
     def execute(self, trajectory: Trajectory) -> ExecutionReport:
+        """Download and run a trajectory, follow it and wait until the robot has settled at its
+        end; every fault, Ctrl-C and SIGTERM stops the robot before the exception leaves."""
         pyads = self._pyads
         q, period = self.setpoints(trajectory)
+        start = self.measured_joints()
+        self._check_start(start, q[0])
         try:
-            start = self.measured_joints()
-            self._check_start(start, q[0])
             self._download(q, period)
+            self._beating.set()
             self._write("stop", False, pyads.PLCTYPE_BOOL)
             self._job = (self._job + 1) % 2**32
             self._write("job", self._job, pyads.PLCTYPE_UDINT)
         except RobotFault:
             raise
+        except KeyboardInterrupt:
+            self._halt()
+            raise
         except Exception as exc:  # noqa: BLE001
             raise self._lost(exc) from None
         try:
             return self._follow(q, period)
-        except BaseException:
-            self.stop()
+        except RobotFault:
+            raise  # stopped where it was raised
+        except BaseException:  # Ctrl-C, SIGTERM (recon_cli.interrupts), a bug
+            self._halt()
             raise
 
     def _check_start(self, measured: np.ndarray, first: np.ndarray) -> None:
-        tol = np.where(self.limits.prismatic, self.config.tracking_bound[1], self.config.tracking_bound[0])
+        tol = self._tracking
         err = np.abs(measured - first)
         if np.any(err > tol):
             j = int(np.argmax(err / tol))
@@ -313,76 +592,139 @@ class AdsRobot:
         self._write("count", len(rows), pyads.PLCTYPE_DINT)
 
     def _follow(self, q: np.ndarray, period: float) -> ExecutionReport:
+        self._supervising, self._polled = True, time.monotonic()
+        try:
+            return self._poll_until_settled(q, period)
+        finally:
+            self._supervising = False
+
+    def _fault(self, message: str, **kw) -> RobotFault:
+        """Stop the robot, then the fault (``message`` is completed by what the stop achieved)."""
+        outcome = self._halt()
+        return RobotFault(f"{message}; {self._stop_text(outcome)}", stopped=outcome.confirmed, **kw)
+
+    def _poll_until_settled(self, q: np.ndarray, period: float) -> ExecutionReport:
         cfg = self.config
         n_points = len(q)
         duration = (n_points - 1) * period
-        bound = np.where(self.limits.prismatic, cfg.tracking_bound[1], cfg.tracking_bound[0])
-        settle = np.where(self.limits.prismatic, cfg.settle_tolerance[1], cfg.settle_tolerance[0])
+        bound, settle = self._tracking, self._settle
         max_err = np.zeros(len(self.joint_names))
         t0 = time.monotonic()
         t_done = None
+        inside = 0  # consecutive polls within the settle tolerance
         while True:
             try:
-                state, index, measured, error, error_id = self._status()
+                state, index, raw, error, error_id, taken = self._status()
             except Exception as exc:  # noqa: BLE001
                 raise self._lost(exc) from None
-            now = time.monotonic()
+            now = self._polled = time.monotonic()
+            at = f" at setpoint {index} of {n_points}"
             if error or state == STATE_FAULT:
-                stopped = self.stop()
-                raise RobotFault(f"the PLC reports fault {error_id} ({error_id_text(error_id)}) at setpoint "
-                                 f"{index} of {n_points}; the robot was stopped", kind="plc_fault", code=error_id,
-                                 stopped=stopped,
-                                 hint="clear the fault on the PLC, then run again; completed scans are kept")
+                raise self._fault(f"the PLC reports fault {error_id} (0x{error_id:X}: {error_id_text(error_id)})"
+                                  f"{at}", kind="plc_fault", code=error_id,
+                                  hint="clear the fault on the PLC, then run again; completed scans are kept")
+            if state not in STATE_NAMES or state == STATE_STARTING:
+                raise self._fault(f"the PLC reports state {state}, not one of 0 (idle), 1 (moving), 2 (done), "
+                                  f"3 (stopped), 4 (fault)", kind="measurement", value=float(state),
+                                  hint=f"check the PLC program's {self.sym['state']}; completed scans are kept")
+            if not taken:
+                state, index = STATE_STARTING, 0  # the PLC has not taken this trajectory yet
+            elif state in (STATE_MOVING, STATE_DONE) and not 0 <= index < n_points:
+                raise self._fault(f"the PLC reports setpoint {index} while {STATE_NAMES[state]}, outside "
+                                  f"0..{n_points - 1} of the downloaded trajectory", kind="measurement",
+                                  value=float(index), bound=float(n_points - 1),
+                                  hint=f"check the PLC program's {self.sym['index']}; completed scans are kept")
+            measured = self._checked(raw, "" if state == STATE_STARTING else f" at setpoint {index} of {n_points}")
             if state in (STATE_STOPPED, STATE_IDLE):
-                raise RobotFault(f"the PLC {'stopped' if state == STATE_STOPPED else 'ended'} the motion at setpoint "
-                                 f"{index} of {n_points} without completing it", kind="plc_fault",
-                                 stopped=self.stop(),
-                                 hint="see the PLC's log (heartbeat watchdog, emergency stop); scans are kept")
+                raise self._fault(f"the PLC {'stopped' if state == STATE_STOPPED else 'ended'} the motion at setpoint "
+                                  f"{index} of {n_points} without completing it", kind="plc_fault",
+                                  hint="see the PLC's log (heartbeat watchdog, emergency stop); scans are kept")
             k = int(np.clip(index if state == STATE_MOVING else (n_points - 1 if state == STATE_DONE else 0),
                             0, n_points - 1))
             err = np.abs(measured - q[k])
-            max_err = np.maximum(max_err, err) if state in (STATE_MOVING, STATE_DONE) else max_err
-            over = err > bound
-            if np.any(over) and state in (STATE_MOVING, STATE_DONE):
-                j = int(np.argmax(err / bound))
-                stopped = self.stop()
-                raise RobotFault(f"tracking error of {self.joint_names[j]} is {err[j]:.4f}, above the bound "
-                                 f"{bound[j]:.4f}, at setpoint {k} of {n_points}; the robot was stopped",
-                                 kind="tracking", joint=self.joint_names[j], value=float(err[j]),
-                                 bound=float(bound[j]), stopped=stopped,
-                                 hint="check the drives and the load; completed scans are kept")
+            if state in (STATE_MOVING, STATE_DONE):
+                max_err = np.maximum(max_err, err)
+                if np.any(err > bound):
+                    j = int(np.argmax(err / bound))
+                    raise self._fault(f"tracking error of {self.joint_names[j]} is {err[j]:.4f}, above the bound "
+                                      f"{bound[j]:.4f}, at setpoint {k} of {n_points}", kind="tracking",
+                                      joint=self.joint_names[j], value=float(err[j]), bound=float(bound[j]),
+                                      hint="check the drives and the load; completed scans are kept")
             if state == STATE_DONE:
                 t_done = t_done if t_done is not None else now
                 final = np.abs(measured - q[-1])
-                if np.all(final <= settle):
+                inside = inside + 1 if np.all(final <= settle) else 0
+                if inside >= SETTLE_POLLS:  # not an axis passing through the goal on its way elsewhere
                     return ExecutionReport(duration=duration, settle_time=now - t_done, max_tracking_error=max_err,
                                            final_error=final, settled=True)
                 if now - t_done > cfg.settle_timeout:
-                    return ExecutionReport(duration=duration, settle_time=now - t_done, max_tracking_error=max_err,
-                                           final_error=final, settled=False)
+                    over = np.flatnonzero(final > settle)
+                    j = int(over[np.argmax(final[over] / settle[over])])
+                    errors = ", ".join(f"{self.joint_names[i]} {final[i]:.3g} {self._units[i]} "
+                                       f"(tolerance {settle[i]:g})" for i in over)
+                    raise self._fault(f"the robot did not settle at the goal within {cfg.settle_timeout:g} s "
+                                      f"(final error {errors}); no scan was taken", kind="settle",
+                                      joint=self.joint_names[j], value=float(final[j]), bound=float(settle[j]),
+                                      hint="check the drives' position control or robot.ads.settle_tolerance; "
+                                           "completed scans are kept")
             elif now - t0 > duration + cfg.time_margin:
-                stopped = self.stop()
-                raise RobotFault(f"the motion did not complete within {duration + cfg.time_margin:.1f} s "
-                                 f"(PLC state {STATE_NAMES.get(state, state)}, setpoint {index} of {n_points}); "
-                                 "the robot was stopped", kind="timeout", stopped=stopped,
-                                 hint="check the PLC program and the drives; completed scans are kept")
+                raise self._fault(f"the motion did not complete within {duration + cfg.time_margin:.1f} s "
+                                  f"(PLC state {STATE_NAMES.get(state, state)}, setpoint {index} of {n_points})",
+                                  kind="timeout", hint="check the PLC program and the drives; completed scans are kept")
             time.sleep(cfg.poll)
 
     # ------------------------------------------------------------------ stopping
     def stop(self) -> bool:
-        """Command the robot to stop (decelerate and hold); True when the PLC took it."""
-        try:
-            self._write("stop", True, self._pyads.PLCTYPE_BOOL)
-            return True
-        except Exception:  # noqa: BLE001 (the connection may be gone; the PLC watchdog stops then)
-            return False
+        """Command the robot to stop (decelerate and hold); True when the PLC confirmed it."""
+        return self._halt().confirmed
+
+    def _reconnect(self) -> None:
+        with self._lock:
+            try:
+                self.plc.close()
+            except Exception:  # noqa: BLE001 (a broken connection may not close cleanly)
+                pass
+            self.plc.open()
+            self.plc.set_timeout(int(self.config.timeout * 1000))
+
+    def _halt(self) -> StopOutcome:
+        """Write ``stop`` until the PLC confirms it (``stop`` reads back TRUE and ``state`` is
+        0, 2, 3 or 4: not moving, and not garbage), reconnecting when the connection is gone, for at most ``watchdog``
+        seconds. The heartbeat pauses meanwhile, so that the PLC's watchdog stops the axes
+        when recon cannot; it resumes once the stop is confirmed."""
+        pyads, cfg = self._pyads, self.config
+        self._beating.clear()
+        t0 = time.monotonic()
+        deadline = t0 + cfg.watchdog
+        reconnect = False
+        while self.plc is not None:
+            try:
+                with self._lock:
+                    if reconnect:
+                        self._reconnect()
+                    self._write("stop", True, pyads.PLCTYPE_BOOL)
+                    stop, state = self._read_list(("stop", "state"))
+                if bool(stop) and int(state) in (STATE_IDLE, STATE_DONE, STATE_STOPPED, STATE_FAULT):
+                    self._beating.set()
+                    return StopOutcome(True, time.monotonic() - t0, cfg.watchdog)
+            except Exception:  # noqa: BLE001 (the connection is gone: reconnect and try again)
+                reconnect = True
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            time.sleep(min(cfg.poll, left))
+        return StopOutcome(False, time.monotonic() - t0, cfg.watchdog)
+
+    def _stop_text(self, outcome: StopOutcome) -> str:
+        if outcome.confirmed:
+            return f"the robot was stopped (confirmed by the PLC after {outcome.seconds:.2f} s)"
+        return (f"the stop could not be confirmed within {outcome.bound:g} s; the PLC watchdog stops the axes "
+                f"after {self.config.watchdog:g} s without a heartbeat")
 
     def _lost(self, exc: Exception) -> RobotFault:
-        stopped = self.stop()
-        return RobotFault(f"lost the connection to the PLC ({ads_error_text(exc)}); "
-                          + ("the robot was stopped" if stopped else
-                             f"the stop command did not arrive, the PLC watchdog stops the axes after "
-                             f"{self.config.watchdog:g} s"), kind="connection", stopped=stopped,
+        outcome = self._halt()
+        return RobotFault(f"lost the connection to the PLC ({ads_error_text(exc)}); {self._stop_text(outcome)}",
+                          kind="connection", stopped=outcome.confirmed,
                           hint="check the network and the PLC; completed scans are kept")
 
     def _close_quietly(self) -> None:
@@ -398,9 +740,20 @@ class AdsRobot:
         self.close()
 
     def close(self) -> None:
-        """Stop the robot, then close the connection (idempotent)."""
+        """Write ``stop`` (one attempt), then end the heartbeat and close the connection
+        (idempotent)."""
         if self.plc is None:
             return
-        self.stop()
-        self._close_quietly()
-        self.plc = None
+        try:
+            self._write("stop", True, self._pyads.PLCTYPE_BOOL)
+        except Exception:  # noqa: BLE001 (the connection is gone; the PLC's watchdog stops the axes)
+            pass
+        finally:
+            self._beating.clear()
+            self._quit.set()
+            heart = getattr(self, "_heart", None)
+            if heart is not None and heart is not threading.current_thread():
+                heart.join(timeout=self.config.timeout + self.config.poll + 1.0)
+            with self._lock:
+                self._close_quietly()
+                self.plc = None

@@ -142,6 +142,7 @@ class OutputFolder:
     def __fspath__(self) -> str:
         return os.fspath(self.path)
 
+
 def claim_output(path: Path | None, mode: OutputMode = OutputMode.NEW, *, command: str,
                  append: str | None = None, force: str | None = "--force", nested_in: Path | None = None,
                  inputs: Iterable[Path | None] = (), names: tuple[str, ...] | None = None,
@@ -203,6 +204,7 @@ def claim_output(path: Path | None, mode: OutputMode = OutputMode.NEW, *, comman
         folder.make()
     return folder
 
+
 def _new_default(name: str) -> Path:
     """A new folder ``runs/<name>-<time>`` (``-2``, ``-3``, ... when that exists)."""
     stamp = f"{name}-{datetime.now():%Y%m%d-%H%M%S}"
@@ -251,6 +253,7 @@ def _written(folder: Path, inputs: list[Path], force: str) -> tuple[str, ...]:
                 raise FileError(f"{force} would remove {p}, which this command reads ({i})",
                                 hint="choose another output folder with --out")
     return tuple(victims)
+
 
 def _recorded_exports(folder: Path) -> list[str]:
     """The exports (relative paths) that earlier script runs in ``folder`` wrote, as their

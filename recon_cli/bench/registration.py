@@ -104,15 +104,15 @@ def run_registration_bench(out: Path, object_name: str = "auto", seed: int = 0, 
                   "kinematics_translation_mm": kinematic.get(r.index, (None, None))[0],
                   "kinematics_rotation_deg": kinematic.get(r.index, (None, None))[1]}
                  for r in first.scans]
-    import open3d as o3d
+    from recon_cli.inputs.meshes import read_cloud, read_mesh
 
-    mesh = o3d.io.read_triangle_mesh(str(reference))
+    mesh = read_mesh(reference, "reference mesh")
     curves = {}
     for name in ("global only", "pose graph (ICP loop closures)", "perturbed, global only",
                  "perturbed, pose graph (ICP loop closures)", KINEMATICS_CASE):
         if name not in results:
             continue
-        pts = np.asarray(o3d.io.read_point_cloud(str(results[name].cloud)).points)
+        pts = np.asarray(read_cloud(results[name].cloud, "fused cloud").points)
         curves[name] = signed_distances(pts, mesh)
     histogram_png(out / "distances.png", curves, f"eq. 4.1, 24 views of the {capture.scene_object.name}: "
                   "fused cloud vs ground truth", limit=0.003)

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from recon_cli.errors import FileError
+from recon_cli.inputs.meshes import read_cloud, read_mesh
 from recon_cli.reconstruction.scan_store import ScanStore
 
 
@@ -23,8 +25,6 @@ def record_registration(recorder, result, store_root: Path,
     """Board detections, clouds before/after registration, mesh, signed distances (the
     fused cloud's points and their distances when the caller has them, else computed
     against the store's simulated object)."""
-    import open3d as o3d
-
     from recon_cli.perception.charuco import detect, thesis_board
     from recon_cli.reconstruction.global_registration import PoseSource
     from recon_cli.reconstruction.scan_store import read_scan
@@ -47,7 +47,7 @@ def record_registration(recorder, result, store_root: Path,
                           + (f" ({rec.pose.reason})" if rec.pose.reason else ""))
     recorder.registration(result)
     if result.mesh is not None:
-        recorder.mesh("reconstruction/mesh", o3d.io.read_triangle_mesh(str(result.mesh)))
+        recorder.mesh("reconstruction/mesh", read_mesh(result.mesh, "reconstructed mesh", triangles=False))
     if distances is not None:
         recorder.distances(*distances)
         return
@@ -55,15 +55,13 @@ def record_registration(recorder, result, store_root: Path,
     if truth is not None:
         from recon_cli.reconstruction.evaluation import signed_distances
 
-        points = np.asarray(o3d.io.read_point_cloud(str(result.cloud)).points)
+        points = np.asarray(read_cloud(result.cloud, "fused cloud", points=False).points)
         if len(points):
             recorder.distances(points, signed_distances(points, truth))
 
 
 def _truth_mesh(store_root: Path):
     """The simulated object of a scan store (ground_truth/<object>.ply), or None."""
-    import open3d as o3d
-
     try:
         name = ScanStore(store_root).session().object_name
     except Exception:  # noqa: BLE001 - a store without a readable session has no truth to show
@@ -71,7 +69,10 @@ def _truth_mesh(store_root: Path):
     path = store_root / "ground_truth" / f"{name}.ply"
     if not name or not path.is_file():
         return None
-    return o3d.io.read_triangle_mesh(str(path))
+    try:
+        return read_mesh(path, "ground-truth mesh")
+    except FileError:  # a broken truth file is left out, as a missing one
+        return None
 
 
 def record_store(recorder, store_root: Path) -> int:

@@ -316,9 +316,9 @@ class Autoscan:
                 error = exc
             else:
                 cloud, mesh = reg.cloud, reg.mesh
-                import open3d as o3d
+                from recon_cli.inputs.meshes import read_cloud
 
-                pts = np.asarray(o3d.io.read_point_cloud(str(cloud)).points)
+                pts = np.asarray(read_cloud(cloud, "fused cloud", points=False).points)
                 coverage = surface_coverage(self.obj, pts, 0.001, np.random.default_rng(cfg.seed))
                 d = signed_distances(pts, self.obj.mesh_world())
                 if self.recorder is not None:

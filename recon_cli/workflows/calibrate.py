@@ -42,6 +42,7 @@ from recon_cli.calibration.views import BoardViewOptions, board_views
 from recon_cli.config import DEFAULTS, Config
 from recon_cli.errors import FileError, InputError, ReconError
 from recon_cli.geometry.transforms import invert, pose_error
+from recon_cli.inputs.images import read_color
 from recon_cli.perception.charuco import BoardSpec, thesis_board
 
 Progress = Callable[[str, int, int], None]
@@ -357,9 +358,7 @@ def board_images(source: Path, pattern: str = "*") -> list[tuple[str, np.ndarray
                         hint=f"images ({', '.join(IMAGE_SUFFIXES)}) or scan_NNNN/color.png")
     images = []
     for f in files:
-        bgr = cv2.imread(str(f), cv2.IMREAD_COLOR)
-        if bgr is None:
-            raise FileError(f"{f} cannot be read as an image", hint="remove it or narrow --pattern")
+        bgr = read_color(f, "calibration image", hint="remove it or narrow --pattern")
         images.append((f.parent.name if scan_dirs else f.name, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)))
     return images
 

@@ -114,7 +114,9 @@ def run_replay(opt: ReplayOptions, progress: Callable[[str, int, int], None] | N
     res_before = overlap_residuals(before, gate, voxel=opt.voxel / 2)
     res_after = res_before if before is after else overlap_residuals(after, gate, voxel=opt.voxel / 2)
     first = result.used[0].final_marker_T_camera
-    fused = o3d.io.read_point_cloud(str(result.cloud))
+    from recon_cli.inputs.meshes import read_cloud
+
+    fused = read_cloud(result.cloud, "fused cloud")
     title = (f"{Path(str(opt.source.source)).name}: {len(result.used)} recorded frames, "
              f"{'recorded poses + pose graph' if result.multiway else 'recorded poses'}")
     picture = atomic_write(out / "cloud.png",

@@ -43,6 +43,7 @@ from recon_cli.backends.hardware.camera_config import (
     text,
 )
 from recon_cli.errors import CameraFault, FileError, InputError
+from recon_cli.inputs.images import read_color, read_depth
 from recon_cli.perception.camera_model import Intrinsics
 
 log = logging.getLogger(__name__)
@@ -271,10 +272,8 @@ def load_frame(frame: RecordedFrame) -> RGBDFrame:
         scan = read_scan(frame.scan_folder)
         color = scan.color if scan.color is not None else np.zeros((*scan.depth.shape, 3), np.uint8)
         return RGBDFrame(color, scan.depth, scan.intrinsics, _stamp(frame), scan.distortion)
-    raw = cv2.imread(str(frame.depth_path), cv2.IMREAD_UNCHANGED)
-    if raw is None or raw.ndim != 2:
-        raise CameraFault(f"{frame.depth_path}: not a single-channel depth image", adapter=ADAPTER,
-                          hint="16-bit PNG/PGM in depth_scale units, or a float image in metres")
+    raw = _read_image(read_depth, frame.depth_path, "depth image", metres=True,
+                      hint="16-bit PNG/PGM in depth_scale units, or a 32-bit float TIFF in metres")
     if np.issubdtype(raw.dtype, np.integer):
         depth = raw.astype(np.float64) / frame.depth_scale
     else:
@@ -283,9 +282,7 @@ def load_frame(frame: RecordedFrame) -> RGBDFrame:
     h, w = depth.shape
     color = None
     if frame.color_path is not None:
-        bgr = cv2.imread(str(frame.color_path), cv2.IMREAD_COLOR)
-        if bgr is None:
-            raise CameraFault(f"{frame.color_path}: cannot be read as an image", adapter=ADAPTER)
+        bgr = _read_image(read_color, frame.color_path, "colour image")
         if bgr.shape[:2] != (h, w):
             raise CameraFault(f"{frame.color_path} is {bgr.shape[1]} x {bgr.shape[0]}, its depth image "
                               f"{frame.depth_path.name} {w} x {h}", adapter=ADAPTER,
@@ -295,6 +292,14 @@ def load_frame(frame: RecordedFrame) -> RGBDFrame:
         color = np.zeros((h, w, 3), np.uint8)
     K = frame.intrinsics or Intrinsics(w, h, *frame.focal)
     return RGBDFrame(color, depth, K, _stamp(frame), frame.distortion)
+
+
+def _read_image(reader, path: Path, what: str, **kw) -> np.ndarray:
+    """An image through the guarded reader; a bad one is the replay camera's fault."""
+    try:
+        return reader(path, what, **kw)
+    except FileError as exc:
+        raise CameraFault(exc.message, adapter=ADAPTER, hint=exc.hint) from None
 
 
 def _stamp(frame: RecordedFrame) -> float:

@@ -9,6 +9,8 @@ from dataclasses import replace
 import numpy as np
 
 from recon_cli.errors import FileError, ReconError
+from recon_cli.inputs.images import read_color, read_depth
+from recon_cli.inputs.meshes import read_cloud
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.checks import readable_file
 from recon_cli.scripts.handlers import handles
@@ -115,7 +117,6 @@ def delete(state: RunState, cmd: C.DeleteFragment, report: CommandReport) -> Non
 @handles(C.LoadFragment)
 def load(state: RunState, cmd: C.LoadFragment, report: CommandReport) -> None:
     import cv2
-    import open3d as o3d
 
     from recon_cli.perception.rgbd import rgbd_cloud
     from recon_cli.perception.sensor import motioncam_3d_m
@@ -124,18 +125,13 @@ def load(state: RunState, cmd: C.LoadFragment, report: CommandReport) -> None:
         return
     if cmd.kind == "point_cloud":
         path = readable_file(state.script, cmd.path_point_cloud, cmd.source, "point cloud")
-        cloud = o3d.io.read_point_cloud(str(path))
-        if len(cloud.points) == 0:
-            raise FileError(f"{cmd.source}: {path} holds no points", hint="check path_point_cloud")
+        cloud = _guarded(cmd, read_cloud, path, "point cloud", hint="check path_point_cloud (a PLY or PCD file)")
     else:
         color_path = readable_file(state.script, cmd.path_color, cmd.source, "colour image")
         depth_path = readable_file(state.script, cmd.path_depth, cmd.source, "depth image")
-        depth = cv2.imread(str(depth_path), cv2.IMREAD_UNCHANGED)
-        color = cv2.imread(str(color_path), cv2.IMREAD_COLOR)
-        if depth is None or color is None:
-            raise FileError(f"{cmd.source}: cannot read {color_path} and {depth_path}",
-                            hint="check path_color and path_depth (PNG images)")
-        if depth.ndim != 2 or color.shape[:2] != depth.shape:
+        depth = _guarded(cmd, read_depth, depth_path, "depth image", hint="check path_depth (a 16-bit PNG)")
+        color = _guarded(cmd, read_color, color_path, "colour image", hint="check path_color")
+        if color.shape[:2] != depth.shape:
             raise FileError(f"{cmd.source}: depth {depth_path.name} ({depth.shape[1]}x{depth.shape[0]}) and colour "
                             f"{color_path.name} ({color.shape[1]}x{color.shape[0]}) do not match",
                             hint="give a single-channel depth image of the colour image's size")
@@ -145,6 +141,14 @@ def load(state: RunState, cmd: C.LoadFragment, report: CommandReport) -> None:
         report.message = "camera frame; intrinsics and depth scale of the MotionCam-3D M model"
     state.fragments[cmd.name] = cloud
     report.details.update(points=len(cloud.points))
+
+
+def _guarded(cmd, reader, path, what: str, **kw):
+    """A file through its guarded reader; a refusal names the script line."""
+    try:
+        return reader(path, what, **kw)
+    except FileError as exc:
+        raise FileError(f"{cmd.source}: {exc.message}", hint=exc.hint) from None
 
 
 @handles(C.ExportFragment)

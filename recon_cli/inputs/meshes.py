@@ -280,12 +280,13 @@ def _ply_binary_faces(path: Path, size: int, header: PlyHeader, before: list[Ply
     for i, (p, _, _, n) in enumerate(fields):
         counts = table[f"c{i}"]
         if p.name in _INDEX_LISTS and n != 3:
-            return f"has a face of {_count(n, 'vertex', 'vertices')} (face 0); recon reads triangle meshes only"
+            return (f"has a face of {_count(n, 'vertex', 'vertices')} (face 0); recon reads triangle meshes only "
+                    "(triangulate it)")
         bad = np.flatnonzero(counts != n)
         if bad.size:
             k = int(bad[0])
             return (f"has faces of different sizes (face {k}: {int(counts[k])} entries in '{p.name}', face 0: {n}); "
-                    "recon reads triangle meshes only")
+                    "recon reads triangle meshes only (triangulate it)")
     return None
 
 
@@ -332,7 +333,7 @@ def _ply_ascii_faces(mm: mmap.mmap, header: PlyHeader, before: list[PlyElement],
     _, k = _ascii_skip(mm, at, b"".join(parts), face.count)
     if k < face.count:
         return (f"has a face that is not a triangle (face {k}: its index list is not '3' and three indices, or the "
-                "file ends); recon reads triangle meshes only")
+                "file ends); recon reads triangle meshes only (triangulate it)")
     return None
 
 
@@ -372,6 +373,7 @@ def _count_in(mm: mmap.mmap, needle: bytes) -> int:
 # --------------------------------------------------------------------- OBJ
 _OBJ_VERTEX = re.compile(rb"(?:^|(?<=[\r\n]))[ \t]*v[ \t]")
 _OBJ_FACE = re.compile(rb"(?:^|(?<=[\r\n]))[ \t]*f[ \t]")
+_OBJ_POLYGON = re.compile(rb"(?:^|(?<=[\r\n]))[ \t]*f(?:[ \t]+[^ \t\r\n#]+){4}")
 _OBJ_MTLLIB = re.compile(rb"(?:^|(?<=[\r\n]))[ \t]*mtllib\b[^\r\n]*")
 
 
@@ -392,9 +394,10 @@ def _obj_chunks(mm: mmap.mmap) -> Iterator[bytes]:
 
 
 def _obj_guard(path: Path) -> Path | None:
-    """Count the vertex and face lines; a copy without the material library lines when
-    there are any (returned; the caller removes it), else None."""
-    vertices = faces = 0
+    """Count the vertex and face lines (faces must be triangles: Open3D drops the others
+    silently); a copy without the material library lines when there are any (returned;
+    the caller removes it), else None."""
+    vertices = faces = polygons = 0
     materials = False
     with _mapped(path) as mm:
         if mm.find(b"\x00") >= 0:
@@ -402,11 +405,15 @@ def _obj_guard(path: Path) -> Path | None:
         for chunk in _obj_chunks(mm):
             vertices += len(_OBJ_VERTEX.findall(chunk))
             faces += len(_OBJ_FACE.findall(chunk))
+            polygons += len(_OBJ_POLYGON.findall(chunk))
             materials = materials or _OBJ_MTLLIB.search(chunk) is not None
             if vertices > MAX_VERTICES:
                 raise _Refused(f"has more than {MAX_VERTICES} vertex lines, more than recon reads")
             if faces > MAX_TRIANGLES:
                 raise _Refused(f"has more than {MAX_TRIANGLES} face lines, more than recon reads")
+        if polygons:
+            raise _Refused(f"has {_count(polygons, 'face')} of more than three vertices, which Open3D would leave "
+                           "out; recon reads triangle meshes only (triangulate it)")
         if not materials:
             return None
         fd, name = tempfile.mkstemp(suffix=".obj", prefix="recon-mesh-")

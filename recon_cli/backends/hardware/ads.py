@@ -634,7 +634,7 @@ class AdsRobot:
                                   f"0..{n_points - 1} of the downloaded trajectory", kind="measurement",
                                   value=float(index), bound=float(n_points - 1),
                                   hint=f"check the PLC program's {self.sym['index']}; completed scans are kept")
-            measured = self._checked(raw, "" if state == STATE_STARTING else f" at setpoint {index} of {n_points}")
+            measured = self._checked(raw, "" if state == STATE_STARTING else at)
             if state in (STATE_STOPPED, STATE_IDLE):
                 raise self._fault(f"the PLC {'stopped' if state == STATE_STOPPED else 'ended'} the motion at setpoint "
                                   f"{index} of {n_points} without completing it", kind="plc_fault",
@@ -657,7 +657,7 @@ class AdsRobot:
                 if inside >= SETTLE_POLLS:  # not an axis passing through the goal on its way elsewhere
                     return ExecutionReport(duration=duration, settle_time=now - t_done, max_tracking_error=max_err,
                                            final_error=final, settled=True)
-                if now - t_done > cfg.settle_timeout:
+                if now - t_done > cfg.settle_timeout and not inside:  # (inside: let the streak end)
                     over = np.flatnonzero(final > settle)
                     j = int(over[np.argmax(final[over] / settle[over])])
                     errors = ", ".join(f"{self.joint_names[i]} {final[i]:.3g} {self._units[i]} "

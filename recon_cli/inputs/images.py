@@ -318,28 +318,34 @@ _QUIET = threading.RLock()
 
 
 @contextlib.contextmanager
-def native_output_captured():
-    """Route the process's stderr (file descriptor 2) into a temporary file while native
-    code runs (libpng and libjpeg print their diagnostics there directly) and silence
-    OpenCV's logging; yields a list that receives the captured text. Serialised by a lock:
-    one redirection at a time."""
-    import cv2
-
+def native_output_captured(fds: tuple[int, ...] = (2,), opencv: bool = True):
+    """Route the process's file descriptors ``fds`` (stderr: libpng, libjpeg and rply print
+    their diagnostics there directly) into a temporary file while native code runs, and
+    silence OpenCV's logging; yields a list that receives the captured text afterwards.
+    Serialised by a lock: one redirection at a time."""
     with _QUIET, tempfile.TemporaryFile() as sink:
         captured: list[str] = []
         for stream in (sys.stdout, sys.stderr):
             with contextlib.suppress(Exception):
                 stream.flush()
-        saved = os.dup(2)
-        level = cv2.utils.logging.getLogLevel()
+        saved = [os.dup(fd) for fd in fds]
+        cv2 = level = None
+        if opencv:
+            import cv2
+
+            level = cv2.utils.logging.getLogLevel()
         try:
-            os.dup2(sink.fileno(), 2)
-            cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+            for fd in fds:
+                os.dup2(sink.fileno(), fd)
+            if cv2 is not None:
+                cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
             yield captured
         finally:
-            cv2.utils.logging.setLogLevel(level)
-            os.dup2(saved, 2)
-            os.close(saved)
+            if cv2 is not None:
+                cv2.utils.logging.setLogLevel(level)
+            for fd, copy in zip(fds, saved, strict=True):
+                os.dup2(copy, fd)
+                os.close(copy)
             sink.seek(0)
             captured.append(sink.read(64 * 1024).decode("utf-8", "replace"))
 
@@ -354,7 +360,7 @@ def _size_text(n: int) -> str:
 
 
 def _mp(n: int) -> str:
-    return f"{n / 1e6:.3g} megapixels"
+    return f"{n / 1e6:.4g} megapixels"
 
 
 def read_file_bytes(path: Path, what: str, limit: int, hint: str) -> bytes:

@@ -467,6 +467,9 @@ def _pcd_guard(path: Path, size: int) -> None:
     if not all(re.fullmatch(r"[1-9]\d{0,3}", c) for c in counts):
         raise _Refused("has a COUNT outside 1 to 9999")
     sizes, counts_i = [int(s) for s in seen["SIZE"]], [int(c) for c in counts]
+    normals = [a in fields for a in ("normal_x", "normal_y", "normal_z")]
+    if any(normals) and not all(normals):  # Open3D would write normals it has no room for
+        raise _Refused("has some of the fields normal_x, normal_y, normal_z but not all three")
     for axis in "xyz":
         if axis not in fields:
             raise _Refused("has no x, y and z fields")
@@ -517,9 +520,14 @@ def _pcd_guard(path: Path, size: int) -> None:
 # --------------------------------------------------------------------- loading and checks
 @contextlib.contextmanager
 def _open3d_quiet():
+    """Open3D with its logging at errors only (which it raises) and the process's stdout
+    and stderr captured (rply prints its read errors there directly)."""
     import open3d as o3d
 
-    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+    from recon_cli.inputs.images import native_output_captured
+
+    with native_output_captured((1, 2), opencv=False), \
+            o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
         yield o3d
 
 

@@ -76,7 +76,7 @@ def _check_file(path: Path, what: str, hint: str) -> int:
     try:
         st = path.stat()
     except FileNotFoundError:
-        raise FileError(f"{path}: {what} does not exist", hint=hint) from None
+        raise FileError(f"{path}: {what} does not exist", hint="check the path") from None
     except OSError as exc:
         raise FileError(f"{path}: {what} cannot be read ({exc.strerror})", hint=hint) from None
     if not stat.S_ISREG(st.st_mode):

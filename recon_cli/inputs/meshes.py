@@ -273,20 +273,23 @@ def _ply_binary_faces(path: Path, size: int, header: PlyHeader, before: list[Ply
         if start + face.count * offset > size:
             return (f"ends inside its faces: {face.count} faces of {offset} bytes do not fit after the other elements "
                     "(truncated, or faces that are not all triangles)")
+        for p, _, _, n in fields:
+            if p.name in _INDEX_LISTS and n != 3:
+                return (f"has a face of {_count(n, 'vertex', 'vertices')} (face 0); recon reads triangle meshes only "
+                        "(triangulate it)")
         record = np.dtype({"names": [f"c{i}" for i in range(len(fields))], "formats": [f[2] for f in fields],
                            "offsets": [f[1] for f in fields], "itemsize": offset})
+        block = max(1, 32 * 2**20 // offset)  # faces read at a time
         f.seek(start)
-        table = np.fromfile(f, record, face.count)
-    for i, (p, _, _, n) in enumerate(fields):
-        counts = table[f"c{i}"]
-        if p.name in _INDEX_LISTS and n != 3:
-            return (f"has a face of {_count(n, 'vertex', 'vertices')} (face 0); recon reads triangle meshes only "
-                    "(triangulate it)")
-        bad = np.flatnonzero(counts != n)
-        if bad.size:
-            k = int(bad[0])
-            return (f"has faces of different sizes (face {k}: {int(counts[k])} entries in '{p.name}', face 0: {n}); "
-                    "recon reads triangle meshes only (triangulate it)")
+        for first in range(0, face.count, block):
+            table = np.fromfile(f, record, min(block, face.count - first))
+            for i, (p, _, _, n) in enumerate(fields):
+                counts = table[f"c{i}"]
+                bad = np.flatnonzero(counts != n)
+                if bad.size:
+                    k = int(bad[0])
+                    return (f"has faces of different sizes (face {first + k}: {int(counts[k])} entries in "
+                            f"'{p.name}', face 0: {n}); recon reads triangle meshes only (triangulate it)")
     return None
 
 

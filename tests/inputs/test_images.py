@@ -24,6 +24,7 @@ from recon_cli.inputs.images import (
     MAX_IMAGE_FILE_BYTES,
     MAX_IMAGE_PIXELS,
     MAX_JPEG_SCANS,
+    MAX_JPEG_SEGMENTS,
     read_color,
     read_depth,
     read_image,
@@ -70,6 +71,17 @@ def jpeg_of_scans(n: int) -> bytes:
     return data[:sos] + scan * n + b"\xff\xd9"
 
 
+def jpeg_stuffed(megabytes: int, end: bool = True) -> bytes:
+    """A small JPEG whose scan is followed by ``megabytes`` of stuffed 0xFF 0x00 pairs."""
+    data = _encode(".jpg", COLOUR)
+    return data[:-2] + b"\xff\x00" * (megabytes * 2**19) + (b"\xff\xd9" if end else b"")
+
+
+def jpeg_with_comments(n: int) -> bytes:
+    data = _encode(".jpg", COLOUR)
+    return data[:2] + b"\xff\xfe\x00\x02" * n + data[2:]
+
+
 def tiff_claiming(width: int, height: int, samples: int = 1, bits: int = 8) -> bytes:
     entries = [(256, 4, 1, width), (257, 4, 1, height), (258, 3, 1, bits), (277, 3, 1, samples)]
     ifd = struct.pack("<H", len(entries)) + b"".join(struct.pack("<HHII", *e) for e in entries) + b"\0\0\0\0"
@@ -99,6 +111,9 @@ HOSTILE = [
     ("png-depth-60000x60000", png_claiming(60000, 60000, 16, 0), "depth", "declares 60000 x 60000 pixels"),
     ("jpeg-huge-sof", jpeg_claiming(65000, 65000), "colour", "declares 65000 x 65000 pixels"),
     ("jpeg-many-scans", jpeg_of_scans(MAX_JPEG_SCANS + 50), "colour", f"more than {MAX_JPEG_SCANS} scans"),
+    ("jpeg-many-segments", jpeg_with_comments(MAX_JPEG_SEGMENTS), "colour",
+     f"more than {MAX_JPEG_SEGMENTS} marker segments"),
+    ("jpeg-stuffed-unterminated", jpeg_stuffed(8, end=False), "colour", "ends inside a scan (truncated)"),
     ("tiff-huge", tiff_claiming(60000, 60000), "colour", "declares 60000 x 60000 pixels"),
     ("tiff-decodes-too-large", tiff_claiming(6000, 6000, 4, 32), "depth_or_metres", "would decode to"),
     ("bmp-huge", bmp_claiming(60000, 60000), "colour", "declares 60000 x 60000 pixels"),
@@ -197,6 +212,7 @@ def test_the_limits_are_what_the_docs_say():
         "width x height the header declares (checked before decoding)": f"{MAX_IMAGE_PIXELS:,} pixels",
         "decoded array (width x height x channels x bytes per sample)": f"{MAX_DECODED_BYTES:,} bytes",
         "scans of a JPEG": f"{MAX_JPEG_SCANS}",
+        "marker segments of a JPEG": f"{MAX_JPEG_SEGMENTS:,}",
     }
 
 

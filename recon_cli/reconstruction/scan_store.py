@@ -180,7 +180,9 @@ class ScanStore:
 
     # ------------------------------------------------------------------ reading
     def session(self) -> SessionInfo:
-        """``session.json``, checked and typed (empty when the store has none)."""
+        """``session.json``, checked and typed (empty when the store has none); refused when
+        it is a link leading out of the store."""
+        self.check_inside(self.root / "session.json")
         return read_session(self.root)
 
     def scan_folders(self) -> list[tuple[int, Path]]:
@@ -203,6 +205,8 @@ class ScanStore:
         of the store, or a scan folder holding one: what is read from a store lies inside it."""
         real_root = self.root.resolve()
         path = Path(path)
+        if not (path.exists() or path.is_symlink()):
+            return
         for p in (path, *(sorted(path.iterdir()) if path.is_dir() else ())):
             if not p.is_symlink():
                 continue
@@ -219,6 +223,8 @@ class ScanStore:
         return max((i for i, _ in self.scan_folders()), default=-1) + 1
 
     def read(self, index: int) -> Scan:
+        """One scan; a scan folder (or a file in it) that is a link leading out of the store
+        is refused like a broken scan (MetadataError)."""
         return read_scan(self.root / f"scan_{index:04d}")
 
     def __iter__(self):
@@ -242,9 +248,11 @@ def _read_image(path: Path, flags: int, what: str) -> np.ndarray:
 
 
 def read_scan(folder: Path) -> Scan:
-    """Read one scan folder (from simulation or hardware); a broken or inconsistent scan
-    raises a MetadataError that names the file and what is wrong with it."""
+    """Read one scan folder (from simulation or hardware); a broken or inconsistent scan, or
+    one that is (or holds) a link leading out of its store (the folder's parent), raises a
+    MetadataError that names the file and what is wrong with it."""
     folder = Path(folder)
+    ScanStore(folder.parent).check_inside(folder)
     meta = read_scan_meta(folder)
     intr = meta["intrinsics"]
     size = (int(intr["height"]), int(intr["width"]))

@@ -94,3 +94,31 @@ def test_killed_writer_leaves_only_complete_scans(tmp_path):
             assert scan.joints == {"a": float(scan.index)}
         leftovers = [p.name for p in folder.iterdir() if p.name.startswith(".scan_")]
         assert all(".tmp" in name for name in leftovers)  # ignored by readers
+
+
+@pytest.mark.parametrize("what", ["folder", "file", "session"])
+def test_every_reader_refuses_links_out_of_the_store(tmp_path, what):
+    """Whoever reads a store (register, calibrate, replay, evaluate, reports) reads only what
+    lies inside it: a scan folder, a file of a scan or session.json that links out is refused."""
+    from recon_cli.errors import MetadataError
+
+    rng = np.random.default_rng(0)
+    outside = ScanStore.create(tmp_path / "outside", {"created": 0.0})
+    outside.write(_scan(0, rng), depth_scale=1000.0)
+    store = ScanStore.create(tmp_path / "store", {"created": 0.0})
+    store.write(_scan(0, rng), depth_scale=1000.0)
+    if what == "folder":
+        os.symlink(tmp_path / "outside" / "scan_0000", tmp_path / "store" / "scan_0001")
+        with pytest.raises(MetadataError, match="outside the scan store"):
+            store.read(1)
+    elif what == "file":
+        (tmp_path / "store" / "scan_0000" / "depth.png").unlink()
+        os.symlink(tmp_path / "outside" / "scan_0000" / "depth.png", tmp_path / "store" / "scan_0000" / "depth.png")
+        with pytest.raises(MetadataError, match="depth.png is a link to .*outside the scan store"):
+            read_scan(tmp_path / "store" / "scan_0000")
+    else:
+        (tmp_path / "outside" / "session.json").write_text('{"created": 0.0}')
+        (tmp_path / "store" / "session.json").unlink(missing_ok=True)
+        os.symlink(tmp_path / "outside" / "session.json", tmp_path / "store" / "session.json")
+        with pytest.raises(MetadataError, match="session.json is a link to .*outside the scan store"):
+            store.session()

@@ -140,3 +140,16 @@ def test_docs_table_equals_the_code():
         assert row in text, f"docs/hardware.md lacks the row\n{row}"
     documented = re.findall(r"^\| `(\w+)` \| [\[(]", text, flags=re.M)
     assert documented == list(RANGES), "the docs table has other rows or another order than RANGES"
+
+
+def test_the_documented_example_is_valid():
+    """The station file of docs/hardware.md passes the checks (its axes are the cell's joints)."""
+    import yaml
+
+    from recon_cli.robot.cell import Cell
+    from recon_cli.robot.description import CellConfig
+
+    text = DOCS.read_text(encoding="utf-8")
+    example = yaml.safe_load(text.split("```yaml\n", 1)[1].split("```", 1)[0])
+    cfg = AdsConfig.from_mapping(example["robot"]["ads"])
+    assert sorted(cfg.axes) == sorted(Cell(CellConfig()).joint_names) and len(cfg.scale) == len(cfg.axes)

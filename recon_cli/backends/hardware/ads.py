@@ -31,8 +31,8 @@ whose names are configuration (``robot.ads.symbols`` of the station file). Units
 
 The heartbeat runs in a background thread from connect to close; during a motion it beats
 only while the polling loop is alive, so the PLC's watchdog also catches a stalled recon.
-Every access to the connection holds one lock (a pyads ``Connection`` is not meant to be
-shared by threads without one).
+Every access to the connection holds one lock (pyads does not document a ``Connection`` as
+safe to share between threads).
 
 Faults stop the robot and raise :class:`~recon_cli.errors.RobotFault`: connection loss, the
 PLC's fault flag, a motion the PLC stops or ends early, no completion within the time

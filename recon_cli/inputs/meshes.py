@@ -351,8 +351,7 @@ def _stl_guard(path: Path, size: int) -> None:
         return
     text = head.lstrip()
     if text.startswith(b"solid") and not re.search(rb"[\x00\x80-\xff]", head):
-        with _mapped(path) as mm:
-            facets = _count_in(mm, rb"facet")
+        facets = _count_in(path, b"facet")
         if facets > 2 * MAX_TRIANGLES:  # "facet" starts and ends every triangle
             raise _Refused(f"holds {facets // 2} ASCII facets, more than the {MAX_TRIANGLES} triangles recon reads")
         return
@@ -363,37 +362,43 @@ def _stl_guard(path: Path, size: int) -> None:
                    "(truncated or corrupt), and it is not ASCII STL either")
 
 
-def _count_in(mm: mmap.mmap, needle: bytes) -> int:
-    """Occurrences of ``needle`` in the mapped file, read in chunks."""
-    total, at, n = 0, 0, len(mm)
-    while at < n:
-        chunk = mm[at:at + _CHUNK + len(needle) - 1]
-        total += chunk.count(needle)
-        at += _CHUNK
+def _count_in(path: Path, needle: bytes) -> int:
+    """Occurrences of ``needle`` in the file, read in chunks."""
+    total, tail = 0, b""
+    with open(path, "rb") as f:
+        while block := f.read(_CHUNK):
+            data = tail + block
+            total += data.count(needle)
+            tail = data[-(len(needle) - 1):] if len(needle) > 1 else b""  # shorter than the needle
     return total
 
 
 # --------------------------------------------------------------------- OBJ
-_OBJ_VERTEX = re.compile(rb"(?:^|(?<=[\r\n]))[ \t]*v[ \t]")
-_OBJ_FACE = re.compile(rb"(?:^|(?<=[\r\n]))[ \t]*f[ \t]")
-_OBJ_POLYGON = re.compile(rb"(?:^|(?<=[\r\n]))[ \t]*f(?:[ \t]+[^ \t\r\n#]+){4}")
-_OBJ_MTLLIB = re.compile(rb"(?:^|(?<=[\r\n]))[ \t]*mtllib\b[^\r\n]*")
+_OBJ_TOKEN = rb"[^ \t\r\n]+"
+_OBJ_POLYGON = re.compile(rb"\nf[ \t]+" + rb"[ \t]+".join([_OBJ_TOKEN] * 3) + rb"[ \t]+[^ \t\r\n#]")
+_OBJ_INDENT = re.compile(rb"\n[ \t]+")
+_OBJ_MTLLIB = re.compile(rb"mtllib[^\r\n]*")
 
 
-def _obj_chunks(mm: mmap.mmap) -> Iterator[bytes]:
-    """The mapped file in chunks that end at line ends (a chunk may be longer than _CHUNK
-    when a line is)."""
-    at, n = 0, len(mm)
-    while at < n:
-        end = min(at + _CHUNK, n)
-        if end < n:
-            cut = max(mm.rfind(b"\n", at, end), mm.rfind(b"\r", at, end))
+def _obj_chunks(path: Path) -> Iterator[bytes]:
+    """The file in chunks of at most _CHUNK bytes that end at line ends."""
+    with open(path, "rb") as f:
+        rest = b""
+        while True:
+            block = f.read(_CHUNK - len(rest))
+            if not block:
+                if rest:
+                    yield rest
+                return
+            data = rest + block
+            cut = max(data.rfind(b"\n"), data.rfind(b"\r"))
             if cut < 0:
-                cut = max(mm.find(b"\n", end), mm.find(b"\r", end))
-                cut = n - 1 if cut < 0 else cut
-            end = cut + 1
-        yield mm[at:end]
-        at = end
+                if len(data) >= _CHUNK:
+                    raise _Refused(f"has a line longer than {_CHUNK // 2**20} MiB: it is not an OBJ file recon reads")
+                rest = data
+                continue
+            yield data[:cut + 1]
+            rest = data[cut + 1:]
 
 
 def _obj_guard(path: Path) -> Path | None:
@@ -402,31 +407,33 @@ def _obj_guard(path: Path) -> Path | None:
     the caller removes it), else None."""
     vertices = faces = polygons = 0
     materials = False
-    with _mapped(path) as mm:
-        if mm.find(b"\x00") >= 0:
+    for chunk in _obj_chunks(path):
+        if b"\x00" in chunk:
             raise _Refused("holds NUL bytes: it is not a text OBJ file")
-        for chunk in _obj_chunks(mm):
-            vertices += len(_OBJ_VERTEX.findall(chunk))
-            faces += len(_OBJ_FACE.findall(chunk))
-            polygons += len(_OBJ_POLYGON.findall(chunk))
-            materials = materials or _OBJ_MTLLIB.search(chunk) is not None
-            if vertices > MAX_VERTICES:
-                raise _Refused(f"has more than {MAX_VERTICES} vertex lines, more than recon reads")
-            if faces > MAX_TRIANGLES:
-                raise _Refused(f"has more than {MAX_TRIANGLES} face lines, more than recon reads")
-        if polygons:
-            raise _Refused(f"has {_count(polygons, 'face')} of more than three vertices, which Open3D would leave "
-                           "out; recon reads triangle meshes only (triangulate it)")
-        if not materials:
-            return None
-        fd, name = tempfile.mkstemp(suffix=".obj", prefix="recon-mesh-")
-        try:
-            with os.fdopen(fd, "wb") as out:
-                for chunk in _obj_chunks(mm):
-                    out.write(_OBJ_MTLLIB.sub(b"", chunk))
-        except BaseException:
-            os.unlink(name)
-            raise
+        lines = b"\n" + chunk.replace(b"\r", b"\n")  # every line after a "\n", whatever the line ends
+        if b"\n " in lines or b"\n\t" in lines:
+            lines = _OBJ_INDENT.sub(b"\n", lines)
+        vertices += lines.count(b"\nv ") + lines.count(b"\nv\t")
+        faces += lines.count(b"\nf ") + lines.count(b"\nf\t")
+        polygons += _OBJ_POLYGON.search(lines) is not None
+        materials = materials or b"mtllib" in lines
+        if vertices > MAX_VERTICES:
+            raise _Refused(f"has more than {MAX_VERTICES} vertex lines, more than recon reads")
+        if faces > MAX_TRIANGLES:
+            raise _Refused(f"has more than {MAX_TRIANGLES} face lines, more than recon reads")
+    if polygons:
+        raise _Refused("has faces of more than three vertices, which Open3D would leave out; recon reads "
+                       "triangle meshes only (triangulate it)")
+    if not materials:
+        return None
+    fd, name = tempfile.mkstemp(suffix=".obj", prefix="recon-mesh-")
+    try:
+        with os.fdopen(fd, "wb") as out:
+            for chunk in _obj_chunks(path):
+                out.write(_OBJ_MTLLIB.sub(b"", chunk))
+    except BaseException:
+        os.unlink(name)
+        raise
     return Path(name)
 
 

@@ -5,7 +5,8 @@ A read goes: the file is a regular file of at most :data:`MAX_IMAGE_FILE_BYTES`;
 are one of the formats recon reads (PNG, JPEG, TIFF, BMP, PNM), recognised by their
 signature, not the file name; the width and height its header declares are at most
 :data:`MAX_IMAGE_PIXELS` pixels and the decoded array at most :data:`MAX_DECODED_BYTES`;
-a JPEG has at most :data:`MAX_JPEG_SCANS` scans and ends with its end marker. Only then
+a JPEG has at most :data:`MAX_JPEG_SCANS` scans and :data:`MAX_JPEG_SEGMENTS` marker
+segments and ends with its end marker. Only then
 does OpenCV decode the same bytes, and the result is checked to be what the caller needs
 (a depth image 16-bit single channel, a colour image 8-bit three channels). Every refusal
 is a :class:`~recon_cli.errors.FileError` of one line.

@@ -7,9 +7,12 @@ parsed strictly: vertex and face counts at most :data:`MAX_VERTICES` /
 :data:`MAX_TRIANGLES` and consistent with the file size (a header claiming 10^11 vertices
 in a small file is refused before Open3D reserves memory for them), and for a mesh every
 face of a PLY is checked to be a triangle (Open3D's polygon splitting reads vertices
-without bounds checks). A binary STL's triangle count must match its size; an OBJ's
-vertex and face lines are counted, and its material library (``mtllib``, which would
-make Open3D open further files and decode their textures) is left out.
+without bounds checks); a PCD declares all three normal fields or none (Open3D writes
+the ones it finds into an array it did not size for them otherwise). A binary STL's
+triangle count must match its size; an OBJ's vertex and face lines are counted, its
+faces must be triangles (Open3D drops the others silently), and its material library
+(``mtllib``, which would make Open3D open further files and decode their textures) is
+left out.
 
 After loading: no NaN or infinite coordinates, normals or colours; coordinates within
 :data:`MAX_COORDINATE_M` and an extent of at most :data:`MAX_EXTENT_M` (after the caller's

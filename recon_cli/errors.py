@@ -138,7 +138,9 @@ class RobotFault(ReconError):
     error id), "timeout" (no completion within the time bound), "tracking" (measured joints
     too far from the setpoints, ``joint``/``value``/``bound``), "limit" (a setpoint outside
     a joint or velocity limit, refused before anything was sent), "start" (the robot is not
-    where the trajectory starts). ``stopped``: the stop command reached the robot.
+    where the trajectory starts), "measurement" (NaN, infinite, out-of-range or malformed
+    values read from the controller), "settle" (the robot did not settle at the goal: no scan
+    is taken). ``stopped``: the controller confirmed the stop.
     """
 
     exit_code = 4

@@ -32,6 +32,11 @@ def report(
     from recon_cli.report import write_page
     from recon_cli.report.page import PAGE, PAGE_FILES
 
+    from recon_cli.errors import FileError
+
+    if run_folder.exists() and not run_folder.is_dir():
+        raise FileError(f"{run_folder} is not a folder", hint="give the --out folder of a recon run, autoscan, "
+                                                                "capture or register")
     folder = claim_output(run_folder, OutputMode.APPEND, command="report", names=(PAGE, PAGE_FILES))
     page = write_page(folder.path, replace(_R, render=render, image_width=width))
     console.print(f"{page.kind.value} folder, status {page.status}: {len(page.pictures)} pictures"

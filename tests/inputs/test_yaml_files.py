@@ -4,9 +4,6 @@ within bounded memory and time; fuzzed documents never give anything but that li
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 import textwrap
 import time
 from pathlib import Path
@@ -22,6 +19,7 @@ from recon_cli.errors import FileError, InputError, ReconError
 from recon_cli.inputs.schema import KINDS, check, load_schema, range_rows
 from recon_cli.inputs.yamlfile import LIMITS, parse_yaml, read_yaml
 from recon_cli.realism import parse_profile
+from tests.inputs.measure import run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 SIM_STATION = "format: 1\nrobot: {adapter: sim}\ncamera: {adapter: sim}\n"
@@ -215,18 +213,6 @@ def test_docs_list_the_limits_of_every_yaml_kind():
 
 
 # ----------------------------------------------------------------------------- through the CLI, measured
-def _cli(args: list[str], cwd: Path) -> tuple[int, str, float, float]:
-    """exit code, stderr, wall time [s] and peak memory [GB] of ``recon ARGS`` in its own process."""
-    env = {**os.environ, "MUJOCO_GL": "egl", "RECON_PROGRESS": "0"}
-    err_path = cwd / "stderr.txt"
-    t0 = time.monotonic()
-    with err_path.open("w") as err, open(os.devnull, "w") as out:
-        proc = subprocess.Popen([sys.executable, "-m", "recon_cli", *args], cwd=cwd, env=env, stdout=out, stderr=err)
-        _, status, usage = os.wait4(proc.pid, 0)  # the child's own peak memory
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    return proc.returncode, err_path.read_text(), time.monotonic() - t0, usage.ru_maxrss / 1e6
-
-
 @pytest.mark.parametrize("kind", ["station", "realism", "batch"])
 def test_hostile_files_through_the_cli_are_one_line_in_bounded_time_and_memory(tmp_path, kind):
     hostile = {"station": SIM_STATION + BOMB, "realism": BOMB, "batch": "jobs:\n  - run: smoke.xml\n" + BOMB}[kind]
@@ -234,9 +220,10 @@ def test_hostile_files_through_the_cli_are_one_line_in_bounded_time_and_memory(t
     args = {"station": ["station", "check", str(path)],
             "realism": ["capture", "--realism", str(path), "--out", str(tmp_path / "out")],
             "batch": ["batch", str(path), "--list"]}[kind]
-    code, err, wall, gb = _cli(args, tmp_path)
-    assert code == 1 and err.count("\n") == 1 and "Traceback" not in err and "alias *a is not accepted" in err
-    assert wall < 20 and gb < 1.0, (wall, gb)
+    run = run_cli(args, tmp_path)
+    err = run.err
+    assert run.code == 1 and err.count("\n") == 1 and "Traceback" not in err and "alias *a is not accepted" in err
+    assert run.seconds < 20 and run.peak_gb < 1.0, (run.seconds, run.peak_gb)
     assert not (tmp_path / "out").exists()
 
 

@@ -61,9 +61,9 @@ def reconstruct(state: RunState, cmd: C.Reconstruct, report: CommandReport) -> N
     mesh, _ = poisson_mesh(fused, surface)
     mesh_path = write_mesh(folder / "mesh.ply", mesh, r.out_T_marker)
     if state.recorder is not None:
-        import open3d as o3d
+        from recon_cli.inputs.meshes import read_mesh
 
-        state.recorder.mesh("reconstruction/mesh", o3d.io.read_triangle_mesh(str(mesh_path)))
+        state.recorder.mesh("reconstruction/mesh", read_mesh(mesh_path, "reconstructed mesh", triangles=False))
     state.reconstruction.update(cloud=cloud, mesh=mesh_path)
     state.outputs.update(cloud=str(cloud), mesh=str(mesh_path))
     report.details.update(points=len(fused.points), triangles=len(mesh.triangles))

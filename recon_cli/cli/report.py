@@ -28,11 +28,10 @@ def report(
     from dataclasses import replace
 
     from recon_cli.console import console, styled
+    from recon_cli.errors import FileError
     from recon_cli.outputs import OutputMode, claim_output
     from recon_cli.report import write_page
     from recon_cli.report.page import PAGE, PAGE_FILES
-
-    from recon_cli.errors import FileError
 
     if run_folder.exists() and not run_folder.is_dir():
         raise FileError(f"{run_folder} is not a folder", hint="give the --out folder of a recon run, autoscan, "

@@ -167,7 +167,8 @@ class ScriptRunner:
             else:
                 handler_for(cmd)(self.state, cmd, report)
         except KeyboardInterrupt:
-            report.status, report.message = CommandStatus.INTERRUPTED, "stopped by a signal; the robot was commanded to stop"
+            report.status = CommandStatus.INTERRUPTED
+            report.message = "stopped by a signal; the robot was commanded to stop"
             report.seconds = time.perf_counter() - t
             self.reports.append(report)
             raise

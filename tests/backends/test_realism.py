@@ -173,7 +173,8 @@ def test_depth_artefacts(gantry, view_q, thesis):
 # --------------------------------------------------------------------- profile files
 @pytest.mark.parametrize("text, where", [
     ("kinematics: {joint_offset_deg: 0.1}", "kinematics.joint_offset_deg is not a known key"),
-    ("kinematics: {base_error: {translation_mm: fast}}", "kinematics.base_error.translation_mm = 'fast' is not a number"),
+    ("kinematics: {base_error: {translation_mm: fast}}",
+     "kinematics.base_error.translation_mm = 'fast' is not a number"),
     ("camera: {actual: {fx: 1700, fy: 1700, cx: 800}}", "camera.actual lacks cy"),
     ("camera: {actual: {fx: 1700, fy: 1700, cx: 800, cy: 600, distortion: [1, 2]}}", "camera.actual.distortion"),
     ("depth: {grazing_dropout_deg: [80, 60]}", "depth.grazing_dropout_deg"),

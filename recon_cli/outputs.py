@@ -212,6 +212,7 @@ def _new_default(name: str) -> Path:
         path = RUNS / (stamp if k == 1 else f"{stamp}-{k}")
         try:
             path.mkdir(parents=True)
+            _MADE.append(path)
         except FileExistsError:
             continue
         except OSError as exc:
@@ -222,10 +223,24 @@ def _new_default(name: str) -> Path:
     raise FileError(f"too many output folders named {stamp}-N in {RUNS}", hint="choose a folder with --out")
 
 
+#: output folders this process made; those still empty when a command fails are removed
+_MADE: list[Path] = []
+
+
+def remove_empty_made() -> None:
+    """Remove the output folders this process made that are still empty (a command that
+    failed before writing anything leaves no trace); a folder with anything in it stays."""
+    while _MADE:
+        with contextlib.suppress(OSError):
+            os.rmdir(_MADE.pop())
+
+
 def _make(path: Path) -> None:
     """Make the folder (and its parents) and check that a file can be made in it."""
     try:
+        missing = [p for p in (path, *path.parents) if not p.exists()]
         path.mkdir(parents=True, exist_ok=True)
+        _MADE.extend(reversed(missing))  # the deepest is removed first
         fd, probe = tempfile.mkstemp(prefix=".write-test", dir=path)  # created exclusively: never through a link
         os.close(fd)
         os.unlink(probe)

@@ -508,3 +508,16 @@ def test_a_station_file_link_is_updated_where_it_points(tmp_path):
     assert "a comment that must survive" in real.read_text() and real.stat().st_mode & 0o777 == 0o640
     assert sorted(os.listdir(link_dir)) == ["cell.yaml"]  # nothing beside the link
     assert sorted(os.listdir(real_dir)) == ["cell.yaml", "cell.yaml.bak"]
+
+
+@pytest.mark.parametrize("args", [["capture", "--object", "spaceship"], ["autoscan", "--object", "BAD.stl"],
+                                  ["run", "NOPE.xml"]])
+def test_a_command_that_fails_leaves_no_empty_output_folder(tmp_path, args):
+    (tmp_path / "BAD.stl").write_text("x")
+    args = [a.replace("BAD.stl", str(tmp_path / "BAD.stl")) for a in args]
+    assert main([*args, "--out", str(tmp_path / "out" / "new")]) != 0
+    assert not (tmp_path / "out").exists()
+    (tmp_path / "kept").mkdir()
+    (tmp_path / "kept" / "note.txt").write_text("mine")
+    assert main([*args, "--out", str(tmp_path / "kept"), "--force"]) != 0
+    assert (tmp_path / "kept" / "note.txt").read_text() == "mine"

@@ -77,10 +77,23 @@ def refuse_non_finite(command) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the app and return the exit code; user errors become one line on stderr."""
-    from recon_cli.console import err_console
-
     command = typer.main.get_command(app)
     refuse_non_finite(command)
+    from recon_cli.outputs import remove_empty_made
+
+    try:
+        code = _main(command, argv)
+    except BaseException:
+        remove_empty_made()
+        raise
+    if code != 0:
+        remove_empty_made()  # a failed command leaves no empty output folder behind
+    return code
+
+
+def _main(command, argv: list[str] | None) -> int:
+    from recon_cli.console import err_console
+
     try:
         result = command.main(args=argv, prog_name="recon", standalone_mode=False)
     except ReconError as exc:

@@ -40,7 +40,7 @@ def box_pixels(box: CropBox, camera_T_frame: np.ndarray, intrinsics,
     """Image rectangle (u0, v0, u1, v1; u1, v1 exclusive) of a pinhole camera (``intrinsics``,
     placed by ``camera_T_frame`` in the box's frame) outside which crop_cloud keeps no point:
     the projection of the box grown by ``plane_slab`` in z, plus a pixel. None when the box
-    reaches behind the camera (no rectangle holds it)."""
+    reaches behind the camera (no rectangle holds it) or its projection is not finite."""
     half = np.asarray(box.size) / 2.0 + np.array([0.0, 0.0, plane_slab])
     signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
     corners = transform_points(camera_T_frame @ box.frame_T_box, signs * half)  # (8, 3) camera frame
@@ -48,9 +48,12 @@ def box_pixels(box: CropBox, camera_T_frame: np.ndarray, intrinsics,
         return None
     u = corners[:, 0] / corners[:, 2] * intrinsics.fx + intrinsics.cx
     v = corners[:, 1] / corners[:, 2] * intrinsics.fy + intrinsics.cy
-    u0, v0 = (max(int(np.floor(a.min())) - 1, 0) for a in (u, v))
-    u1 = min(int(np.ceil(u.max())) + 2, intrinsics.width)
-    v1 = min(int(np.ceil(v.max())) + 2, intrinsics.height)
+    if not (np.all(np.isfinite(u)) and np.all(np.isfinite(v))):
+        return None
+    u0 = int(np.clip(np.floor(u.min()) - 1, 0, intrinsics.width))
+    v0 = int(np.clip(np.floor(v.min()) - 1, 0, intrinsics.height))
+    u1 = int(np.clip(np.ceil(u.max()) + 2, 0, intrinsics.width))
+    v1 = int(np.clip(np.ceil(v.max()) + 2, 0, intrinsics.height))
     return u0, v0, max(u1, u0), max(v1, v0)
 
 

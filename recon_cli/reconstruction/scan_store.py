@@ -33,7 +33,15 @@ from recon_cli.geometry.transforms import transform_points
 from recon_cli.inputs.images import COLOR, DEPTH, read_image
 from recon_cli.outputs import atomic_write, remove_inside
 from recon_cli.perception.camera_model import Intrinsics, backproject
-from recon_cli.reconstruction.metadata import SCAN_FORMAT, SessionInfo, load_json, read_scan_meta, read_session
+from recon_cli.reconstruction.metadata import (
+    MAX_METADATA_BYTES,
+    SCAN_FORMAT,
+    SessionInfo,
+    check_pose,
+    load_json,
+    read_scan_meta,
+    read_session,
+)
 from recon_cli.serialization import to_jsonable
 
 SCAN_DIR = re.compile(r"^scan_(\d{4,})$")
@@ -247,6 +255,28 @@ def _read_image(path: Path, flags: int, what: str) -> np.ndarray:
         raise MetadataError(exc.message, path=str(path), hint=exc.hint) from None
 
 
+def _ground_truth(path: Path) -> dict[str, Any] | None:
+    """A simulated scan's ``ground_truth.json`` (None when there is none): a JSON object whose
+    ``world_T_camera`` is a rigid 4 x 4 pose of numbers within +-1000."""
+    if not (path.exists() or path.is_symlink()):
+        return None
+    gt = load_json(path, "ground_truth.json", MAX_METADATA_BYTES)
+    hint = "remove ground_truth.json (it is used for evaluation only)"
+    if not isinstance(gt, dict):
+        raise MetadataError(f"{path}: ground_truth.json holds no JSON object", path=str(path), hint=hint)
+    pose = gt.get("world_T_camera")
+
+    def number(v) -> bool:
+        return isinstance(v, int | float) and not isinstance(v, bool) and -1000 <= v <= 1000
+
+    if not (isinstance(pose, list) and len(pose) == 4
+            and all(isinstance(r, list) and len(r) == 4 and all(map(number, r)) for r in pose)):
+        raise MetadataError(f"{path}: ground_truth.json key 'world_T_camera' is not a 4 x 4 pose of numbers "
+                            "within [-1000, 1000]", path=str(path), where="world_T_camera", hint=hint)
+    check_pose(pose, path, "ground_truth.json", "world_T_camera")
+    return gt
+
+
 def read_scan(folder: Path) -> Scan:
     """Read one scan folder (from simulation or hardware); a broken or inconsistent scan, or
     one that is (or holds) a link leading out of its store (the folder's parent), raises a
@@ -273,9 +303,7 @@ def read_scan(folder: Path) -> Scan:
                                 f"depth image {size[1]} x {size[0]}", path=str(folder / "color.png"),
                                 hint="register colour to depth before storing the scan")
         color = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-    gt = None
-    if (folder / "ground_truth.json").exists():
-        gt = load_json(folder / "ground_truth.json", "ground_truth.json")
+    gt = _ground_truth(folder / "ground_truth.json")
     marker = meta.get("marker_T_camera")
     known = {"format", "index", "intrinsics", "depth_scale", "depth_unit", "joints",
              "world_T_camera_fk", "marker_T_camera", "distortion"}

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from recon_cli.errors import FileError
+from recon_cli.errors import FileError, InputError
 from recon_cli.outputs import atomic_write
 from recon_cli.reconstruction.options import SurfaceOptions  # noqa: F401 (re-exported)
 
@@ -25,6 +25,25 @@ def oriented_cloud(cloud, camera_position: np.ndarray, options: SurfaceOptions):
     return cloud
 
 
+#: voxels along one axis of a voxel grid (Open3D indexes them with a C int)
+MAX_GRID_VOXELS = 2**31 - 1
+
+
+def _check_extent(cloud, voxel: float) -> None:
+    """Refuse (InputError) a cloud with non-finite points or one too large for a voxel grid
+    of ``voxel``: scans placed by poses that are far off."""
+    pts = np.asarray(cloud.points)
+    if not len(pts):
+        return
+    if not np.all(np.isfinite(pts)):
+        raise InputError("the scans' points hold NaN or infinite coordinates",
+                         hint="check the scans' poses and intrinsics")
+    span = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+    if span > voxel * MAX_GRID_VOXELS / 2:
+        raise InputError(f"the scans' points span {span:.3g} m, too far for a voxel grid of {voxel:g} m",
+                         hint="check the scans' poses (a pose far off places its scan far away)")
+
+
 def fuse(clouds: list, options: SurfaceOptions):
     """Merge posed clouds (with oriented normals), down-sample on a voxel grid (which
     averages points, colours and normals per voxel) and remove outliers (options.outlier_filter)."""
@@ -33,6 +52,7 @@ def fuse(clouds: list, options: SurfaceOptions):
     merged = o3d.geometry.PointCloud()
     for c in clouds:
         merged += c
+    _check_extent(merged, options.voxel)
     fused = merged.voxel_down_sample(options.voxel)
     if options.outlier_filter == "radius" and len(fused.points) > options.outlier_min_points:
         # in units of the cloud's own spacing where it is sparser than the voxel (low image

@@ -25,7 +25,6 @@ folders with poses).
 
 from __future__ import annotations
 
-import json
 import logging
 import re
 from dataclasses import dataclass, field
@@ -148,13 +147,68 @@ def _quat_matrix(q: np.ndarray) -> np.ndarray:
     return Rotation.from_quat(q).as_matrix()  # (x, y, z, w)
 
 
-def read_poses(path: Path) -> list[np.ndarray]:
-    """world_T_camera of every line of a poses file (see the module docstring)."""
-    poses = []
+#: bytes of a poses file (one line of at most about 200 bytes per frame)
+MAX_POSES_BYTES = 16 * 2**20
+#: largest distance of a recorded camera from the recording's origin [m]
+MAX_TRANSLATION = 1000.0
+#: focal lengths and principal point of a recording's intrinsics [px] (as camera.replay.intrinsics)
+FOCAL_RANGE, CENTRE_RANGE = (1.0, 1e5), (-1e5, 1e5)
+
+
+def _read_text(path: Path, what: str, max_bytes: int) -> str:
+    """The UTF-8 text of a recording's file: a regular file (checked before it is opened) of
+    at most ``max_bytes`` bytes (checked before it is read), or a one-line FileError."""
+    from recon_cli.reconstruction.metadata import read_bytes
+
     try:
-        lines = Path(path).read_text(encoding="utf-8").splitlines()
-    except OSError as exc:
-        raise FileError(f"cannot read the poses file {path} ({exc.strerror})") from None
+        data = read_bytes(path, what, max_bytes)
+    except FileError as exc:
+        raise FileError(exc.message, hint=exc.hint) from None
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise FileError(f"{path}: {what} is not UTF-8 text (byte {exc.start})", hint="save it as UTF-8 text") from None
+
+
+def _pose_matrix(v: np.ndarray, path: Path, k: int) -> np.ndarray:
+    """world_T_camera of one line's numbers (7, 8, 12 or 16), checked: finite, translation
+    within MAX_TRANSLATION, a unit quaternion or a rigid matrix."""
+    if not np.all(np.isfinite(v)):
+        raise FileError(f"{path}:{k}: {' '.join(f'{x:g}' for x in v)} holds NaN or infinity",
+                        hint="tx ty tz qx qy qz qw per line, finite numbers")
+    T = np.eye(4)
+    if len(v) in (7, 8):
+        t, q = (v[0:3], v[3:7]) if len(v) == 7 else (v[1:4], v[4:8])
+        if not np.isclose(np.linalg.norm(q), 1.0, atol=1e-3):
+            raise FileError(f"{path}:{k}: quaternion of norm {np.linalg.norm(q):.4f}",
+                            hint="tx ty tz qx qy qz qw with a unit quaternion")
+        T[:3, :3] = _quat_matrix(q / np.linalg.norm(q))
+        T[:3, 3] = t
+    elif len(v) in (12, 16):
+        M = v.reshape(-1, 4)
+        R = M[:3, :3]
+        rigid = (float(np.max(np.abs(R.T @ R - np.eye(3)))) <= 1e-3 and float(np.linalg.det(R)) > 0
+                 and (len(v) == 12 or np.allclose(M[3], (0.0, 0.0, 0.0, 1.0), rtol=0.0, atol=1e-9)))
+        if not rigid:
+            raise FileError(f"{path}:{k}: the matrix is not a rigid transform",
+                            hint="a rotation and a translation, last row 0 0 0 1")
+        T[:3] = M[:3]
+    else:
+        raise FileError(f"{path}:{k}: {len(v)} numbers", hint="7 (tx ty tz qx qy qz qw), 8 (with a leading "
+                                                              "timestamp), 12 or 16 (matrix rows)")
+    distance = float(np.linalg.norm(T[:3, 3]))
+    if distance > MAX_TRANSLATION:
+        raise FileError(f"{path}:{k}: the camera is {distance:.4g} m from the origin, more than "
+                        f"{MAX_TRANSLATION:g} m", hint="poses in metres, tx ty tz qx qy qz qw per line")
+    return T
+
+
+def read_poses(path: Path) -> list[np.ndarray]:
+    """world_T_camera of every line of a poses file (see the module docstring); the file is
+    read as :func:`_read_text` reads it, every pose checked by :func:`_pose_matrix`."""
+    path = Path(path)
+    poses = []
+    lines = _read_text(path, "poses file", MAX_POSES_BYTES).splitlines()
     for k, line in enumerate(lines, 1):
         line = line.split("#", 1)[0].strip()
         if not line:
@@ -163,33 +217,35 @@ def read_poses(path: Path) -> list[np.ndarray]:
             v = np.array([float(t) for t in line.replace(",", " ").split()])
         except ValueError:
             raise FileError(f"{path}:{k}: not a list of numbers", hint="tx ty tz qx qy qz qw per line") from None
-        T = np.eye(4)
-        if len(v) in (7, 8):
-            t, q = (v[0:3], v[3:7]) if len(v) == 7 else (v[1:4], v[4:8])
-            if not np.isclose(np.linalg.norm(q), 1.0, atol=1e-3):
-                raise FileError(f"{path}:{k}: quaternion of norm {np.linalg.norm(q):.4f}",
-                                hint="tx ty tz qx qy qz qw with a unit quaternion")
-            T[:3, :3] = _quat_matrix(q / np.linalg.norm(q))
-            T[:3, 3] = t
-        elif len(v) in (12, 16):
-            T[: len(v) // 4] = v.reshape(-1, 4)
-        else:
-            raise FileError(f"{path}:{k}: {len(v)} numbers", hint="7 (tx ty tz qx qy qz qw), 8 (with a leading "
-                                                                  "timestamp), 12 or 16 (matrix rows)")
-        poses.append(T)
+        poses.append(_pose_matrix(v, path, k))
     return poses
 
 
+def _check_focal(values: tuple[float, float, float, float], where: str) -> tuple[float, float, float, float]:
+    """fx, fy, cx, cy inside FOCAL_RANGE and CENTRE_RANGE (one-line InputError)."""
+    from recon_cli.inputs.numbers import in_range
+
+    names, ranges = ("fx", "fy", "cx", "cy"), (FOCAL_RANGE, FOCAL_RANGE, CENTRE_RANGE, CENTRE_RANGE)
+    fx, fy, cx, cy = (in_range(v, f"{where}.{name}" if where != "--intrinsics" else f"--intrinsics {name}", lo, hi,
+                               unit="px", hint="fx, fy, cx, cy in pixels")
+                      for v, name, (lo, hi) in zip(values, names, ranges, strict=True))
+    return fx, fy, cx, cy
+
+
 def _intrinsics_file(folder: Path) -> tuple[float, float, float, float] | None:
+    """fx, fy, cx, cy of the recording's ``intrinsics.json``, None when there is none; read by
+    the scan store's JSON reader (regular file, size, nesting, finite numbers)."""
+    from recon_cli.reconstruction.metadata import MAX_METADATA_BYTES, load_json
+
     path = folder / "intrinsics.json"
-    if not path.exists():
+    if not (path.exists() or path.is_symlink()):
         return None
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise FileError(f"cannot read {path} ({exc})", hint="a JSON object {fx, fy, cx, cy}") from None
+        data = load_json(path, "intrinsics.json", MAX_METADATA_BYTES)
+    except FileError as exc:
+        raise FileError(exc.message, hint=exc.hint or "a JSON object {fx, fy, cx, cy} [px]") from None
     data = {k: v for k, v in data.items() if k not in ("width", "height")} if isinstance(data, dict) else data
-    return intrinsics_values(data, str(path))
+    return _check_focal(intrinsics_values(data, str(path)), str(path))
 
 
 def image_frames(cfg: ReplayConfig, folder: Path) -> list[RecordedFrame]:
@@ -200,7 +256,8 @@ def image_frames(cfg: ReplayConfig, folder: Path) -> list[RecordedFrame]:
     if len(color_files) != len(depth_files):
         raise FileError(f"{folder}: {len(color_files)} colour images but {len(depth_files)} depth images",
                         hint=f"pair them one to one ({cfg.where}.color and .depth globs)")
-    values = cfg.intrinsics or _intrinsics_file(folder)
+    given = "--intrinsics" if cfg.where == "recon replay" else f"{cfg.where}.intrinsics"
+    values = _check_focal(cfg.intrinsics, given) if cfg.intrinsics else _intrinsics_file(folder)
     if values is None:
         raise InputError(f"{cfg.where}: the recording {folder} has no intrinsics",
                          hint=(f"give {cfg.where}.intrinsics: {{fx, fy, cx, cy}}" if cfg.where != "recon replay"

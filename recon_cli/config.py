@@ -47,6 +47,16 @@ class SensorConfig:
     resolution: float = 1.0  # image size relative to the sensor's 1600 x 1200
 
 
+#: bounds of the view planner's numbers (ViewPlanConfig checks them; the command line states
+#: them): scans in total, camera distance [m], preliminary samples per view (each is compared
+#: with every earlier sample, so memory grows with m x the samples so far) and the
+#: regularization of the potential field
+VIEWPLAN_N = (2, 200)
+VIEWPLAN_DC = (0.2, 1.5)
+VIEWPLAN_M = (1, 1000)
+VIEWPLAN_SIGMA = (1e-12, 1.0)
+
+
 @dataclass(frozen=True)
 class ViewPlanConfig:
     """The non-model-based view planner (thesis Table 2.1) and our additions."""
@@ -58,6 +68,16 @@ class ViewPlanConfig:
     lift: bool = True  # raise infeasible views toward the vertical (ours; False: as the thesis)
     min_height: float = 0.05  # [m] lowest camera height above the board plane (thesis: above it)
     min_axis_ratio: float = 0.3  # ours: no semi-axis below this share of the largest (0: the thesis)
+
+    def __post_init__(self) -> None:
+        from recon_cli.errors import InputError
+
+        for name, (lo, hi), unit in (("n", VIEWPLAN_N, ""), ("d_c", VIEWPLAN_DC, " m"), ("m", VIEWPLAN_M, ""),
+                                     ("sigma", VIEWPLAN_SIGMA, "")):
+            value = getattr(self, name)
+            if not lo <= value <= hi:  # NaN too
+                raise InputError(f"view planner {name} = {value:g}{unit} is outside {lo:g} ... {hi:g}{unit}",
+                                 hint=f"choose {name} within {lo:g} ... {hi:g}{unit}")
 
 
 @dataclass(frozen=True)

@@ -74,14 +74,14 @@ def test_ik_marker_frame(capsys):
     (["ik", "--cell", "scara"], 1, "unknown cell 'scara'; choose one of: gantry, ceiling"),
     (["cell", "--cell", "12dof"], 1, "unknown cell"),
     (["ik", "--radius", "abc"], 2, "Invalid value for '--radius'"),
-    (["ik", "--focus", "1,2,x"], 1, "--focus '1,2,x' is not 3 numbers"),
-    (["ik", "--focus", "1,2"], 1, "is not 3 numbers"),
-    (["ik", "--radius", "-0.5"], 1, "not positive"),
+    (["ik", "--focus", "1,2,x"], 2, "Invalid value for '--focus': '1,2,x' is not 3 numbers"),
+    (["ik", "--focus", "1,2"], 2, "is not 3 numbers"),
+    (["ik", "--radius", "-0.5"], 2, "Invalid value for '--radius' / '-r'"),
     (["ik", "--theta", "nan"], 2, "Invalid value for '--theta': nan is not a finite number"),
     (["ik", "--radius", "inf"], 2, "inf is not a finite number"),
     (["ik", "--frame", "tool"], 1, "unknown frame 'tool'"),
     (["ik", "--object-box", "0.3,-1,0.3"], 1, "non-positive edge"),
-    (["cell", "--safety", "-1"], 1, "safety distance"),
+    (["cell", "--safety", "-1"], 2, "Invalid value for '--safety'"),
     (["ik", "--nonsense"], 2, "No such option"),
 ])
 def test_bad_input_is_one_line(capsys, argv, code, needle):

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 import os
 import sys
+import typing
 
 import typer
 
@@ -55,15 +56,36 @@ def _non_finite(value) -> bool:
     return False
 
 
+def _non_finite_text(value) -> float | None:
+    """The non-finite number a command-line text spells ('nan', 'inf', '1e999'), else None."""
+    if not isinstance(value, str):
+        return None
+    try:
+        number = float(value)
+    except ValueError:
+        return None
+    return None if math.isfinite(number) else number
+
+
+def _is_number(param) -> bool:
+    annotation = getattr(getattr(param, "type_descriptor", None), "annotation", None)
+    return annotation in (int, float) or bool(set(typing.get_args(annotation)) & {int, float})
+
+
 def refuse_non_finite(command) -> None:
-    """Every number option of ``command`` and its subcommands refuses NaN and infinity (a
-    range such as ``min=1`` lets NaN through: every comparison with it is false)."""
+    """Every number option of ``command`` and its subcommands refuses NaN and infinity, named
+    as such before its range is checked (a range such as ``min=1`` lets NaN through: every
+    comparison with it is false)."""
     for param in getattr(command, "params", ()):
         if getattr(param, "_recon_finite", False):
             continue
         process = param.process_value
+        number = _is_number(param)
 
-        def process_value(ctx, value, _process=process, _param=param):
+        def process_value(ctx, value, _process=process, _param=param, _number=number):
+            bad = _non_finite_text(value) if _number else None
+            if bad is not None:
+                raise typer.BadParameter(f"{bad!r} is not a finite number", ctx=ctx, param=_param)
             value = _process(ctx, value)
             if _non_finite(value):
                 raise typer.BadParameter(f"{value!r} is not a finite number", ctx=ctx, param=_param)

@@ -11,11 +11,13 @@ from recon_cli.cli.app import app
 from recon_cli.cli.options import (
     CellOpt,
     D,
+    DcOpt,
     ForceOpt,
     RealismOpt,
     RecordOpt,
     ResolutionOpt,
     SafetyOpt,
+    ScaleOpt,
     SeedOpt,
     check_record,
     make_view,
@@ -23,20 +25,23 @@ from recon_cli.cli.options import (
     parse_vector,
     realism_profile,
 )
+from recon_cli.config import VIEWPLAN_M, VIEWPLAN_N, VIEWPLAN_SIGMA
 
 _V = D.viewplan
 
 
 @app.command()
 def autoscan(
-    dc: Annotated[float, typer.Option("--dc", min=0.2, max=1.5, help="Camera distance to the ellipsoid [m].")]
-    = _V.d_c,
-    n: Annotated[int, typer.Option("--n", min=2, max=200, help="Scans in total (the initial one included).")] = _V.n,
+    dc: DcOpt = _V.d_c,
+    n: Annotated[int, typer.Option("--n", min=VIEWPLAN_N[0], max=VIEWPLAN_N[1],
+                                   help="Scans in total (the initial one included).")] = _V.n,
     object_name: Annotated[str, typer.Option("--object", help="Object to scan (built-in, YCB or mesh file).")]
     = "bottle",
-    scale: Annotated[float, typer.Option(help="Scale of a mesh file.")] = D.scene.object_scale,
-    m: Annotated[int, typer.Option("--m", min=1, help="Preliminary samples per view (eq. 2.7).")] = _V.m,
-    sigma: Annotated[float, typer.Option(min=1e-12, help="Potential-field regularization (eq. 2.6).")] = _V.sigma,
+    scale: ScaleOpt = D.scene.object_scale,
+    m: Annotated[int, typer.Option("--m", min=VIEWPLAN_M[0], max=VIEWPLAN_M[1],
+                                   help="Preliminary samples per view (eq. 2.7).")] = _V.m,
+    sigma: Annotated[float, typer.Option(min=VIEWPLAN_SIGMA[0], max=VIEWPLAN_SIGMA[1],
+                                         help="Potential-field regularization (eq. 2.6).")] = _V.sigma,
     initial: Annotated[str | None, typer.Option(help="Initial view 'theta,phi' in degrees around the object's box "
                                                      "centre at r = dc + 0.1 (default 45,0).")] = None,
     cell: CellOpt = D.cell.kind.value,

@@ -29,9 +29,9 @@ def batch(
                                                   "DASK_SCHEDULER_ADDRESS).")] = None,
     cluster: Annotated[str | None, typer.Option(help="'local': start a Dask LocalCluster of --workers "
                                                      "processes for the batch.")] = None,
-    timeout: Annotated[float | None, typer.Option(min=1.0, help="Timeout per job attempt [s] for jobs that set "
-                                                                "none (replaces the batch file's default; "
-                                                                "default 3600).")] = None,
+    timeout: Annotated[float | None, typer.Option(min=1.0, max=604_800.0, help="Timeout per job attempt [s] for "
+                                                  "jobs that set none (replaces the batch file's default; default "
+                                                  "3600; at most a week).")] = None,
     retries: Annotated[int | None, typer.Option(min=0, max=10, help="Extra attempts after an infrastructure "
                                                                     "failure (killed, lost worker; default 1).")]
     = None,

@@ -12,8 +12,10 @@ import typer
 
 from recon_cli.cli.app import bench_app
 from recon_cli.cli.options import (
+    PLANNING_TIME_RANGE,
     CellOpt,
     D,
+    DcOpt,
     ForceOpt,
     RealismOpt,
     ResolutionOpt,
@@ -25,13 +27,14 @@ from recon_cli.cli.options import (
     output_folder,
     realism_profile,
 )
+from recon_cli.config import VIEWPLAN_N
 
 OutOpt = Annotated[Path | None, typer.Option(help="Output folder (default runs/bench-<name>-<time>).")]
 
 
 @bench_app.command("ik")
 def bench_ik(
-    n: Annotated[int, typer.Option("--n", min=1, help="Number of camera poses.")] = 500,
+    n: Annotated[int, typer.Option("--n", min=1, max=100_000, help="Number of camera poses.")] = 500,
     solutions: Annotated[int, typer.Option(min=1, max=32, help="Solutions asked per pose in the second run.")]
     = D.planner.ik_solutions,
     cell: CellOpt = D.cell.kind.value,
@@ -110,7 +113,7 @@ def bench_registration(
 
 @bench_app.command("sequence")
 def bench_sequence(
-    runs: Annotated[int, typer.Option("--runs", min=1, help="Runs per case.")] = 500,
+    runs: Annotated[int, typer.Option("--runs", min=1, max=10_000, help="Runs per case.")] = 500,
     quick: Annotated[bool, typer.Option("--quick", help="CI mode: 3 runs per case.")] = False,
     cases: Annotated[str, typer.Option(help="Comma-separated cases: A, B, C, D (ours), A0 (recon run's "
                                             "default order).")] = "A,B,C,D,A0",
@@ -148,8 +151,9 @@ def bench_viewplan(
     = "wood_block,toy_blocks,bottle,mug",
     methods: Annotated[str, typer.Option(help="Comma-separated: ellipsoid, sphere, random.")] \
         = "ellipsoid,sphere,random",
-    n: Annotated[int, typer.Option("--n", min=2, help="Scans per run.")] = D.viewplan.n,
-    dc: Annotated[float, typer.Option("--dc", help="Camera distance to the ellipsoid [m].")] = D.viewplan.d_c,
+    n: Annotated[int, typer.Option("--n", min=VIEWPLAN_N[0], max=VIEWPLAN_N[1], help="Scans per run.")]
+    = D.viewplan.n,
+    dc: DcOpt = D.viewplan.d_c,
     cell: CellOpt = D.cell.kind.value,
     resolution: ResolutionOpt = D.sensor.resolution,
     seed: SeedOpt = D.seed,
@@ -182,15 +186,17 @@ def bench_viewplan(
 
 @bench_app.command("planners")
 def bench_planners(
-    n: Annotated[int, typer.Option("--n", min=1, help="Requests per planner.")] = 1000,
+    n: Annotated[int, typer.Option("--n", min=1, max=100_000, help="Requests per planner.")] = 1000,
     planners: Annotated[str, typer.Option(help="Comma-separated OMPL planners, or 'default'.")] = "default",
-    time_limit: Annotated[float, typer.Option(min=0.1, help="Time limit per request [s].")] = D.planner.time_limit,
+    time_limit: Annotated[float, typer.Option(min=PLANNING_TIME_RANGE[0], max=PLANNING_TIME_RANGE[1],
+                                              help="Time limit per request [s].")] = D.planner.time_limit,
     quick: Annotated[bool, typer.Option(help="CI mode: 10 requests of RRTConnect and RRT.")] = False,
     peer: Annotated[str, typer.Option(help="Also run a peer on the same problem: 'mplib' or 'none'.")] = "none",
-    peer_n: Annotated[int, typer.Option(min=1, help="Requests for the peer (per RRT range tried).")] = 200,
+    peer_n: Annotated[int, typer.Option(min=1, max=10_000, help="Requests for the peer (per RRT range tried).")]
+    = 200,
     simplify: Annotated[str, typer.Option(help="Path simplification: shortcut, reduce, full or none.")]
     = D.planner.simplify,
-    shortcut_rounds: Annotated[int, typer.Option(min=1, help="Rounds of per-joint shortcuts (shortcut).")]
+    shortcut_rounds: Annotated[int, typer.Option(min=1, max=100, help="Rounds of per-joint shortcuts (shortcut).")]
     = D.planner.shortcut_rounds,
     seed: SeedOpt = D.seed,
     out: OutOpt = None,

@@ -28,13 +28,23 @@ app.add_typer(calibrate_app, name="calibrate")
 
 BoardOpt = Annotated[str | None, typer.Option(help="Another board than the cell's (robot/board.yaml): "
                                                    "squares_x,squares_y,square,marker,DICTIONARY, e.g. "
-                                                   "5,7,0.04,0.02,DICT_6X6_250 (lengths in metres).")]
+                                                   "5,7,0.04,0.02,DICT_6X6_250 (lengths in metres): 2 ... 100 "
+                                                   "squares per side, no more markers (squares_x * squares_y "
+                                                   "// 2) than the dictionary holds, lengths in (0, 1] m, the "
+                                                   "marker smaller than the square.")]
 METHODS = ("tsai", "park", "horaud", "andreff", "daniilidis", "shah", "li")
 MODELS = ("k1k2p1p2k3", "k1k2p1p2", "k1k2", "none")
 
 
+#: squares per side of a --board, and the range of its square and marker lengths [m]
+BOARD_SQUARES = (2, 100)
+BOARD_LENGTH = 1.0
+
+
 def parse_board(text: str | None):
-    """The BoardSpec of ``--board`` (None: the cell's board)."""
+    """The BoardSpec of ``--board`` (None: the cell's board): 2 ... 100 squares per side, at
+    most as many markers (squares_x * squares_y // 2) as the dictionary holds, lengths in
+    (0, 1] m and the marker smaller than the square; anything else is a one-line error."""
     if text is None:
         return None
     import cv2
@@ -43,17 +53,31 @@ def parse_board(text: str | None):
 
     parts = [p.strip() for p in text.split(",")]
     try:
+        if len(parts) != 5:
+            raise ValueError
         sx, sy, square, marker = int(parts[0]), int(parts[1]), float(parts[2]), float(parts[3])
         name = parts[4].upper()
-    except (ValueError, IndexError):
+    except ValueError:
         raise InputError(f"--board '{text}' is not squares_x,squares_y,square,marker,DICTIONARY",
                          hint="e.g. 5,7,0.04,0.02,DICT_6X6_250 (lengths in metres)") from None
     dictionaries = sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_") and not n.endswith("_SIZE"))
     if name not in dictionaries:
         raise UnknownNameError("ArUco dictionary", name, dictionaries)
-    if sx < 2 or sy < 2 or not 0 < marker < square:
-        raise InputError(f"--board '{text}': needs at least 2 x 2 squares and 0 < marker < square",
+    lo, hi = BOARD_SQUARES
+    if not (lo <= sx <= hi and lo <= sy <= hi):
+        raise InputError(f"--board '{text}': {sx} x {sy} squares is outside {lo} ... {hi} per side",
                          hint="e.g. 5,7,0.04,0.02,DICT_6X6_250")
+    if not (0 < square <= BOARD_LENGTH and 0 < marker <= BOARD_LENGTH):  # NaN too
+        raise InputError(f"--board '{text}': square and marker lengths must lie in (0, {BOARD_LENGTH:g}] m",
+                         hint="give them in metres, e.g. 5,7,0.04,0.02,DICT_6X6_250")
+    if marker >= square:
+        raise InputError(f"--board '{text}': the marker ({marker:g} m) must be smaller than the square "
+                         f"({square:g} m)", hint="e.g. 5,7,0.04,0.02,DICT_6X6_250")
+    markers = sx * sy // 2
+    size = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name)).bytesList.shape[0]
+    if markers > size:
+        raise InputError(f"--board '{text}': {sx} x {sy} squares hold {markers} markers, more than the "
+                         f"{size} of {name}", hint="use fewer squares or a larger dictionary, e.g. DICT_6X6_1000")
     return BoardSpec(sx, sy, square, marker, name)
 
 
@@ -159,11 +183,13 @@ def handeye(
 def intrinsics(
     source: Annotated[Path, typer.Argument(help="Folder of board images, or a scan store (its colour images).")],
     out: Annotated[Path | None, typer.Option(help="Output folder (default runs/intrinsics-<time>).")] = None,
-    pattern: Annotated[str, typer.Option(help="Which files of an image folder (glob), e.g. 'img_*.jpg'.")] = "*",
+    pattern: Annotated[str, typer.Option(help="Which files of an image folder (a glob inside it: relative, no "
+                                              "'..'), e.g. 'img_*.jpg'.")] = "*",
     model: Annotated[str, typer.Option(help="Distortion coefficients to fit: k1k2p1p2k3 (OpenCV's default), "
                                             "k1k2p1p2, k1k2 or none.")] = "k1k2p1p2k3",
     board: BoardOpt = None,
-    min_corners: Annotated[int, typer.Option(min=4, help="Board corners an image needs to take part.")] = 8,
+    min_corners: Annotated[int, typer.Option(min=4, max=10_000, help="Board corners an image needs to take "
+                                                                      "part.")] = 8,
     profile: Annotated[str | None, typer.Option(help="Realism profile (ideal, thesis or FILE.yaml) to copy into "
                                                      "<out>/realism.yaml with the calibration as its assumed camera "
                                                      "(simulated sessions then use it: --realism that file).")]
@@ -175,9 +201,10 @@ def intrinsics(
 
     from recon_cli.calibration.intrinsics import DistortionModel
     from recon_cli.console import console, styled
-    from recon_cli.workflows.calibrate import IntrinsicsOptions, run_intrinsics
+    from recon_cli.workflows.calibrate import IntrinsicsOptions, check_pattern, run_intrinsics
 
     one_of(model, MODELS, "distortion model")
+    check_pattern(pattern)
     spec = parse_board(board)
     folder = output_folder(out, "calibrate intrinsics", default="intrinsics", force=force,
                            inputs=(source, None if profile is None else Path(profile))).path

@@ -13,22 +13,64 @@ from typing import Annotated
 
 import typer
 
-from recon_cli.config import DEFAULTS
+from recon_cli.config import DEFAULTS, VIEWPLAN_DC
 from recon_cli.errors import InputError, UnknownNameError
+from recon_cli.geometry.view import MAX_COORDINATE, MAX_RADIUS
 
 D = DEFAULTS
 
+#: bounds of the view options, the same as a script's (README "limits"; the scripts' XSD and
+#: recon_cli.scripts.build.ANGLE_BOUNDS_DEG): focus coordinates within ±MAX_COORDINATE [m]
+#: and the radius (the lower bound stands for "positive") as a View takes them, polar angle,
+#: azimuth and roll [deg]
+RADIUS_RANGE = (0.001, MAX_RADIUS)
+MAX_THETA = 180.0
+MAX_TURN = 720.0
+#: planner time limits [s] (a script's <planner time> is at most 3600 s too)
+PLANNING_TIME_RANGE = (0.1, 3600.0)
+#: the safety distance [m] (robot.description.CellConfig checks the same range)
+SAFETY_RANGE = (0.0, 0.2)
+#: the scale of a mesh file (0.001 for millimetres; meshes are read up to 1000 m after it)
+SCALE_RANGE = (1e-6, 1000.0)
+
+
+def _focus(value: str | None) -> str | None:
+    """--focus: three finite coordinates within ±MAX_COORDINATE m (a usage error, exit 2)."""
+    if value is None:
+        return value
+    try:
+        x = parse_vector(value, 3, "--focus", "metres")
+    except InputError:
+        raise typer.BadParameter(f"{value!r} is not 3 numbers; give x,y,z in metres, e.g. 0,0,0.78") from None
+    worst = max(abs(v) for v in x)
+    if worst > MAX_COORDINATE:
+        raise typer.BadParameter(f"a coordinate of {worst:.4g} m is outside ±{MAX_COORDINATE:g} m; "
+                                 "give x,y,z in metres, e.g. 0,0,0.78")
+    return value
+
+
 CellOpt = Annotated[str, typer.Option("--cell", help="gantry (9 DoF, linear axes) or ceiling (7 DoF).")]
-SafetyOpt = Annotated[float, typer.Option("--safety", help="Safety distance [m] that inflates every collision shape.")]
+SafetyOpt = Annotated[float, typer.Option("--safety", min=SAFETY_RANGE[0], max=SAFETY_RANGE[1],
+                                          help="Safety distance [m] that inflates every collision shape.")]
 SeedOpt = Annotated[int, typer.Option("--seed", min=0, max=2**32 - 1,
                                       help="Seed of the random number generator (0 ... 2^32-1).")]
-FocusOpt = Annotated[str, typer.Option("--focus", help="Focus point f as x,y,z [m].")]
-RadiusOpt = Annotated[float, typer.Option("--radius", "-r", help="Camera distance r from f [m].")]
-ThetaOpt = Annotated[float, typer.Option("--theta", help="Polar angle from the vertical [deg].")]
-PhiOpt = Annotated[float, typer.Option("--phi", help="Azimuth [deg].")]
-AlphaOpt = Annotated[float, typer.Option("--alpha", help="Camera roll about its viewing axis [deg].")]
+FocusOpt = Annotated[str, typer.Option("--focus", callback=_focus, help="Focus point f as x,y,z [m], each "
+                                                                        f"within ±{MAX_COORDINATE:g} m.")]
+RadiusOpt = Annotated[float, typer.Option("--radius", "-r", min=RADIUS_RANGE[0], max=RADIUS_RANGE[1],
+                                          help="Camera distance r from f [m].")]
+ThetaOpt = Annotated[float, typer.Option("--theta", min=-MAX_THETA, max=MAX_THETA,
+                                         help="Polar angle from the vertical [deg].")]
+PhiOpt = Annotated[float, typer.Option("--phi", min=-MAX_TURN, max=MAX_TURN, help="Azimuth [deg].")]
+AlphaOpt = Annotated[float, typer.Option("--alpha", min=-MAX_TURN, max=MAX_TURN,
+                                         help="Camera roll about its viewing axis [deg].")]
 FrameOpt = Annotated[str, typer.Option("--frame", help="Frame of f and the angles: world or marker.")]
 ResolutionOpt = Annotated[float, typer.Option(min=0.05, max=1.0, help="Image size relative to 1600 x 1200.")]
+ScaleOpt = Annotated[float, typer.Option("--scale", min=SCALE_RANGE[0], max=SCALE_RANGE[1],
+                                         help="Scale of a mesh file (0.001 for millimetres).")]
+PlanningTimeOpt = Annotated[float, typer.Option("--planning-time", min=PLANNING_TIME_RANGE[0],
+                                                max=PLANNING_TIME_RANGE[1], help="Planning time limit [s].")]
+DcOpt = Annotated[float, typer.Option("--dc", min=VIEWPLAN_DC[0], max=VIEWPLAN_DC[1],
+                                      help="Camera distance to the ellipsoid [m].")]
 RealismOpt = Annotated[str, typer.Option("--realism", help="How real the simulated cell is: 'ideal' (the model "
                                                            "itself), 'thesis' (errors of the thesis' cell) or a "
                                                            "profile FILE.yaml (docs/simulation.md).")]

@@ -20,7 +20,7 @@ def replay(
     out: Annotated[Path | None, typer.Option(help="Output folder (default runs/replay-<time>).")] = None,
     voxel: Annotated[float, typer.Option(min=0.0005, max=0.5, help="Registration voxel and finest ICP "
                                                                    "correspondence distance [m].")] = 0.02,
-    depth_scale: Annotated[float, typer.Option(min=1e-6, help="Depth image units per metre (image folders).")]
+    depth_scale: Annotated[float, typer.Option(min=1e-6, max=1e6, help="Depth image units per metre (image folders).")]
     = 1000.0,
     intrinsics: Annotated[str | None, typer.Option(help="Pinhole intrinsics fx,fy,cx,cy [px] (image folders without "
                                                         "intrinsics.json).")] = None,

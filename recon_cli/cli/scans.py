@@ -20,11 +20,13 @@ from recon_cli.cli.options import (
     ForceOpt,
     FrameOpt,
     PhiOpt,
+    PlanningTimeOpt,
     RadiusOpt,
     RealismOpt,
     RecordOpt,
     ResolutionOpt,
     SafetyOpt,
+    ScaleOpt,
     SeedOpt,
     ThetaOpt,
     check_record,
@@ -46,8 +48,7 @@ def capture(
     object_name: Annotated[
         str, typer.Option("--object", help="Built-in object, YCB object or mesh file; 'auto': the drill if the "
                                            "YCB data is here, else the built-in bottle.")] = D.scene.object_name,
-    scale: Annotated[float, typer.Option(help="Scale of a mesh file (0.001 for millimetres).")]
-    = D.scene.object_scale,
+    scale: ScaleOpt = D.scene.object_scale,
     focus: FocusOpt = FOCUS,
     radius: RadiusOpt = RADIUS,
     theta: ThetaOpt = THETA,
@@ -58,7 +59,7 @@ def capture(
     noise: Annotated[bool, typer.Option("--noise/--no-noise", help="Depth noise model on or off.")] = D.sensor.noise,
     resolution: ResolutionOpt = D.sensor.resolution,
     planner: Annotated[str, typer.Option(help="OMPL planner.")] = D.planner.planner,
-    planning_time: Annotated[float, typer.Option(min=0.1, help="Planning time limit [s].")] = D.planner.time_limit,
+    planning_time: PlanningTimeOpt = D.planner.time_limit,
     cell: CellOpt = D.cell.kind.value,
     safety: SafetyOpt = D.cell.safety_distance,
     seed: SeedOpt = D.seed,
@@ -143,7 +144,7 @@ def register(
     = _R.local,
     loop_closures: Annotated[str, typer.Option(help="Initialize loop closures by 'icp' or with the 'global' "
                                                     "alignment (the thesis).")] = _R.multiway.loop_closure_init,
-    voxel: Annotated[float, typer.Option(min=0.0001, help="Voxel of the fused cloud [m].")] = _R.surface.voxel,
+    voxel: Annotated[float, typer.Option(min=0.0001, max=0.1, help="Voxel of the fused cloud [m].")] = _R.surface.voxel,
     depth: Annotated[int, typer.Option(min=5, max=12, help="Poisson octree depth.")] = _R.surface.poisson_depth,
     trim: Annotated[float, typer.Option(min=0.0, max=0.5, help="Poisson density quantile trimmed.")]
     = _R.surface.density_quantile,
@@ -218,12 +219,12 @@ ALIGNMENTS = ("none", "icp")
 def evaluate(
     reconstruction: Annotated[Path, typer.Argument(help="Reconstructed cloud or mesh (PLY, ...).")],
     reference: Annotated[Path, typer.Option(help="Reference mesh (ground truth).")],
-    tolerance: Annotated[float, typer.Option(min=1e-5, help="Coverage tolerance [m].")] = 0.001,
+    tolerance: Annotated[float, typer.Option(min=1e-5, max=0.1, help="Coverage tolerance [m].")] = 0.001,
     views: Annotated[Path | None, typer.Option(help="Scan store whose camera poses define the visible "
                                                     "surface (coverage of what could be seen).")] = None,
     align: Annotated[str, typer.Option(help="'none' (frames agree) or 'icp' (register the reconstruction "
                                             "to the reference first, reported).")] = "none",
-    samples: Annotated[int, typer.Option(min=1000, help="Reference surface samples.")] = 200_000,
+    samples: Annotated[int, typer.Option(min=1000, max=5_000_000, help="Reference surface samples.")] = 200_000,
     out: Annotated[Path | None, typer.Option(help="Output folder (default: beside the reconstruction).")] = None,
 ) -> None:
     """Signed distances to a reference mesh, their statistics and histogram, and coverage."""

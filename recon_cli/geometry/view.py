@@ -17,6 +17,10 @@ import numpy as np
 
 from recon_cli.errors import InvalidViewError
 
+#: bounds of a view, the same as a script's (README "limits"): no cell is larger
+MAX_COORDINATE = 100.0  # [m] of the focus point
+MAX_RADIUS = 10.0  # [m]
+
 
 class Frame(StrEnum):
     """Reference frame a view (or a box) is given in."""
@@ -52,6 +56,13 @@ class View:
                 f"view radius r = {self.radius} m is not positive",
                 hint="give the camera distance from the focus point in metres, e.g. 0.6",
             )
+        if self.radius > MAX_RADIUS:
+            raise InvalidViewError(f"view radius r = {self.radius:.4g} m is beyond {MAX_RADIUS:g} m",
+                                   hint="give the camera distance from the focus point in metres, e.g. 0.6")
+        worst = max(abs(v) for v in self.focus)
+        if worst > MAX_COORDINATE:
+            raise InvalidViewError(f"view focus point has a coordinate of {worst:.4g} m, beyond "
+                                   f"±{MAX_COORDINATE:g} m", hint="give the focus point in metres, e.g. 0,0,0.78")
 
     @classmethod
     def from_degrees(cls, focus, radius: float, theta_deg: float, phi_deg: float,

@@ -299,7 +299,8 @@ _PROBES = {"png": _png, "jpeg": _jpeg, "tiff": _tiff, "bmp": _bmp, "pnm": _pnm}
 
 
 def _describe(d: bytes) -> str:
-    """What unreadable bytes are, as a clause ("it is a GIF")."""
+    """What unreadable bytes are, as a clause ("it is a GIF"): a format named by its signature,
+    never the bytes themselves (a message must not show what a file holds)."""
     if d.startswith(b"\x00\x00\x00") and d[4:8] == b"ftyp":
         return "it is an AVIF/HEIF file"
     for magic, name in ((b"RIFF", "a WebP/RIFF file"), (b"GIF8", "a GIF"), (b"\x76\x2f\x31\x01", "an OpenEXR file"),
@@ -308,7 +309,7 @@ def _describe(d: bytes) -> str:
                         (b"PF", "a PFM file"), (b"P7", "a PAM file")):
         if d.startswith(magic):
             return f"it is {name}"
-    return f"it starts with {d[:8]!r}"
+    return "it is not in an image format recon knows"
 
 
 def image_header(data: bytes, formats: tuple[str, ...] = FORMATS) -> Header:

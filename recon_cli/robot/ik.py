@@ -20,6 +20,10 @@ import pinocchio as pin
 from recon_cli.robot.collision import CollisionModel
 from recon_cli.robot.kinematics import Kinematics
 
+#: [m] a goal farther than this from the world origin (or not finite) is out of reach of any
+#: cell without a descent
+MAX_GOAL_DISTANCE = 1000.0
+
 
 class IKStatus(StrEnum):
     SOLVED = "solved"
@@ -158,6 +162,10 @@ class IKSolver:
         solutions: list[IKSolution] = []
         converged = rejected = 0
         pairs: tuple[tuple[str, str], ...] = ()
+        goal = np.asarray(world_T_goal, dtype=float)
+        if goal.shape != (4, 4) or not np.all(np.isfinite(goal)) or np.max(np.abs(goal[:3, 3])) > MAX_GOAL_DISTANCE:
+            # no robot reaches it; the descent would only overflow
+            return IKResult(IKStatus.UNREACHABLE, (), 0, 0, 0, time.perf_counter() - t0, pairs)
         attempts = 0
         while attempts < options.max_attempts and len(solutions) < options.max_solutions:
             start = (np.clip(seed, self._lo, self._hi) if (seed is not None and attempts == 0)

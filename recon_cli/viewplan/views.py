@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from recon_cli.config import VIEWPLAN_M
+from recon_cli.errors import InputError
 from recon_cli.viewplan.ellipsoid import Ellipsoid
 
 
@@ -38,7 +40,11 @@ def potential(ellipsoid: Ellipsoid, candidates: np.ndarray, previous: np.ndarray
 def next_sample(ellipsoid: Ellipsoid, previous: np.ndarray, m: int, sigma: float,
                 rng: np.random.Generator) -> np.ndarray:
     """Eq. 2.7: of M random surface points (uniform directions on the sphere mapped onto
-    the ellipsoid), the one with the lowest potential."""
+    the ellipsoid), the one with the lowest potential. ``m`` within VIEWPLAN_M (every candidate
+    is compared with every earlier sample at once)."""
+    if not VIEWPLAN_M[0] <= m <= VIEWPLAN_M[1]:
+        raise InputError(f"{m} preliminary samples per view is outside {VIEWPLAN_M[0]} ... {VIEWPLAN_M[1]}",
+                         hint=f"choose m within {VIEWPLAN_M[0]} ... {VIEWPLAN_M[1]} (thesis: 200)")
     u = rng.normal(size=(m, 3))
     candidates = ellipsoid.surface_from_directions(u)
     return candidates[int(np.argmin(potential(ellipsoid, candidates, np.asarray(previous).reshape(-1, 3), sigma)))]

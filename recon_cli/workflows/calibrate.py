@@ -24,7 +24,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
-from pathlib import Path
+from pathlib import Path, PurePath
 
 import numpy as np
 
@@ -343,23 +343,65 @@ class IntrinsicsOptions:
     profile: str | None = None
 
 
-def board_images(source: Path, pattern: str = "*") -> list[tuple[str, np.ndarray]]:
-    """RGB images of a folder (files matching ``pattern``) or of a scan store's scans."""
+def check_pattern(pattern: str) -> str:
+    """``--pattern``: a glob relative to the image folder that cannot climb out of it."""
+    parts = PurePath(pattern).parts
+    if not pattern.strip() or PurePath(pattern).is_absolute() or pattern.startswith("~") or ".." in parts:
+        raise InputError(f"--pattern {pattern!r} leaves the image folder",
+                         hint="give a glob relative to the folder, without '..', e.g. 'img_*.png' or 'left/*.png'")
+    return pattern
+
+
+def _outside(path: Path, root: Path) -> str | None:
+    """Why ``path`` (in the folder ``root``, already resolved) is not read: a link, or a link
+    on its way, that leads out of ``root`` or does not resolve; None when it stays inside."""
+    try:
+        target = path.resolve(strict=True)
+    except (OSError, RuntimeError):
+        return "a link that does not resolve"
+    if not target.is_relative_to(root):
+        return "a link leading out of the folder"
+    return None
+
+
+def board_images(source: Path, pattern: str = "*", skipped: list | None = None) -> list[tuple[str, np.ndarray]]:
+    """RGB images of a folder (files matching ``pattern``, a glob inside it) or of a scan
+    store's scans. Files that are links leading out of the folder are not read: they go into
+    ``skipped`` (SkippedImage) with the reason."""
     import cv2
 
     source = Path(source)
     if not source.is_dir():
         raise FileError(f"{source} is not a folder", hint="pass a folder of board images or a scan store")
+    check_pattern(pattern)
+    root = source.resolve()
     scan_dirs = sorted(p for p in source.glob("scan_*") if (p / "color.png").exists())
-    files = [p / "color.png" for p in scan_dirs] if scan_dirs else sorted(
-        p for p in source.glob(pattern) if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
-    if not files:
-        raise FileError(f"{source} holds no images" + (f" matching {pattern!r}" if pattern != "*" else ""),
-                        hint=f"images ({', '.join(IMAGE_SUFFIXES)}) or scan_NNNN/color.png")
+    try:
+        files = [p / "color.png" for p in scan_dirs] if scan_dirs else sorted(
+            p for p in source.glob(pattern) if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+    except (ValueError, NotImplementedError, IndexError):  # a glob pathlib does not take ("a**", ".")
+        raise InputError(f"--pattern {pattern!r} is not a glob of file names",
+                         hint="'**' only as a whole path component, e.g. 'img_*.png', 'left/*.png' or "
+                              "'**/*.png'") from None
+    names = [f.parent.name if scan_dirs else str(f.relative_to(source)) for f in files]
+    kept, away = [], []
+    for f, name in zip(files, names, strict=True):
+        reason = _outside(f, root)
+        if reason is None:
+            kept.append((f, name))
+        else:
+            away.append(SkippedImage(name, f"not read: {reason}"))
+    if skipped is not None:
+        skipped.extend(away)
+    if not kept:
+        what = f"{source} holds no images" + (f" matching {pattern!r}" if pattern != "*" else "")
+        if away:
+            what += f" inside it ({len(away)} {'is a link' if len(away) == 1 else 'are links'} leading out of it)"
+        raise FileError(what, hint=f"images ({', '.join(IMAGE_SUFFIXES)}) or scan_NNNN/color.png")
     images = []
-    for f in files:
+    for f, name in kept:
         bgr = read_color(f, "calibration image", hint="remove it or narrow --pattern")
-        images.append((f.parent.name if scan_dirs else f.name, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)))
+        images.append((name, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)))
     return images
 
 
@@ -385,8 +427,10 @@ def run_intrinsics(opt: IntrinsicsOptions) -> IntrinsicsRun:
     out = Path(opt.out)
     out.mkdir(parents=True, exist_ok=True)
     board = opt.board or thesis_board()
-    images = board_images(opt.source, opt.pattern)
+    away: list[SkippedImage] = []
+    images = board_images(opt.source, opt.pattern, away)
     views, skipped = find_boards(images, board, opt.min_corners)
+    skipped = away + skipped
     result = calibrate_intrinsics(views, opt.model, skipped)
     stats = {"source": str(opt.source), "rms_px": result.rms, "views": len(result.views),
              "corners": result.corners, "model": result.model.value, "std": result.std,

@@ -127,7 +127,7 @@ HOSTILE = [
      "depth image is uint16 with 3 channels, not 16-bit grey"),
     ("depth-jpeg", _encode(".jpg", COLOUR), "depth", "is uint8 with 3 channels, not 16-bit grey"),
     ("empty", b"", "colour", "is empty (0 bytes)"),
-    ("text", b"not an image at all", "colour", "cannot be read as an image (it starts with b'not an i')"),
+    ("text", b"not an image at all", "colour", "cannot be read as an image (it is not in an image format recon knows)"),
     ("gif", b"GIF89a" + b"\0" * 32, "colour", "it is a GIF"),
     ("openexr", b"\x76\x2f\x31\x01" + b"\0" * 32, "depth_or_metres", "it is an OpenEXR file"),
     ("png-bad-ihdr", png_claiming(4, 4, depth=7), "colour", "bit depth 7 and colour type 2"),

@@ -24,11 +24,19 @@ def check(
     from recon_cli.backends.hardware.station import check_station
     from recon_cli.backends.station_file import load_station
     from recon_cli.console import console
+    from recon_cli.errors import ReconError, RobotFault
 
     sf = load_station(station)
     console.print(f"station {sf.name!r} ({station}): robot {sf.robot_adapter}, camera {sf.camera_adapter}, "
                   f"cell {sf.cell.kind.value}")
-    result = check_station(sf)
+    try:
+        result = check_station(sf)
+    except RobotFault as exc:
+        if exc.kind != "connection" or exc.stopped:
+            raise
+        # nothing moved and nothing was running: a connection check that cannot connect is an
+        # error of the station file or the cell's network (exit 1), not a stopped robot (exit 4)
+        raise ReconError(exc.message, hint=exc.hint) from None
     console.print("joints: " + ", ".join(f"{k} {v:.4f} m" if result.prismatic[k] else f"{k} {np.degrees(v):.3f}°"
                                          for k, v in result.joints.items())
                   + ("" if result.within_limits else "  (outside the soft limits!)"))

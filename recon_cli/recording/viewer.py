@@ -10,6 +10,7 @@ it and wait for it, and on Linux it also gets SIGTERM should recon die without c
 
 from __future__ import annotations
 
+import errno
 import ipaddress
 import os
 import signal
@@ -82,15 +83,26 @@ def _wildcard(address: str) -> bool:
     return ipaddress.ip_address(address).is_unspecified
 
 
-def _port_free(address: str, port: int) -> bool:
-    """Nothing listens on ``address:port`` (bound the way rerun binds, with SO_REUSEADDR)."""
+def _bind_problem(address: str, port: int) -> InputError | None:
+    """Why a server cannot listen on ``address:port`` (bound the way rerun binds, with
+    SO_REUSEADDR), or None when it can."""
     with socket.socket(_family(address), socket.SOCK_STREAM) as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             s.bind((address, port))
-        except OSError:
-            return False
-    return True
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                return InputError(f"port {port} is in use on {address}", hint="choose another --port")
+            if exc.errno == errno.EADDRNOTAVAIL:
+                return InputError(f"--bind {address} is not an address of this machine",
+                                  hint="give 127.0.0.1 (this machine only, the default), 0.0.0.0 (every IPv4 "
+                                       "interface), :: (every interface) or one address of this machine")
+            if exc.errno == errno.EACCES:
+                return InputError(f"port {port} on {address} needs privileges recon does not have",
+                                  hint="choose a --port of 1024 or above")
+            return InputError(f"cannot listen on {address} port {port} ({exc.strerror or exc})",
+                              hint="choose another --bind or --port")
+    return None
 
 
 def _free_port(address: str) -> int:
@@ -234,8 +246,9 @@ def open_viewer(path: Path, web: bool = False, port: int | None = None, bind: st
     subprocess.run([*command, "analytics", "disable"], check=False, capture_output=True, timeout=60)
     if web:
         web_port = port or WEB_PORT
-        if not _port_free(bind, web_port):
-            raise InputError(f"port {web_port} is in use on {bind}", hint="choose another --port")
+        problem = _bind_problem(bind, web_port)
+        if problem is not None:
+            raise problem
         grpc_port = _free_port(bind)
         args = ["--serve-web", "--bind", bind, "--web-viewer-port", str(web_port), "--port", str(grpc_port)]
     else:

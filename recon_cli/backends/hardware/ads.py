@@ -46,6 +46,8 @@ before they propagate.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import re
 import threading
 import time
@@ -312,6 +314,40 @@ def _pyads():
     return pyads
 
 
+#: AdsLib's log threshold (``Logger::logLevel``: 0 verbose, 1 info, 2 warning, 3 error)
+_ADSLIB_LOG_LEVEL = "_ZN6Logger8logLevelE"
+_ADSLIB_SILENT = 4
+_ADSLIB_LOG_LOCK = threading.RLock()
+
+
+@contextlib.contextmanager
+def adslib_quiet():
+    """Keep AdsLib's own log lines ("Socket(): connect failed", "Unable to create socket", ...,
+    written from C++ to stderr) off the terminal while connecting: recon says in one line what
+    failed. AdsLib's log threshold is raised above its levels meanwhile; a build without that
+    symbol has its stderr (file descriptor 2) captured instead."""
+    level = None
+    try:
+        from pyads import pyads_ex
+
+        level = ctypes.c_size_t.in_dll(pyads_ex._adsDLL, _ADSLIB_LOG_LEVEL)
+    except (ImportError, AttributeError, ValueError, OSError):
+        level = None
+    if level is None:
+        from recon_cli.inputs.images import native_output_captured
+
+        with native_output_captured(opencv=False):
+            yield
+        return
+    with _ADSLIB_LOG_LOCK:
+        saved = level.value
+        level.value = max(saved, _ADSLIB_SILENT)
+        try:
+            yield
+        finally:
+            level.value = saved
+
+
 class _NotConnected(ConnectionError):
     """The connection is closed (pyads answers None instead of raising then)."""
 
@@ -367,7 +403,7 @@ class AdsRobot:
         self._lreal_n = pyads.PLCTYPE_LREAL * n
         self._chunk_type = pyads.PLCTYPE_LREAL * (config.chunk_points * n)
         try:
-            with self._lock:
+            with self._lock, adslib_quiet():
                 if not self.plc.is_open:
                     self.plc.open()
                 self.plc.set_timeout(int(config.timeout * 1000))
@@ -684,8 +720,9 @@ class AdsRobot:
                 self.plc.close()
             except Exception:  # noqa: BLE001 (a broken connection may not close cleanly)
                 pass
-            self.plc.open()
-            self.plc.set_timeout(int(self.config.timeout * 1000))
+            with adslib_quiet():
+                self.plc.open()
+                self.plc.set_timeout(int(self.config.timeout * 1000))
 
     def _halt(self) -> StopOutcome:
         """Write ``stop`` until the PLC confirms it (``stop`` reads back TRUE and ``state`` is

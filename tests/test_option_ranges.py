@@ -193,3 +193,16 @@ def test_a_view_and_ik_refuse_absurd_values_without_numpy_warnings():
         T[:3, 3] = (0.0, 0.0, 1e300)
         with pytest.raises((UnreachableViewError, InvalidViewError)):
             cell.solve_pose(T, np.random.default_rng(0))
+
+
+@pytest.mark.parametrize(("argv", "needle"), [
+    (["ik", "--object-box", "1e300,0.3,0.3"], "--object-box '1e300,0.3,0.3' has an edge beyond 10 m"),
+    (["autoscan", "--initial", "1e300,0"], "--initial '1e300,0' is outside theta ±180°, phi ±720°"),
+    (["register", "x", "--box", "0,0,1e300,0.3,0.3,0.3"], "the centre must lie within ±100 m"),
+    (["register", "x", "--box", "0,0,0.8,11,0.3,0.3"], "sizes be at most 10 m"),
+])
+def test_numbers_in_text_options_are_bounded_too(capsys, tmp_path, argv, needle):
+    code = main(argv + (["--out", str(tmp_path / "out")] if argv[0] == "autoscan" else []))
+    out, err = capsys.readouterr()
+    assert code == 1 and err.count("\n") == 1 and needle in err, (code, out, err)
+    assert "Traceback" not in out + err and not (tmp_path / "out").exists()

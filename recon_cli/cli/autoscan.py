@@ -9,6 +9,8 @@ import typer
 
 from recon_cli.cli.app import app
 from recon_cli.cli.options import (
+    MAX_THETA,
+    MAX_TURN,
     CellOpt,
     D,
     DcOpt,
@@ -26,6 +28,7 @@ from recon_cli.cli.options import (
     realism_profile,
 )
 from recon_cli.config import VIEWPLAN_M, VIEWPLAN_N, VIEWPLAN_SIGMA
+from recon_cli.errors import InputError
 
 _V = D.viewplan
 
@@ -72,6 +75,9 @@ def autoscan(
     view = None
     if initial is not None:
         theta, phi = parse_vector(initial, 2, "--initial", "degrees")
+        if abs(theta) > MAX_THETA or abs(phi) > MAX_TURN:
+            raise InputError(f"--initial '{initial}' is outside theta ±{MAX_THETA:g}°, phi ±{MAX_TURN:g}°",
+                             hint="give 'theta,phi' in degrees, e.g. 45,0")
         from recon_cli.objects import load_object
 
         center, _ = load_object(object_name, scale).crop_box(config.scene.box_margin)

@@ -30,6 +30,8 @@ MAX_TURN = 720.0
 PLANNING_TIME_RANGE = (0.1, 3600.0)
 #: the safety distance [m] (robot.description.CellConfig checks the same range)
 SAFETY_RANGE = (0.0, 0.2)
+#: the longest edge [m] of a box given on the command line (--object-box, --box)
+MAX_BOX_EDGE = 10.0
 #: the scale of a mesh file (0.001 for millimetres; meshes are read up to 1000 m after it)
 SCALE_RANGE = (1e-6, 1000.0)
 
@@ -138,6 +140,9 @@ def make_cell(cell: str, safety: float, object_box: str | None = None):
         size = parse_vector(object_box, 3, "--object-box", "metres")
         if min(size) <= 0:
             raise InputError(f"--object-box '{object_box}' has a non-positive edge",
+                             hint="give the box edges in metres, e.g. 0.3,0.3,0.3")
+        if max(size) > MAX_BOX_EDGE:
+            raise InputError(f"--object-box '{object_box}' has an edge beyond {MAX_BOX_EDGE:g} m",
                              hint="give the box edges in metres, e.g. 0.3,0.3,0.3")
         c.set_object_box(ObjectBox.on_table(size, table_top_z=c.table_surface_z))
     return c

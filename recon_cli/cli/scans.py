@@ -11,6 +11,8 @@ import typer
 from recon_cli.cli.app import app
 from recon_cli.cli.options import (
     FOCUS,
+    MAX_BOX_EDGE,
+    MAX_COORDINATE,
     RADIUS,
     THETA,
     AlphaOpt,
@@ -172,6 +174,9 @@ def register(
         v = parse_vector(box, 6, "--box", "metres")
         if min(v[3:]) <= 0:
             raise InputError(f"--box {box}: sizes must be positive", hint="cx,cy,cz,sx,sy,sz in metres")
+        if max(v[3:]) > MAX_BOX_EDGE or max(map(abs, v[:3])) > MAX_COORDINATE:
+            raise InputError(f"--box {box}: the centre must lie within ±{MAX_COORDINATE:g} m and the sizes be at "
+                             f"most {MAX_BOX_EDGE:g} m", hint="cx,cy,cz,sx,sy,sz in metres")
         T = np.eye(4)
         T[:3, 3] = v[:3]
         crop = CropBox(T, tuple(v[3:]))

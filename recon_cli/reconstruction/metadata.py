@@ -117,7 +117,9 @@ def load_json(path: Path, what: str, max_bytes: int = MAX_JSON_BYTES) -> Any:
     return parse_json(text, path, what)
 
 
-_STRING = re.compile(r'"(?:[^"\\\n]|\\.)*"')
+#: a JSON string, or an unterminated one up to the end of its line: a match from every quote
+#: succeeds, without backtracking, so removing the strings takes one pass over the text
+_STRING = re.compile(r'"(?:[^"\\\n]|\\.)*+(?:"|\\?$)', re.MULTILINE)
 
 
 def _line(bare: str, pattern: str | None) -> int | None:

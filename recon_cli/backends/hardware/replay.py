@@ -149,7 +149,7 @@ def _quat_matrix(q: np.ndarray) -> np.ndarray:
 
 #: bytes of a poses file (one line of at most about 200 bytes per frame)
 MAX_POSES_BYTES = 16 * 2**20
-#: largest distance of a recorded camera from the recording's origin [m]
+#: largest coordinate of a recorded camera position [m]
 MAX_TRANSLATION = 1000.0
 #: focal lengths and principal point of a recording's intrinsics [px] (as camera.replay.intrinsics)
 FOCAL_RANGE, CENTRE_RANGE = (1.0, 1e5), (-1e5, 1e5)
@@ -172,7 +172,7 @@ def _read_text(path: Path, what: str, max_bytes: int) -> str:
 
 def _pose_matrix(v: np.ndarray, path: Path, k: int) -> np.ndarray:
     """world_T_camera of one line's numbers (7, 8, 12 or 16), checked: finite, translation
-    within MAX_TRANSLATION, a unit quaternion or a rigid matrix."""
+    within +-MAX_TRANSLATION, a unit quaternion or a rigid matrix."""
     if not np.all(np.isfinite(v)):
         raise FileError(f"{path}:{k}: {' '.join(f'{x:g}' for x in v)} holds NaN or infinity",
                         hint="tx ty tz qx qy qz qw per line, finite numbers")
@@ -196,10 +196,10 @@ def _pose_matrix(v: np.ndarray, path: Path, k: int) -> np.ndarray:
     else:
         raise FileError(f"{path}:{k}: {len(v)} numbers", hint="7 (tx ty tz qx qy qz qw), 8 (with a leading "
                                                               "timestamp), 12 or 16 (matrix rows)")
-    distance = float(np.linalg.norm(T[:3, 3]))
-    if distance > MAX_TRANSLATION:
-        raise FileError(f"{path}:{k}: the camera is {distance:.4g} m from the origin, more than "
-                        f"{MAX_TRANSLATION:g} m", hint="poses in metres, tx ty tz qx qy qz qw per line")
+    if np.any(np.abs(T[:3, 3]) > MAX_TRANSLATION):
+        raise FileError(f"{path}:{k}: translation ({', '.join(f'{x:g}' for x in T[:3, 3])}) m is outside "
+                        f"[-{MAX_TRANSLATION:g}, {MAX_TRANSLATION:g}] m",
+                        hint="poses in metres, tx ty tz qx qy qz qw per line")
     return T
 
 

@@ -17,11 +17,18 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from recon_cli.errors import FileError, InputError
+from recon_cli.inputs import meshes
 from recon_cli.inputs.meshes import (
     MAX_COORDINATE_M,
     MAX_EXTENT_M,
     MAX_HEADER_BYTES,
     MAX_MESH_FILE_BYTES,
+    MAX_OBJ_LINES,
+    MAX_PCD_UNCOMPRESSED_BYTES,
+    MAX_STL_TEXT_BYTES,
+    MAX_STL_TRIANGLES,
+    MAX_TEXT_TRIANGLES,
+    MAX_TEXT_VERTICES,
     MAX_TRIANGLES,
     MAX_VERTICES,
     read_cloud,
@@ -67,7 +74,31 @@ def pcd(fields="x y z", size="4 4 4", typ="F F F", count="1 1 1", points=3, data
     return head.encode() + body
 
 
+def ply_records(vertex_props: list[tuple[str, str]], rows: np.ndarray, faces=None, count_type="u1") -> bytes:
+    """A binary little-endian PLY of vertex records (``vertex_props``: (PLY type, name);
+    ``rows``: a structured or plain array with one column per property) and triangles."""
+    codes = {"float": "<f4", "double": "<f8", "uchar": "u1", "int": "<i4"}
+    record = np.dtype([(name, codes[t]) for t, name in vertex_props])
+    table = np.zeros(len(rows), record)
+    for k, (_, name) in enumerate(vertex_props):
+        table[name] = rows[:, k]
+    head = f"ply\nformat binary_little_endian 1.0\nelement vertex {len(rows)}\n"
+    head += "".join(f"property {t} {name}\n" for t, name in vertex_props)
+    body = table.tobytes()
+    if faces is not None:
+        head += f"element face {len(faces)}\nproperty list uchar int vertex_indices\n"
+        face = np.zeros(len(faces), np.dtype([("n", count_type), ("i", "<i4", 3)]))
+        face["n"], face["i"] = 3, faces
+        body += face.tobytes()
+    return (head + "end_header\n").encode() + body
+
+
+XYZ = [("float", "x"), ("float", "y"), ("float", "z")]
 NAN = [(float("nan"), 0.0, 0.0), *TRIANGLE[1:]]
+TETRA = [*TRIANGLE, (0.0, 0.0, 0.1)]
+TETRA_FACES = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
+ASCII_TETRA = ply(TETRA, TETRA_FACES, "ascii")
+
 LINE = [(0.0, 0.0, 0.0), (0.1, 0.0, 0.0), (0.2, 0.0, 0.0)]
 OBJ = "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nf 1 2 3\n"
 
@@ -117,7 +148,8 @@ HOSTILE = [
     ("obj-nul", "a.obj", OBJ.encode() + b"\x00", "mesh", "holds NUL bytes"),
     ("obj-endless-line", "a.obj", OBJ.encode() + b"# " + b"x" * (5 * 2**20), "mesh", "has a line longer than 4 MiB"),
     ("obj-zero-area", "a.obj", b"v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "mesh", "is degenerate"),
-    ("obj-index-out-of-range", "a.obj", OBJ.replace("f 1 2 3", "f 1 2 9").encode(), "mesh", "has no triangles"),
+    ("obj-index-out-of-range", "a.obj", OBJ.replace("f 1 2 3", "f 1 2 9").encode(), "mesh",
+     "cannot be read (assimp: OBJ: vertex index out of range)"),
     ("empty-ply", "a.ply", b"", "mesh", "is empty (0 bytes)"),
     ("empty-obj", "a.obj", b"", "mesh", "is empty (0 bytes)"),
     ("empty-pcd", "a.pcd", b"", "cloud", "is empty (0 bytes)"),
@@ -137,11 +169,61 @@ HOSTILE = [
     ("pcd-out-of-order", "a.pcd", pcd(order=("FIELDS", "POINTS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "DATA")),
      "cloud", "has its header line SIZE out of PCD order"),
     ("pcd-nan", "a.pcd", pcd(body=b"nan 0 0\n0 0 0\n0 1 0\n"), "cloud", "1 point with NaN or infinite values"),
+    # values Open3D's readers cannot parse: rply leaves the rest of the array uninitialised, assimp and the PCD
+    # reader read a word as 0 or part of a number, the PCD reader skips a short line
+    ("ply-ascii-word-for-a-float", "a.ply", ASCII_TETRA.replace(b"\n0 0 0\n", b"\nabc 0 0\n"), "vertices",
+     "reconstruction cannot be read (rply: Error reading 'x' of 'vertex' number 0: a value that is not a number"),
+    ("ply-ascii-inf-for-a-float", "a.ply", ASCII_TETRA.replace(b"\n0 0 0\n", b"\ninf 0 0\n"), "cloud",
+     "cannot be read (rply: Error reading 'x' of 'vertex' number 0"),
+    ("ply-ascii-1e39-for-a-float", "a.ply", ASCII_TETRA.replace(b"\n0 0 0.1\n", b"\n0 0 1e39\n"), "vertices",
+     "cannot be read (rply: Error reading 'z' of 'vertex' number 3"),
+    ("ply-ascii-word-for-an-index", "a.ply", ASCII_TETRA.replace(b"3 1 2 3", b"3 1 2 x"), "mesh",
+     "cannot be read (rply: Error reading value number 3 of 'vertex_indices' of 'face' number 3"),
+    ("ply-ascii-missing-value", "a.ply", ply(TRIANGLE, fmt="ascii").replace(b"0 0.1 0\n", b"0 0.1\n"), "cloud",
+     "cannot be read (rply: Unexpected end of file; Error reading 'z' of 'vertex' number 2"),
+    ("obj-word", "a.obj", OBJ.replace("v 0 0 0", "v abc 0 0").encode(), "vertices",
+     "has a 'v' line whose values are not all numbers (line 1: 'v abc 0 0')"),
+    ("obj-hexadecimal", "a.obj", OBJ.replace("v 0.1 0 0", "v 0x10 0 0").encode(), "mesh",
+     "has a 'v' line whose values are not all numbers (line 2: 'v 0x10 0 0')"),
+    ("obj-decimal-comma", "a.obj",
+     ("# part\r\n" + OBJ.replace("\n", "\r\n").replace("v 0 0.1 0", "v 0 0,1 0")).encode(), "mesh",
+     "(line 4: 'v 0 0,1 0')"),
+    ("obj-underscore", "a.obj", OBJ.replace("v 0.1 0 0", "v 1_0 0 0").encode(), "mesh", "(line 2: 'v 1_0 0 0')"),
+    ("obj-normal-word", "a.obj", (OBJ + "vn 0 0 one\n").encode(), "mesh",
+     "has a 'vn' line whose values are not all numbers (line 5: 'vn 0 0 one')"),
+    ("stl-ascii-word", "a.stl", b"solid t\nfacet normal 0 0 1\nouter loop\nvertex abc 0 0\nvertex 0.1 0 0\n"
+     b"vertex 0 0.1 0\nendloop\nendfacet\nendsolid t\n", "mesh", 'cannot be read (assimp: Cannot parse string "abc'),
+    ("pcd-word", "a.pcd", pcd(body=b"abc 0 0\n0.1 0 0\n0 0.1 0\n"), "cloud",
+     "has a data line that is not 3 numbers (line 11: 'abc 0 0'"),
+    ("pcd-short-line", "a.pcd", pcd(body=b"0 0\n0.1 0 0\n0 0.1 0\n"), "cloud", "(line 11: '0 0'"),
+    ("pcd-two-points-on-a-line", "a.pcd", pcd(body=b"0 0 0 0.1 0 0\n0 0.1 0\n"), "cloud",
+     "(line 11: '0 0 0 0.1 0 0'"),
+    ("pcd-too-few-lines", "a.pcd", pcd(body=b"0 0 0\n\n\n\n0.1 0 0\n\n\n"), "cloud",
+     "has 2 lines of point values, but POINTS declares 3"),
+    # the limits of formats Open3D loads before recon can check them
+    ("ply-ascii-over-the-text-limit", "a.ply", ply(TRIANGLE, [(0, 1, 2)], "ascii", nv=MAX_TEXT_VERTICES + 1), "mesh",
+     f"declares {MAX_TEXT_VERTICES + 1} vertices, more than the {MAX_TEXT_VERTICES} recon reads from ASCII PLY"),
+    ("pcd-ascii-over-the-text-limit", "a.pcd", pcd(points=MAX_TEXT_VERTICES + 1), "cloud",
+     f"more than the {MAX_TEXT_VERTICES} recon reads from ASCII or compressed PCD"),
+    # binary records checked before loading
+    ("ply-nan-normal", "a.ply", ply_records([*XYZ, ("float", "nx"), ("float", "ny"), ("float", "nz")],
+                                            np.array([[0, 0, 0, 0, 0, 1], [0.1, 0, 0, np.inf, 0, 1],
+                                                      [0, 0.1, 0, 0, 0, 1]])), "cloud",
+     "has 1 normal with NaN or infinite values (normal 1: (inf, 0, 1))"),
+    ("pcd-binary-nan-normal", "a.pcd", pcd("x y z normal_x normal_y normal_z", "4 4 4 4 4 4", "F F F F F F",
+                                           "1 1 1 1 1 1", data="binary",
+                                           body=np.array([[0, 0, 0, 0, 0, 1], [0.1, 0, 0, 0, 0, 1],
+                                                          [0, 0.1, 0, 0, np.nan, 1]], "<f4").tobytes()), "cloud",
+     "has 1 normal with NaN or infinite values (normal 2: (0, nan, 1))"),
 ]
 
 
 def _read(kind: str, path: Path):
-    return read_mesh(path) if kind == "mesh" else read_cloud(path)
+    """``kind``: "mesh", "vertices" (a mesh file whose triangles are optional, as
+    ``recon evaluate`` reads a reconstruction) or "cloud"."""
+    if kind == "cloud":
+        return read_cloud(path)
+    return read_mesh(path, "reconstruction", triangles=False) if kind == "vertices" else read_mesh(path)
 
 
 @pytest.mark.parametrize("name, filename, data, kind, message", HOSTILE, ids=[h[0] for h in HOSTILE])
@@ -194,6 +276,94 @@ def test_valid_files_read(tmp_path):
         read_cloud(tmp_path / "n.ply")
 
 
+def test_binary_records_are_checked_in_chunks_before_open3d_loads(tmp_path, monkeypatch):
+    """Binary PLY and PCD files are refused before Open3D reads them (it would first hold
+    the whole file), what is wrong found in any chunk and counted over all of them."""
+    monkeypatch.setattr(meshes, "_SCAN_BYTES", 100)  # 8 vertices, 7 faces a chunk
+
+    def loaded(*args, **kwargs):
+        raise AssertionError("Open3D loaded a file the guard refuses")
+
+    readers = o3d.io.read_triangle_mesh, o3d.io.read_point_cloud
+    monkeypatch.setattr(o3d.io, "read_triangle_mesh", loaded)
+    monkeypatch.setattr(o3d.io, "read_point_cloud", loaded)
+    n = 1000
+    line = np.zeros((n, 3))
+    line[:, 0] = np.arange(n) * 1e-4
+    surface = line.copy()
+    surface[1::2, 1] = 1e-3
+    faces = np.stack([np.arange(n - 2), np.arange(1, n - 1), np.arange(2, n)], axis=1)
+    normals = np.tile([0.0, 0.0, 1.0], (n, 1))
+
+    def refused(data: bytes, kind: str = "cloud", **kw) -> str:
+        path = tmp_path / ("a.pcd" if data.startswith(b"VERSION") else "a.ply")
+        path.write_bytes(data)
+        with pytest.raises(FileError) as info:
+            read_cloud(path) if kind == "cloud" else read_mesh(path, **kw)
+        return info.value.one_line()
+
+    rows = surface.copy()
+    rows[[997, 998], 2] = [np.nan, -np.inf]
+    assert "has 2 points with NaN or infinite values (point 997: (0.0997, 0.001, nan))" in refused(
+        ply_records(XYZ, rows))
+    rows = np.hstack([surface, normals])
+    rows[[3, 900], 3] = np.nan
+    props = [*XYZ, ("double", "nx"), ("double", "ny"), ("double", "nz")]
+    assert "has 2 normals with NaN or infinite values (normal 3: (nan, 0, 1))" in refused(ply_records(props, rows))
+    rows = surface.copy()
+    rows[999, 0] = 150.0  # the extent spans the chunks
+    assert "is 150 m across (after scale 1)" in refused(ply_records(XYZ, rows))
+    assert refused(ply_records(XYZ, rows, faces), "mesh", scale=10, units_hint="pass --scale").endswith(
+        "has a coordinate of 1500 m (after scale 10), outside ±1000 m (is the file in metres?); pass --scale")
+    assert "is degenerate: the total area of its 998 triangles is 0" in refused(ply_records(XYZ, line, faces), "mesh")
+    assert "is degenerate" in refused(ply_records(XYZ, line, faces), "mesh", triangles=False)
+    bad = faces.copy()
+    bad[990, 2] = n
+    assert f"has triangles with vertex index {n}, outside 0 to {n - 1}" in refused(ply_records(XYZ, surface, bad),
+                                                                                    "mesh")
+    assert f"has no triangles ({n} vertices only)" in refused(ply_records(XYZ, surface), "mesh")
+    far = surface.copy()
+    far[500] = (-5000.0, 0, 0)
+    assert "has a coordinate of 5000 m (after scale 1)" in refused(ply_records(XYZ, far))
+    rows = np.hstack([surface, normals]).astype("<f4")
+    rows[999, 1] = np.nan
+    data = pcd("x y z normal_x normal_y normal_z", "4 4 4 4 4 4", "F F F F F F", "1 1 1 1 1 1", points=n,
+               data="binary", body=rows.tobytes())
+    assert "has 1 point with NaN or infinite values (point 999: (0.0999, nan, 0))" in refused(data)
+    monkeypatch.setattr(o3d.io, "read_triangle_mesh", readers[0])
+    monkeypatch.setattr(o3d.io, "read_point_cloud", readers[1])
+    (tmp_path / "ok.ply").write_bytes(ply_records([*XYZ, ("float", "nx"), ("float", "ny"), ("float", "nz")],
+                                                  np.hstack([surface, normals]), faces))
+    assert len(read_mesh(tmp_path / "ok.ply").triangles) == n - 2
+
+
+def test_limits_of_the_formats_open3d_loads_first(tmp_path, monkeypatch):
+    stl = tmp_path / "a.stl"
+    with stl.open("wb") as f:  # sparse
+        f.write(b"binary stl".ljust(80, b" ") + struct.pack("<I", MAX_STL_TRIANGLES + 1))
+        f.truncate(84 + 50 * (MAX_STL_TRIANGLES + 1))
+    with pytest.raises(FileError, match=f"declares {MAX_STL_TRIANGLES + 1} triangles, more than the "
+                                        f"{MAX_STL_TRIANGLES} recon reads from STL"):
+        read_mesh(stl)
+    with stl.open("wb") as f:
+        f.write(b"solid t\n" + b" " * 4096)
+        f.truncate(MAX_STL_TEXT_BYTES + 1)
+    with pytest.raises(FileError, match="is an ASCII STL of 128.0 MiB, more than the 128 MiB recon reads"):
+        read_mesh(stl)
+    monkeypatch.setattr(meshes, "MAX_OBJ_LINES", 3)
+    for extra, noun in (("v 0 0 0.1\n", "vertex"), ("vn 0 0 1\n" * 4, "normal"), ("vt 0 0\n" * 4, "texture coordinate"),
+                        ("f 1 2 3\n" * 3, "face")):
+        (tmp_path / "a.obj").write_text(OBJ + extra)
+        with pytest.raises(FileError, match=f"has more than 3 {noun} lines, more than recon reads from OBJ"):
+            read_mesh(tmp_path / "a.obj")
+    points = MAX_PCD_UNCOMPRESSED_BYTES // 92 + 1  # x, y, z and 20 values of 4 bytes
+    body = struct.pack("<II", 10, points * 92) + b"\0" * 10
+    (tmp_path / "a.pcd").write_bytes(pcd("x y z f", "4 4 4 4", "F F F F", "1 1 1 20", points=points,
+                                         data="binary_compressed", body=body))
+    with pytest.raises(FileError, match="would decompress to 128.0 MiB, more than the 128 MiB recon reads"):
+        read_cloud(tmp_path / "a.pcd")
+
+
 def test_an_obj_material_library_is_not_opened(tmp_path):
     """The texture a material library names could claim gigapixels (Open3D would decode it
     unguarded) or the library could be a FIFO: the mesh is read without it."""
@@ -224,12 +394,19 @@ def test_the_limits_are_what_the_docs_say():
         "file size (checked before reading)": f"{MAX_MESH_FILE_BYTES:,} bytes ({MAX_MESH_FILE_BYTES // 2**20} MiB)",
         "mesh formats": "OBJ, PLY, STL",
         "point cloud formats": "PLY, PCD",
-        "vertices of a mesh, points of a cloud": f"{MAX_VERTICES:,}",
-        "triangles of a mesh": f"{MAX_TRIANGLES:,}",
+        "vertices of a binary PLY, points of a binary PCD": f"{MAX_VERTICES:,}",
+        "triangles of a binary PLY": f"{MAX_TRIANGLES:,}",
+        "vertices and faces of an ASCII PLY, points of an ASCII or compressed PCD": f"{MAX_TEXT_VERTICES:,}",
+        "vertex, normal, texture coordinate and face lines of an OBJ (each)": f"{MAX_OBJ_LINES:,}",
+        "triangles of an STL": f"{MAX_STL_TRIANGLES:,}",
+        "ASCII STL file": f"{MAX_STL_TEXT_BYTES:,} bytes ({MAX_STL_TEXT_BYTES // 2**20} MiB)",
+        "data of a compressed PCD (compressed and uncompressed)":
+            f"{MAX_PCD_UNCOMPRESSED_BYTES:,} bytes ({MAX_PCD_UNCOMPRESSED_BYTES // 2**20} MiB)",
         "extent along any axis (after `--scale`)": f"{MAX_EXTENT_M:g} m",
         "absolute coordinate (after `--scale`)": f"{MAX_COORDINATE_M:g} m",
         "PLY or PCD header": f"{MAX_HEADER_BYTES:,} bytes",
     }
+    assert MAX_TEXT_TRIANGLES == MAX_TEXT_VERTICES
 
 
 # ----------------------------------------------------------------------------- measured, in a process of its own
@@ -241,7 +418,7 @@ from recon_cli.inputs.meshes import read_cloud, read_mesh
 for line in Path(sys.argv[1]).read_text().splitlines():
     kind, path = line.split(" ", 1)
     try:
-        read_mesh(path) if kind == "mesh" else read_cloud(path)
+        read_cloud(path) if kind == "cloud" else read_mesh(path, triangles=kind == "mesh")
     except FileError:
         continue
     raise SystemExit(f"{path} was read")
@@ -260,6 +437,43 @@ def test_every_refusal_in_bounded_time_and_memory(tmp_path):
     run = run_python(_REFUSE_ALL, [str(tmp_path / "list.txt")], tmp_path)
     assert run.code == 0 and run.err == "" and run.out == "", (run.out, run.err)
     assert run.seconds < 20 and run.peak_gb < 1.0, (run.seconds, run.peak_gb)
+
+
+_REFUSE_ONE = """
+import sys
+from recon_cli.errors import FileError
+from recon_cli.inputs.meshes import read_mesh
+try:
+    read_mesh(sys.argv[1], "reconstruction", triangles=False)
+except FileError as exc:
+    print(exc.one_line())
+print("open3d loaded" if "open3d" in sys.modules else "open3d not loaded")
+_peak()
+"""
+
+
+def test_a_large_binary_ply_is_refused_without_loading_it(tmp_path):
+    """2 million vertices with normals and colours (102 MB), the last one NaN: refused from
+    chunks of its records, without Open3D (which would hold them all: 0.5 GB)."""
+    n = 2_000_000
+    axes = ("x", "y", "z", "nx", "ny", "nz")
+    record = np.dtype([(a, "<f8") for a in axes] + [(c, "u1") for c in ("red", "green", "blue")])
+    table = np.zeros(n, record)
+    table["x"] = np.linspace(0.0, 0.1, n)
+    table["nz"] = 1.0
+    table["x"][-1] = np.nan
+    head = f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\n"
+    head += "".join(f"property double {a}\n" for a in axes) + "property uchar red\nproperty uchar green\n"
+    head += "property uchar blue\nend_header\n"
+    path = tmp_path / "big.ply"
+    with path.open("wb") as f:
+        f.write(head.encode())
+        table.tofile(f)
+    del table
+    run = run_python(_REFUSE_ONE, [str(path)], tmp_path)
+    assert run.out.splitlines() == [f"{path}: reconstruction has 1 vertex with NaN or infinite values (vertex "
+                                    f"{n - 1}: (nan, 0, 0)); check the file with a mesh viewer", "open3d not loaded"]
+    assert run.peak_gb < 0.25 and run.seconds < 20, (run.peak_gb, run.seconds)
 
 
 def _one_line(run) -> str:

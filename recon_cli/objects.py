@@ -233,6 +233,25 @@ def _standing(name: str, description: str, vertices: np.ndarray, triangles: np.n
                        pose(None, BOARD_CENTRE), rgba)
 
 
+MIN_THICKNESS_M = 1e-6
+"""Thinnest object mesh, across its flattest direction (MuJoCo refuses a mesh without volume)."""
+
+
+def _check_volume(path: Path, vertices: np.ndarray) -> None:
+    """An object mesh must enclose a volume: 4 vertices at least, not all in one plane."""
+    solid = "an object to scan must enclose a volume"
+    hint = "give a closed surface of the object (a solid), not a single face or a sheet"
+    if len(vertices) < 4:
+        raise InputError(f"mesh {path} has only {len(vertices)} vertices: {solid} (4 vertices at least)", hint=hint)
+    centred = vertices - vertices.mean(axis=0)
+    normal = np.linalg.eigh(centred.T @ centred)[1][:, 0]  # the direction of least spread
+    depth = centred @ normal
+    thickness = float(depth.max() - depth.min())
+    if thickness < MIN_THICKNESS_M:
+        raise InputError(f"mesh {path} is flat: its vertices lie in one plane ({thickness * 1e3:.2g} mm thick, less "
+                         f"than {MIN_THICKNESS_M * 1e3:g} mm); {solid}", hint=hint)
+
+
 def load_mesh_file(path: Path, scale: float = 1.0) -> SceneObject:
     """An object from a mesh file, scaled by ``scale`` (e.g. 0.001 for millimetres)."""
     if not (math.isfinite(scale) and scale > 0):
@@ -249,6 +268,7 @@ def load_mesh_file(path: Path, scale: float = 1.0) -> SceneObject:
     if size < 0.005:
         raise InputError(f"mesh {path} is only {size * 1e3:.3g} mm across after scaling by {scale:g}",
                          hint="check the units and pass --scale")
+    _check_volume(path, v)
     return _standing(Path(path).stem, f"mesh file {path} (scale {scale:g})", v,
                      np.asarray(mesh.triangles), (0.7, 0.7, 0.72, 1.0))
 

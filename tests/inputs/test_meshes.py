@@ -380,12 +380,45 @@ def test_object_files_are_checked_after_their_scale(tmp_path):
     from recon_cli.objects import load_object
 
     path = tmp_path / "part.ply"
-    path.write_bytes(ply([(0, 0, 0), (300.0, 0, 0), (0, 100.0, 0)], [(0, 1, 2)]))  # millimetres
+    path.write_bytes(ply([(0, 0, 0), (300.0, 0, 0), (0, 100.0, 0), (0, 0, 20.0)], TETRA_FACES))  # millimetres
     with pytest.raises(FileError, match=r"is 300 m across.*; pass a scale, e.g. --scale 0.001"):
         load_object(str(path))
-    assert load_object(str(path), scale=0.001).extent == pytest.approx([0.3, 0.1, 0.0])
+    assert load_object(str(path), scale=0.001).extent == pytest.approx([0.3, 0.1, 0.02])
     with pytest.raises(InputError, match="too large for the board"):  # within the reader's limits, not the board's
         load_object(str(path), scale=0.01)
+
+
+TILTED_SQUARE = [(0, 0, 0), (0.1, 0, 0.1), (0, 0.1, 0), (0.1, 0.1, 0.1)]
+
+
+@pytest.mark.parametrize("vertices, faces, message", [
+    (TRIANGLE, [(0, 1, 2)], "has only 3 vertices: an object to scan must enclose a volume (4 vertices at least)"),
+    ([*TRIANGLE, TRIANGLE[0]], [(0, 1, 2), (3, 2, 1)], "is flat: its vertices lie in one plane (0 mm thick"),
+    ([(0, 0, 0), (0.1, 0, 0), (0, 0.1, 0), (0.1, 0.1, 0)], [(0, 1, 2), (1, 3, 2)], "is flat"),
+    (TILTED_SQUARE, [(0, 1, 2), (1, 3, 2)], "is flat: its vertices lie in one plane"),
+])
+def test_an_object_mesh_must_enclose_a_volume(tmp_path, vertices, faces, message):
+    """MuJoCo, which renders the object, refuses a mesh of fewer than 4 vertices or without
+    volume; the mesh is refused with one line when it is loaded."""
+    from recon_cli.objects import load_object
+
+    path = tmp_path / "part.ply"
+    path.write_bytes(ply(vertices, faces))
+    with pytest.raises(InputError) as info:
+        load_object(str(path))
+    assert message in info.value.one_line() and info.value.hint, info.value.one_line()
+    path.write_bytes(ply([*vertices, (0.05, 0.05, 0.001)], faces))  # 1 mm off the plane
+    assert len(load_object(str(path)).vertices) == len(vertices) + 1
+
+
+def test_a_mesh_mujoco_refuses_is_one_line(gantry):
+    from recon_cli.backends.sim.scene import build_scene
+    from recon_cli.objects import SceneObject
+
+    flat = SceneObject("sheet", "a sheet", np.array(TILTED_SQUARE), np.array([(0, 1, 2), (1, 3, 2)]), np.eye(4))
+    with pytest.raises(InputError, match=r"^the object 'sheet' cannot be simulated: MuJoCo refuses its mesh \(mesh "
+                                         r"volume is too small"):
+        build_scene(gantry.config, flat)
 
 
 def test_the_limits_are_what_the_docs_say():
@@ -503,6 +536,12 @@ def test_an_object_file_is_refused_before_any_scan(tmp_path, command):
     assert line.startswith("error: part.stl: mesh file is not a valid STL file: as binary STL it declares "
                            "4000000000 triangles"), line
     assert not any((tmp_path / "out").rglob("*"))
+
+
+def test_capture_refuses_an_object_of_one_triangle(tmp_path):
+    (tmp_path / "tri.obj").write_text(OBJ)
+    line = _one_line(run_cli(["capture", "--object", "tri.obj", "--out", "out"], tmp_path))
+    assert line.startswith("error: mesh tri.obj has only 3 vertices: an object to scan must enclose a volume"), line
 
 
 # ----------------------------------------------------------------------------- fuzz

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from lxml import etree
 
+from recon_cli.errors import InputError
 from recon_cli.objects import SceneObject
 from recon_cli.paths import ROBOT_DIR
 from recon_cli.perception.charuco import BoardSpec, thesis_board
@@ -163,7 +164,14 @@ def build_scene(config: CellConfig, scene_object: SceneObject | None = None,
         act.ctrllimited = True
         act.ctrlrange = [-float(effort[joint.name]), float(effort[joint.name])]  # URDF effort
 
-    model = spec.compile()
+    try:
+        model = spec.compile()
+    except ValueError as exc:  # the object's mesh is the only input MuJoCo checks here
+        if scene_object is None or OBJECT_NAME not in str(exc):
+            raise
+        reason = str(exc).strip().splitlines()[0].removeprefix("Error: ").strip()
+        raise InputError(f"the object '{scene_object.name}' cannot be simulated: MuJoCo refuses its mesh ({reason})",
+                         hint="give a closed surface of the object (a solid)") from None
     extent = model.stat.extent
     model.vis.map.znear = 0.05 / extent  # 5 cm: far inside the sensor's 0.497 m minimum range
     model.vis.map.zfar = 10.0 / extent

@@ -16,6 +16,7 @@
 
 from __future__ import annotations
 
+import re
 import shutil
 import tempfile
 from pathlib import Path
@@ -117,7 +118,10 @@ def expand(path: Path) -> tuple[etree._Element, dict[etree._Element, C.Source], 
             raise _expansion_error(path, exc, frames, tmp) from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    root = etree.fromstring(text.encode(), _parser())
+    try:
+        root = etree.fromstring(text.encode(), _parser())
+    except etree.XMLSyntaxError as exc:  # xacro:element, xacro:attribute and expressions can make anything
+        raise _not_xml(path, doc, exc) from None
     for pi in root.xpath("//processing-instruction()"):
         if pi.getparent() is not None:
             pi.getparent().remove(pi)
@@ -135,6 +139,67 @@ def expand(path: Path) -> tuple[etree._Element, dict[etree._Element, C.Source], 
     new = [e for e in clean.iter() if isinstance(e.tag, str)]
     sources = {n: tagged[o] for o, n in zip(old, new, strict=True) if o in tagged}
     return clean, sources, expanded
+
+
+_NOT_XML_CHAR = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
+_MAX_NAME = 50_000  # libxml2's longest name
+
+
+def _name_problem(kind: str, name: str, prefixes: set[str]) -> str | None:
+    """Why ``name`` is no XML element or attribute name (a QName whose prefix is declared
+    in ``prefixes``), or None; ``kind``: "element name" or "attribute name"."""
+    if len(name) > _MAX_NAME:
+        return f"an {kind} of {len(name)} characters, more than the {_MAX_NAME} an XML parser reads"
+    parts = name.split(":")
+    shown = f"{name[:40]!r}{'...' if len(name) > 40 else ''}"
+    if len(parts) > 2 or not all(_ncname(part) for part in parts):
+        return f"an invalid {kind} {shown}"
+    if len(parts) == 2 and parts[0] not in prefixes:
+        return f"an {kind} {shown} whose prefix '{parts[0]}' is not declared"
+    return None
+
+
+def _ncname(part: str) -> bool:
+    try:
+        etree.Element(part)
+    except ValueError:
+        return False
+    return True
+
+
+def _not_xml(path: Path, doc, exc: etree.XMLSyntaxError) -> ScriptError:
+    """One line for an expansion that is not XML: the first element (in document order)
+    with an invalid name, attribute name or character, at the source line of that
+    element or of the nearest one above it that the user wrote."""
+    hint = ("xacro:element and xacro:attribute need XML names (a letter or '_' first, then letters, digits, '-', "
+            "'.', '_'; at most one ':'), and values need characters XML allows")
+    stack = [(doc.documentElement, path.name, frozenset({"xml", "xmlns"}))]
+    while stack:
+        node, where, prefixes = stack.pop()
+        own = node.getAttribute(SRC_ATTR)
+        where = own or where
+        prefixes = prefixes | {name[6:] for name in node.attributes.keys() if name.startswith("xmlns:")}
+        what = _name_problem("element name", node.tagName, prefixes)
+        if not what:
+            for name, value in node.attributes.items():
+                if name == SRC_ATTR:
+                    continue
+                bad = _NOT_XML_CHAR.search(value)
+                what = _name_problem("attribute name", name, prefixes) or (bad and (
+                    f"the character U+{ord(bad.group()):04X}, which XML does not allow, in the attribute {name!r}"))
+                if what:
+                    break
+        for child in node.childNodes:
+            if child.nodeType in (child.TEXT_NODE, child.CDATA_SECTION_NODE) and not what:
+                bad = _NOT_XML_CHAR.search(child.data)
+                if bad:
+                    what = f"the character U+{ord(bad.group()):04X}, which XML does not allow, in a text"
+        if what:
+            inside = "" if own else " (in an element made inside the element of this line)"
+            return ScriptError(f"{where}: the expansion produced {what}{inside}", hint=hint, source=where)
+        stack.extend((child, where, prefixes) for child in reversed(node.childNodes)
+                     if child.nodeType == child.ELEMENT_NODE)
+    return ScriptError(f"{path.name}: the expansion is not XML ({exc.msg})", hint=hint, source=path.name)
 
 
 def _expansion_error(path: Path, exc: BaseException, frames, tmp: Path) -> ScriptError:

@@ -5,9 +5,12 @@ robot's time. ``recon view`` prints it; the tests check recordings with it."""
 from __future__ import annotations
 
 import re
+import stat
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from recon_cli.errors import FileError
 from recon_cli.recording import require_rerun
 from recon_cli.recording.recorder import TIMELINE
 
@@ -46,12 +49,53 @@ class RecordingSummary:
 
 
 def summarize(path: Path) -> RecordingSummary:
-    """Read every chunk of the recording and count what it holds."""
+    """Read every chunk of the recording and count what it holds; a file rerun cannot read
+    is one :class:`~recon_cli.errors.FileError` line (rerun's warnings kept off the terminal)."""
     require_rerun()
+    path = Path(path)
+    try:
+        st = path.stat()
+    except OSError as exc:
+        raise FileError(f"{path} cannot be read ({exc.strerror})", hint=_HINT) from None
+    if not stat.S_ISREG(st.st_mode):
+        raise FileError(f"{path} is not a regular file", hint=_HINT)
+    from pyarrow import ArrowException  # rerun's chunks are Arrow record batches
+
+    from recon_cli.inputs.images import native_output_captured
+
+    failure: BaseException | None = None
+    with native_output_captured((1, 2), opencv=False) as log, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # e.g. "RRD file has no footer" before a truncated file fails
+        try:
+            out = _summarize(path, st.st_size)
+        except (RuntimeError, ValueError, OSError, EOFError, ArrowException) as exc:
+            failure = exc
+        except BaseException as exc:  # a panic of rerun's reader (pyo3's PanicException is no Exception)
+            if type(exc).__name__ != "PanicException":
+                raise
+            failure = exc
+    if failure is not None:
+        raise _unreadable(path, " ".join(str(failure).split()) or type(failure).__name__)
+    logged = re.findall(r"\bERROR \S+: ([^\n]*)", re.sub(r"\x1b\[[0-9;]*m", "", "".join(log)))
+    if logged:  # rerun's decoder logs what it cannot decode (a damaged header, bytes after the last message)
+        raise _unreadable(path, logged[0].strip())  # and ends the stream there, as if the file ended
+    return out
+
+
+_HINT = "give the recording.rrd a run wrote with --record (recon run, autoscan, capture, register)"
+
+
+def _unreadable(path: Path, reason: str) -> FileError:
+    reason = re.sub(r"^Failed to read RRD file at .*?: ", "", reason)
+    reason = re.sub(r': b"(?:[^"\\]|\\.)*"', "", reason)  # the bytes it could not decode
+    return FileError(f"{path} is not a readable rerun recording ({reason[:160]})",
+                     hint="it is truncated or damaged; record the run again")
+
+
+def _summarize(path: Path, size: int) -> RecordingSummary:
     from rerun.chunk import RrdReader
 
-    path = Path(path)
-    out = RecordingSummary(path, path.stat().st_size)
+    out = RecordingSummary(path, size)
     times: list[int] = []
     ellipsoid_rows = 0
     for chunk in RrdReader(path).stream():

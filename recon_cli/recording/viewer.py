@@ -15,6 +15,7 @@ import ipaddress
 import os
 import signal
 import socket
+import stat
 import subprocess
 import sys
 import tempfile
@@ -40,15 +41,27 @@ def find_recording(target: Path) -> Path:
     """The recording of a run folder (``recording.rrd``, or ``reconstruction/recording.rrd``
     of ``recon register``), or the .rrd file itself."""
     target = Path(target)
-    if target.is_file() and target.suffix == ".rrd":
-        return target
+    if target.suffix == ".rrd" and os.path.lexists(target):
+        return _regular(target)
     if not target.exists():
         raise FileError(f"{target} does not exist", hint="give a run folder written with --record")
     for candidate in (target / RECORDING_FILE, target / "reconstruction" / RECORDING_FILE):
-        if candidate.is_file():
-            return candidate
+        if os.path.lexists(candidate):
+            return _regular(candidate)
     raise FileError(f"{target} holds no recording ({RECORDING_FILE})",
                     hint="run the command again with --record (recon run, autoscan, capture, register)")
+
+
+def _regular(path: Path) -> Path:
+    """``path`` if it is a regular file (a FIFO would block the reader), else a FileError."""
+    hint = "give the recording.rrd a run wrote with --record"
+    try:
+        st = path.stat()
+    except OSError as exc:
+        raise FileError(f"{path} cannot be read ({exc.strerror})", hint=hint) from None
+    if not stat.S_ISREG(st.st_mode):
+        raise FileError(f"{path} is not a regular file", hint=hint)
+    return path
 
 
 def has_display() -> bool:

@@ -104,6 +104,7 @@ MESH_SUFFIXES = (".ply", ".obj", ".stl")
 CLOUD_SUFFIXES = (".ply", ".pcd")
 
 _CHUNK = 4 * 2**20
+_BINARY_PLY = f" (convert it to binary PLY, which may hold {MAX_VERTICES} vertices)"
 _UNITS = "convert it to metres"
 
 
@@ -267,13 +268,15 @@ def _ply_guard(path: Path, size: int, mesh: bool, scan: _Scan | None = None, tri
         raise _Refused("has no 'vertex' element with x, y and z")
     kind = "ASCII PLY" if header.format == "ascii" else "binary PLY"
     most_vertices, most_faces = LIMITS[kind]
+    instead = _BINARY_PLY if kind == "ASCII PLY" else ""
     if vertex.count > most_vertices:
-        raise _Refused(f"declares {vertex.count} vertices, more than the {most_vertices} recon reads from {kind}")
+        raise _Refused(f"declares {vertex.count} vertices, more than the {most_vertices} recon reads from {kind}"
+                       f"{instead}")
     for element in header.elements:
         limit = most_vertices if element is vertex else most_faces
         if element.count > limit:
             raise _Refused(f"declares {element.count} '{element.name}' elements, more than the {limit} recon reads "
-                           f"from {kind}")
+                           f"from {kind}{instead}")
     body = size - header.body
     need = sum(e.count * e.min_bytes(header.format) for e in header.elements)
     if header.format == "ascii":
@@ -500,17 +503,18 @@ def _stl_guard(path: Path, size: int) -> None:
     declared = struct.unpack_from("<I", head, 80)[0] if len(head) >= 84 else None
     if declared is not None and 84 + 50 * declared == size:
         if declared > MAX_STL_TRIANGLES:
-            raise _Refused(f"declares {declared} triangles, more than the {MAX_STL_TRIANGLES} recon reads from STL")
+            raise _Refused(f"declares {declared} triangles, more than the {MAX_STL_TRIANGLES} recon reads from STL"
+                           f"{_BINARY_PLY}")
         return
     text = head.lstrip()
     if text.startswith(b"solid") and not re.search(rb"[\x00\x80-\xff]", head):
         if size > MAX_STL_TEXT_BYTES:
             raise _Refused(f"is an ASCII STL of {size / 2**20:.1f} MiB, more than the "
-                           f"{MAX_STL_TEXT_BYTES / 2**20:.0f} MiB recon reads (store it as binary STL or PLY)")
+                           f"{MAX_STL_TEXT_BYTES / 2**20:.0f} MiB recon reads{_BINARY_PLY}")
         facets = _count_in(path, b"facet")
         if facets > 2 * MAX_STL_TRIANGLES:  # "facet" starts and ends every triangle
             raise _Refused(f"holds {facets // 2} ASCII facets, more than the {MAX_STL_TRIANGLES} triangles recon "
-                           "reads from STL")
+                           f"reads from STL{_BINARY_PLY}")
         return
     if declared is None:
         raise _Refused(f"is {size} bytes, too short for an STL file (84 bytes of header at least)")
@@ -605,7 +609,8 @@ def _obj_guard(path: Path) -> Path | None:
         materials = materials or b"mtllib" in lines
         for key, noun in ((b"v", "vertex"), (b"vn", "normal"), (b"vt", "texture coordinate"), (b"f", "face")):
             if counts[key] > MAX_OBJ_LINES:
-                raise _Refused(f"has more than {MAX_OBJ_LINES} {noun} lines, more than recon reads from OBJ")
+                raise _Refused(f"has more than {MAX_OBJ_LINES} {noun} lines, more than recon reads from OBJ"
+                               f"{_BINARY_PLY}")
     if polygons:
         raise _Refused("has faces of more than three vertices, which Open3D would leave out; recon reads "
                        "triangle meshes only (triangulate it)")
@@ -688,7 +693,8 @@ def _pcd_guard(path: Path, size: int, scan: _Scan | None = None) -> None:
         raise _Refused("has a DATA line other than 'DATA ascii', 'DATA binary' or 'DATA binary_compressed'")
     kind = "binary PCD" if data[0] == "binary" else "ASCII or compressed PCD"
     if points > LIMITS[kind][0]:
-        raise _Refused(f"declares {points} points, more than the {LIMITS[kind][0]} recon reads from {kind}")
+        instead = "" if kind == "binary PCD" else f" (convert it to binary PCD, which may hold {MAX_VERTICES} points)"
+        raise _Refused(f"declares {points} points, more than the {LIMITS[kind][0]} recon reads from {kind}{instead}")
     point_size = sum(s * c for s, c in zip(sizes, counts_i, strict=True))
     body = size - at
     if data[0] == "ascii":

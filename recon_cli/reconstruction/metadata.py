@@ -55,6 +55,7 @@ MAX_DEPTH = 32
 MAX_INT_DIGITS = 30
 #: how far a pose's rotation part may be from a rotation (entries of R^T R - I)
 RIGID_TOLERANCE = 1e-3
+_WRONG_FILE = "check that it is the right file"
 
 
 class _Refused(Exception):
@@ -83,16 +84,16 @@ def read_bytes(path: Path, what: str, max_bytes: int = MAX_METADATA_BYTES) -> by
         st = os.stat(path)
         if not stat.S_ISREG(st.st_mode):
             raise MetadataError(f"{path}: {what} is not a regular file ({_kind(st.st_mode)})", path=str(path),
-                                hint=f"replace it with the {what} file, or remove it")
+                                hint="replace it with a regular file, or remove it")
         if st.st_size > max_bytes:
-            raise MetadataError(f"{path}: {what} has {st.st_size:,} bytes, more than the {max_bytes:,} a {what} "
-                                "may hold", path=str(path), hint=f"this is not a {what} recon wrote")
+            raise MetadataError(f"{path}: {what} has {st.st_size:,} bytes, more than the {max_bytes:,} recon "
+                                "reads", path=str(path), hint=_WRONG_FILE)
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
         with os.fdopen(fd, "rb") as f:
             st = os.fstat(f.fileno())
             if not stat.S_ISREG(st.st_mode):
                 raise MetadataError(f"{path}: {what} is not a regular file ({_kind(st.st_mode)})", path=str(path),
-                                    hint=f"replace it with the {what} file, or remove it")
+                                    hint="replace it with a regular file, or remove it")
             data = f.read(max_bytes + 1)  # the file may grow between stat and read
     except FileNotFoundError:
         raise MetadataError(f"{path}: {what} is missing", path=str(path)) from None
@@ -100,7 +101,7 @@ def read_bytes(path: Path, what: str, max_bytes: int = MAX_METADATA_BYTES) -> by
         raise MetadataError(f"{path}: {what} cannot be read ({exc.strerror or exc})", path=str(path)) from None
     if len(data) > max_bytes:
         raise MetadataError(f"{path}: {what} grew past {max_bytes:,} bytes while it was read", path=str(path),
-                            hint=f"this is not a {what} recon wrote")
+                            hint=_WRONG_FILE)
     return data
 
 
@@ -141,7 +142,7 @@ def _depth_check(bare: str, path: Path, what: str) -> None:
         at = int(np.argmax(depth > MAX_DEPTH))
         line = int(np.count_nonzero(b[:at] == ord("\n"))) + 1
         raise MetadataError(f"{path}:{line}: {what} nests lists and objects more than {MAX_DEPTH} levels deep",
-                            path=str(path), where=f"line {line}", hint=f"this is not a {what} recon wrote")
+                            path=str(path), where=f"line {line}", hint=_WRONG_FILE)
 
 
 def _constant(name: str):
@@ -153,7 +154,7 @@ def _int(token: str) -> int:
     digits = len(token.lstrip("-"))
     if digits > MAX_INT_DIGITS:
         raise _Refused(f"holds an integer of {digits:,} digits, more than {MAX_INT_DIGITS}",
-                       rf"\d{{{MAX_INT_DIGITS + 1}}}", "this is not a {what} recon wrote")
+                       rf"\d{{{MAX_INT_DIGITS + 1}}}", _WRONG_FILE)
     return int(token)
 
 
@@ -194,7 +195,7 @@ def _text_check(doc: Any, path: Path, what: str) -> None:
                 code = next(ord(c) for c in node if 0xD800 <= ord(c) <= 0xDFFF)
                 raise MetadataError(f"{path}: {what} holds text that is not Unicode (a lone surrogate "
                                     f"\\u{code:04x})", path=str(path),
-                                    hint=f"this is not a {what} recon wrote") from None
+                                    hint=_WRONG_FILE) from None
 
 
 def parse_json(text: str, path: Path, what: str) -> Any:
@@ -210,13 +211,13 @@ def parse_json(text: str, path: Path, what: str) -> Any:
         at = f"{path}:{line}" if line else f"{path}"
         raise MetadataError(f"{at}: {what} {exc.message}", path=str(path),
                             where=f"line {line}" if line else None,
-                            hint=(exc.hint or "").replace("{what}", what) or None) from None
+                            hint=exc.hint) from None
     except json.JSONDecodeError as exc:
         raise MetadataError(f"{path}:{exc.lineno}:{exc.colno}: {what} is broken JSON ({exc.msg})",
                             path=str(path), where=f"line {exc.lineno}") from None
     except RecursionError:  # below MAX_DEPTH only where the interpreter's own stack is nearly used up
         raise MetadataError(f"{path}: {what} nests too deeply", path=str(path),
-                            hint=f"this is not a {what} recon wrote") from None
+                            hint=_WRONG_FILE) from None
     _text_check(doc, path, what)
     return doc
 

@@ -12,13 +12,16 @@ Two kinds of recording:
   folder. Camera poses (optional): a text file, one line per frame, ``tx ty tz qx qy qz qw``
   (world_T_camera, quaternion Hamilton x y z w, as slambook's pose.txt), or with a leading
   timestamp (TUM groundtruth), or 12 / 16 numbers (the 3 x 4 / 4 x 4 matrix row by row);
-  ``#`` starts a comment.
+  ``#`` starts a comment. Both files must be regular files within their size limits
+  (checked before they are opened and read); every pose must be finite, its translation
+  within +-1000 m, its quaternion of norm 1 or its matrix rigid; fx, fy, cx, cy must be
+  inside the ranges of ``camera.replay.intrinsics`` (docs/inputs.md).
 
 After the last frame, ``capture()`` raises a one-line CameraFault (or, with ``loop``, starts
 again). ``import_recording`` turns a recording into a scan store whose kinematic poses are
 the recorded ones, so ``recon register STORE --no-board`` re-processes it.
 
-One module on purpose (a little over 400 lines): the replay camera and the import of a
+One module on purpose (about 500 lines): the replay camera and the import of a
 recording into a scan store share the readers of both source kinds (scan stores, image
 folders with poses).
 """

@@ -107,7 +107,8 @@ class BoardPose:
 
 def estimate_pose(detection: CharucoDetection, spec: BoardSpec, K: Intrinsics,
                   dist: np.ndarray | None = None, min_corners: int = 6) -> BoardPose | None:
-    """Board pose from the interpolated corners with solvePnP; None when too few corners."""
+    """Board pose from the interpolated corners with solvePnP; None when too few corners or
+    when they do not fix a pose."""
     if detection.n_corners < min_corners:
         return None
     board = spec.board()
@@ -120,6 +121,8 @@ def estimate_pose(detection: CharucoDetection, spec: BoardSpec, K: Intrinsics,
     if not ok:
         return None
     rvec, tvec = cv2.solvePnPRefineLM(obj, img, K.matrix(), dist, rvec, tvec)
+    if not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))):
+        return None  # a degenerate corner set (e.g. all on one line): no pose
     proj, jacobian = cv2.projectPoints(obj, rvec, tvec, K.matrix(), dist)
     residual = proj.reshape(-1, 2) - img.reshape(-1, 2)
     rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
@@ -143,8 +146,11 @@ def _pose_sigmas(J: np.ndarray, residual: np.ndarray, rvec: np.ndarray, tvec: np
     m = residual.size
     s2 = max(float(np.sum(residual**2)) / max(m - 6, 1), CORNER_SIGMA_FLOOR_PX**2)
     try:
-        C = s2 * np.linalg.inv(J.T @ J)
+        with np.errstate(all="ignore"):
+            C = s2 * np.linalg.inv(J.T @ J)
     except np.linalg.LinAlgError:
+        return float("inf"), float("inf")
+    if not np.all(np.isfinite(C)):  # a singular fit: the pose is not fixed by these corners
         return float("inf"), float("inf")
 
     def centre(p: np.ndarray) -> np.ndarray:
@@ -155,6 +161,9 @@ def _pose_sigmas(J: np.ndarray, residual: np.ndarray, rvec: np.ndarray, tvec: np
         h = np.zeros(6)
         h[k] = 1e-6
         D[:, k] = (centre(p0 + h) - centre(p0 - h)) / 2e-6
-    position = float(np.sqrt(max(np.linalg.eigvalsh(D @ C @ D.T).max(), 0.0)))
-    rotation = float(np.sqrt(max(np.linalg.eigvalsh(C[:3, :3]).max(), 0.0)))
+    try:
+        position = float(np.sqrt(max(np.linalg.eigvalsh(D @ C @ D.T).max(), 0.0)))
+        rotation = float(np.sqrt(max(np.linalg.eigvalsh(C[:3, :3]).max(), 0.0)))
+    except np.linalg.LinAlgError:
+        return float("inf"), float("inf")
     return position, rotation

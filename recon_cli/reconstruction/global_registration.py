@@ -135,6 +135,8 @@ def _global_pose(scan: Scan, board: BoardSpec, world_T_marker: np.ndarray | None
                           f"{max_reprojection_px:g} px)" if not sharp else
                           f"board pose rejected ({corners} corners fix the camera to "
                           f"{board_pose.position_sigma * 1e3:.1f} mm > {max_board_sigma * 1e3:g} mm)")
+            elif corners >= min_corners:
+                reason = f"board corners do not fix a pose ({corners} corners, degenerate fit)"
             else:
                 reason = f"board not found ({corners} corners, {min_corners} needed)"
     if world_T_marker is None:

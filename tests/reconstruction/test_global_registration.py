@@ -101,3 +101,21 @@ def test_board_pose_sigma_grows_with_few_bunched_corners(monkeypatch):
     assert pose.source.value == "kinematics" and "corners fix the camera to" in pose.reason
     pose = _global_pose(scan, spec, np.eye(4), 6, True, 1.0, bunched.position_sigma * 2.0)
     assert pose.source.value == "charuco"
+
+
+def test_a_board_fit_that_fixes_no_pose_is_no_pose():
+    """Corners that do not fix a pose (a singular or non-finite fit) give infinite
+    uncertainty and no board pose, never a linear-algebra error (registration then falls
+    back to kinematics for that scan)."""
+    import numpy as np
+
+    from recon_cli.perception.charuco import _pose_sigmas
+
+    residual = np.zeros(12)
+    rvec, tvec = np.zeros(3), np.array([0.0, 0.0, 0.5])
+    assert _pose_sigmas(np.zeros((12, 6)), residual, rvec, tvec) == (float("inf"), float("inf"))
+    J = np.full((12, 6), np.nan)
+    assert _pose_sigmas(J, residual, rvec, tvec) == (float("inf"), float("inf"))
+    J = np.ones((12, 6))
+    J[0, 0] = 1e300
+    assert _pose_sigmas(J, residual, rvec, tvec) == (float("inf"), float("inf"))

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import contextlib
 import fnmatch
-import json
 import os
 import shutil
 import tempfile
@@ -278,9 +277,12 @@ def _recorded_exports(folder: Path) -> list[str]:
     for report in sorted(folder.glob("run_report*.json")):
         if report.is_symlink() or not report.is_file():
             continue
+        from recon_cli.errors import ReconError
+        from recon_cli.reconstruction.metadata import load_json
+
         try:
-            outputs = json.loads(report.read_text(encoding="utf-8")).get("outputs") or {}
-        except (OSError, ValueError, AttributeError):
+            outputs = load_json(report, "run report").get("outputs") or {}
+        except (ReconError, AttributeError):
             continue
         for value in outputs.values() if isinstance(outputs, dict) else ():
             if not isinstance(value, str):

@@ -15,7 +15,6 @@ outputs do not hold (a script without ``<evaluate>``) fails its check as "not me
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -71,9 +70,12 @@ def _fmt(value: float) -> str:
 
 
 def _read(path: Path) -> dict | None:
+    from recon_cli.errors import ReconError
+    from recon_cli.reconstruction.metadata import load_json
+
     try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        data = load_json(Path(path), "report")
+    except ReconError:
         return None
     return data if isinstance(data, dict) else None
 

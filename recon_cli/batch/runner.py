@@ -18,7 +18,6 @@ are unchanged and runs the others again from an empty folder.
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from collections.abc import Callable
@@ -135,10 +134,13 @@ def fingerprint(job: JobSpec) -> dict:
 
 def _done(job: JobSpec, folder: Path) -> JobResult | None:
     """The earlier result of ``job`` in ``folder`` if it is the same job, else None."""
+    from recon_cli.errors import ReconError
+    from recon_cli.reconstruction.metadata import load_json
+
     try:
-        data = json.loads((folder / RESULT).read_text(encoding="utf-8"))
+        data = load_json(folder / RESULT, "job result")
         result = JobResult.from_dict(data)
-    except (OSError, ValueError, KeyError, TypeError):
+    except (ReconError, ValueError, KeyError, TypeError, AttributeError):
         return None
     if result.fingerprint != fingerprint(job):
         return None

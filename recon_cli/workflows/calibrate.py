@@ -219,7 +219,6 @@ def _model_kinematics(scans: Path, station_file, config: Config):
 def _truth_flange_T_camera(scans: Path, model: np.ndarray) -> np.ndarray | None:
     """Simulation only: the true camera mount (ground_truth/realism.json; without a realism
     profile the simulated camera is where the model says)."""
-    import json
 
     from recon_cli.reconstruction.metadata import read_session
 
@@ -228,7 +227,10 @@ def _truth_flange_T_camera(scans: Path, model: np.ndarray) -> np.ndarray | None:
         return None
     record = Path(scans) / "ground_truth" / "realism.json"
     if record.exists():
-        kin = (json.loads(record.read_text()).get("kinematics") or {})
+        from recon_cli.reconstruction.metadata import load_json
+
+        data = load_json(record, "ground_truth/realism.json")
+        kin = (data.get("kinematics") if isinstance(data, dict) else None) or {}
         if kin.get("flange_T_camera") is not None:
             return np.asarray(kin["flange_T_camera"], dtype=float)
     return model

@@ -279,7 +279,7 @@ def test_valid_files_read(tmp_path):
 def test_binary_records_are_checked_in_chunks_before_open3d_loads(tmp_path, monkeypatch):
     """Binary PLY and PCD files are refused before Open3D reads them (it would first hold
     the whole file), what is wrong found in any chunk and counted over all of them."""
-    monkeypatch.setattr(meshes, "_SCAN_BYTES", 100)  # 8 vertices, 7 faces a chunk
+    monkeypatch.setattr(meshes.limits, "SCAN_BYTES", 100)  # 8 vertices, 7 faces a chunk
 
     def loaded(*args, **kwargs):
         raise AssertionError("Open3D loaded a file the guard refuses")
@@ -350,7 +350,7 @@ def test_limits_of_the_formats_open3d_loads_first(tmp_path, monkeypatch):
         f.truncate(MAX_STL_TEXT_BYTES + 1)
     with pytest.raises(FileError, match="is an ASCII STL of 128.0 MiB, more than the 128 MiB recon reads"):
         read_mesh(stl)
-    monkeypatch.setattr(meshes, "MAX_OBJ_LINES", 3)
+    monkeypatch.setattr(meshes.obj, "MAX_OBJ_LINES", 3)
     for extra, noun in (("v 0 0 0.1\n", "vertex"), ("vn 0 0 1\n" * 4, "normal"), ("vt 0 0\n" * 4, "texture coordinate"),
                         ("f 1 2 3\n" * 3, "face")):
         (tmp_path / "a.obj").write_text(OBJ + extra)

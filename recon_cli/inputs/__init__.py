@@ -5,6 +5,8 @@
 * :mod:`.schema` — one declarative schema per YAML file kind: known keys (unknown ones
   named with file:line), types, finite numbers inside documented ranges;
 * :mod:`.numbers` — the number checks the schemas (and adapters) share;
+* :mod:`.files` — the guard every reader starts with: a regular file within its
+  size limit, checked before it is opened and opened without blocking;
 * :mod:`.images` — PNG/JPEG reads with the header's size checked before decoding;
 * :mod:`.meshes` — OBJ/PLY/STL reads with declared sizes checked before loading and
   NaN, infinite or degenerate geometry refused.

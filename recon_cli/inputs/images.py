@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import stat
 import struct
 import sys
 import tempfile
@@ -34,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from recon_cli.errors import FileError
+from recon_cli.inputs import files
 
 MAX_IMAGE_FILE_BYTES = 256 * 2**20
 """Largest image file read: 256 MiB (a 24 MP photo is about 10 MB as JPEG, 70 MB as 8-bit
@@ -382,27 +382,22 @@ def _mp(n: int) -> str:
 
 def read_file_bytes(path: Path, what: str, limit: int, hint: str) -> bytes:
     """The bytes of a regular file of at most ``limit`` bytes, or a FileError."""
-    try:
-        st = path.stat()
-    except FileNotFoundError:
-        raise FileError(f"{path}: {what} does not exist", hint="check the path") from None
-    except OSError as exc:
-        raise FileError(f"{path}: {what} cannot be read ({exc.strerror})", hint=hint) from None
-    if not stat.S_ISREG(st.st_mode):
-        raise FileError(f"{path}: {what} is not a regular file", hint=hint)
-    if st.st_size == 0:
-        raise FileError(f"{path}: {what} is empty (0 bytes)", hint=hint)
-    if st.st_size > limit:
-        raise FileError(f"{path}: {what} is {_size_text(st.st_size)}, more than the {_size_text(limit)} "
-                        "recon reads", hint=hint)
-    try:
-        with open(path, "rb") as f:
-            data = f.read(limit + 1)
-    except OSError as exc:
-        raise FileError(f"{path}: {what} cannot be read ({exc.strerror})", hint=hint) from None
-    if len(data) > limit:
-        raise FileError(f"{path}: {what} grew past {_size_text(limit)} while it was read", hint=hint)
-    return data
+
+    def refuse(r: files.Refusal) -> FileError:
+        if r.reason == files.MISSING:
+            return FileError(f"{path}: {what} does not exist", hint="check the path")
+        if r.reason == files.UNREADABLE:
+            return FileError(f"{path}: {what} cannot be read ({r.error.strerror})", hint=hint)
+        if r.reason == files.NOT_REGULAR:
+            return FileError(f"{path}: {what} is not a regular file", hint=hint)
+        if r.reason == files.EMPTY:
+            return FileError(f"{path}: {what} is empty (0 bytes)", hint=hint)
+        if r.reason == files.TOO_LARGE:
+            return FileError(f"{path}: {what} is {_size_text(r.size)}, more than the {_size_text(limit)} "
+                             "recon reads", hint=hint)
+        return FileError(f"{path}: {what} grew past {_size_text(limit)} while it was read", hint=hint)
+
+    return files.read_limited(path, limit, refuse, empty=False)
 
 
 def read_image(path: Path | str, kind: Kind | str, what: str, *, formats: tuple[str, ...] = FORMATS,

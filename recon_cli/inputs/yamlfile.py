@@ -24,12 +24,14 @@ of every key and item, so that later checks (the schemas of :mod:`.schema`) name
 
 from __future__ import annotations
 
+import errno
 import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
 from recon_cli.errors import FileError, InputError
+from recon_cli.inputs import files
 
 
 @dataclass(frozen=True)
@@ -198,22 +200,25 @@ def read_text(path: Path, what: str, *, hint: str | None = None, limits: YamlLim
     """The text of a YAML file, refused when missing, unreadable, not a file or too large
     (its size is checked before it is read)."""
     path = Path(path)
+
+    def refuse(r: files.Refusal) -> FileError:
+        if r.reason == files.MISSING or (r.reason == files.UNREADABLE and not r.opened
+                                         and r.error.errno in (errno.ENOENT, errno.ENOTDIR, errno.EBADF, errno.ELOOP)):
+            return FileError(f"{what} {path} does not exist", hint=hint)
+        if r.reason == files.UNREADABLE:
+            return FileError(f"cannot read the {what} {path} ({r.error.strerror or r.error})", hint=hint)
+        if r.reason == files.NOT_REGULAR:
+            return FileError(f"{what} {path} is not a file", hint=hint)
+        if r.reason == files.TOO_LARGE:
+            return FileError(f"{what} {path} has {r.size:,} bytes, more than a {what} may hold "
+                             f"({limits.max_bytes:,})", hint="this is not a recon input file")
+        return FileError(f"{what} {path} is larger than {limits.max_bytes:,} bytes",
+                         hint="this is not a recon input file")
+
     try:
-        if not path.is_file():
-            if path.exists():
-                raise FileError(f"{what} {path} is not a file", hint=hint)
-            raise FileError(f"{what} {path} does not exist", hint=hint)
-        size = path.stat().st_size
-        if size > limits.max_bytes:
-            raise FileError(f"{what} {path} has {size:,} bytes, more than a {what} may hold "
-                            f"({limits.max_bytes:,})", hint="this is not a recon input file")
-        with path.open("rb") as f:
-            data = f.read(limits.max_bytes + 1)  # the file may grow between stat and read
-    except OSError as exc:
-        raise FileError(f"cannot read the {what} {path} ({exc.strerror or exc})", hint=hint) from None
-    if len(data) > limits.max_bytes:
-        raise FileError(f"{what} {path} is larger than {limits.max_bytes:,} bytes",
-                        hint="this is not a recon input file")
+        data = files.read_limited(path, limits.max_bytes, refuse)
+    except ValueError:  # a path that cannot be encoded (a NUL byte)
+        raise FileError(f"{what} {path} does not exist", hint=hint) from None
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:

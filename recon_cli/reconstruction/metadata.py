@@ -29,7 +29,6 @@ from __future__ import annotations
 import functools
 import json
 import math
-import os
 import re
 import stat
 import time
@@ -40,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from recon_cli.errors import MetadataError
+from recon_cli.inputs import files
 
 SESSION_FORMAT = 1
 SCAN_FORMAT = 1
@@ -80,29 +80,22 @@ def read_bytes(path: Path, what: str, max_bytes: int = MAX_METADATA_BYTES) -> by
     file's kind and size are checked before it is opened, and it is opened without
     blocking (a FIFO put in its place meanwhile is refused, not waited on)."""
     path = Path(path)
-    try:
-        st = os.stat(path)
-        if not stat.S_ISREG(st.st_mode):
-            raise MetadataError(f"{path}: {what} is not a regular file ({_kind(st.st_mode)})", path=str(path),
-                                hint="replace it with a regular file, or remove it")
-        if st.st_size > max_bytes:
-            raise MetadataError(f"{path}: {what} has {st.st_size:,} bytes, more than the {max_bytes:,} recon "
-                                "reads", path=str(path), hint=_WRONG_FILE)
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
-        with os.fdopen(fd, "rb") as f:
-            st = os.fstat(f.fileno())
-            if not stat.S_ISREG(st.st_mode):
-                raise MetadataError(f"{path}: {what} is not a regular file ({_kind(st.st_mode)})", path=str(path),
-                                    hint="replace it with a regular file, or remove it")
-            data = f.read(max_bytes + 1)  # the file may grow between stat and read
-    except FileNotFoundError:
-        raise MetadataError(f"{path}: {what} is missing", path=str(path)) from None
-    except OSError as exc:
-        raise MetadataError(f"{path}: {what} cannot be read ({exc.strerror or exc})", path=str(path)) from None
-    if len(data) > max_bytes:
-        raise MetadataError(f"{path}: {what} grew past {max_bytes:,} bytes while it was read", path=str(path),
-                            hint=_WRONG_FILE)
-    return data
+
+    def refuse(r: files.Refusal) -> MetadataError:
+        if r.reason == files.MISSING or isinstance(r.error, FileNotFoundError):
+            return MetadataError(f"{path}: {what} is missing", path=str(path))
+        if r.reason == files.UNREADABLE:
+            return MetadataError(f"{path}: {what} cannot be read ({r.error.strerror or r.error})", path=str(path))
+        if r.reason == files.NOT_REGULAR:
+            return MetadataError(f"{path}: {what} is not a regular file ({_kind(r.mode)})", path=str(path),
+                                 hint="replace it with a regular file, or remove it")
+        if r.reason == files.TOO_LARGE:
+            return MetadataError(f"{path}: {what} has {r.size:,} bytes, more than the {max_bytes:,} recon reads",
+                                 path=str(path), hint=_WRONG_FILE)
+        return MetadataError(f"{path}: {what} grew past {max_bytes:,} bytes while it was read", path=str(path),
+                             hint=_WRONG_FILE)
+
+    return files.read_limited(path, max_bytes, refuse)
 
 
 def load_json(path: Path, what: str, max_bytes: int = MAX_JSON_BYTES) -> Any:

@@ -3,12 +3,12 @@ load, the geometry checks after."""
 
 from __future__ import annotations
 
-import stat
 from pathlib import Path
 
 import numpy as np
 
 from recon_cli.errors import FileError
+from recon_cli.inputs import files
 
 from .geometry import _check_area, _check_arrays, _check_geometry, _Scan, _total_area
 from .limits import CLOUD_SUFFIXES, MAX_MESH_FILE_BYTES, MAX_TRIANGLES, MAX_VERTICES, MESH_SUFFIXES
@@ -21,20 +21,19 @@ from .stl import _stl_guard
 
 
 def _check_file(path: Path, what: str, hint: str) -> int:
-    try:
-        st = path.stat()
-    except FileNotFoundError:
-        raise FileError(f"{path}: {what} does not exist", hint="check the path") from None
-    except OSError as exc:
-        raise FileError(f"{path}: {what} cannot be read ({exc.strerror})", hint=hint) from None
-    if not stat.S_ISREG(st.st_mode):
-        raise FileError(f"{path}: {what} is not a regular file", hint=hint)
-    if st.st_size == 0:
-        raise FileError(f"{path}: {what} is empty (0 bytes)", hint=hint)
-    if st.st_size > MAX_MESH_FILE_BYTES:
-        raise FileError(f"{path}: {what} is {st.st_size / 2**20:.1f} MiB, more than the "
-                        f"{MAX_MESH_FILE_BYTES / 2**20:.0f} MiB recon reads", hint="simplify or downsample it")
-    return st.st_size
+    def refuse(r: files.Refusal) -> FileError:
+        if r.reason == files.MISSING:
+            return FileError(f"{path}: {what} does not exist", hint="check the path")
+        if r.reason == files.UNREADABLE:
+            return FileError(f"{path}: {what} cannot be read ({r.error.strerror})", hint=hint)
+        if r.reason == files.NOT_REGULAR:
+            return FileError(f"{path}: {what} is not a regular file", hint=hint)
+        if r.reason == files.EMPTY:
+            return FileError(f"{path}: {what} is empty (0 bytes)", hint=hint)
+        return FileError(f"{path}: {what} is {r.size / 2**20:.1f} MiB, more than the "
+                         f"{MAX_MESH_FILE_BYTES / 2**20:.0f} MiB recon reads", hint="simplify or downsample it")
+
+    return files.checked_size(path, MAX_MESH_FILE_BYTES, refuse, empty=False)
 
 
 def _refusal(path: Path, what: str, exc: _Refused | str, hint: str, units: str = _UNITS) -> FileError:

@@ -1,0 +1,88 @@
+"""The guard every reader of a user's file starts with: a regular file of at most a given
+number of bytes.
+
+:func:`checked_size` stats the file: it must exist, be a regular file (not a FIFO, a
+device or a folder, which could block or never end), be non-empty where the caller asks,
+and be within the limit, all before it is opened. :func:`read_limited` then opens it
+without blocking, checks again on the open file that it is a regular file (a FIFO put in
+its place meanwhile is refused, not waited on) and reads at most the limit and one byte
+(the file may grow between the stat and the read).
+
+Each caller words its own refusals: it passes a function that turns a :class:`Refusal`
+into the exception to raise (a FileError, a MetadataError, ...).
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+MISSING = "missing"
+"""The path does not exist (at the stat)."""
+UNREADABLE = "unreadable"
+"""The stat, the open or the read failed (``error``; ``opened``: after the stat)."""
+NOT_REGULAR = "not regular"
+"""Not a regular file (``mode``), at the stat or on the open file."""
+EMPTY = "empty"
+"""0 bytes, when the caller refuses empty files."""
+TOO_LARGE = "too large"
+"""More bytes (``size``) than the limit, at the stat."""
+GREW = "grew"
+"""More bytes than the limit were read."""
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """Why a file is refused: ``reason`` (one of the constants above) and what goes with it."""
+
+    reason: str
+    path: Path
+    limit: int
+    size: int = 0
+    mode: int = 0
+    error: OSError | None = None
+    opened: bool = False
+
+
+Refuse = Callable[[Refusal], Exception]
+"""The caller's wording: a refusal -> the exception to raise."""
+
+
+def checked_size(path: Path, limit: int, refuse: Refuse, *, empty: bool = True) -> int:
+    """The size of ``path``, a regular file of at most ``limit`` bytes (and not empty
+    unless ``empty``), from its stat, or ``refuse``'s exception."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise refuse(Refusal(MISSING, path, limit)) from None
+    except OSError as exc:
+        raise refuse(Refusal(UNREADABLE, path, limit, error=exc)) from None
+    if not stat.S_ISREG(st.st_mode):
+        raise refuse(Refusal(NOT_REGULAR, path, limit, mode=st.st_mode))
+    if not empty and st.st_size == 0:
+        raise refuse(Refusal(EMPTY, path, limit))
+    if st.st_size > limit:
+        raise refuse(Refusal(TOO_LARGE, path, limit, size=st.st_size))
+    return st.st_size
+
+
+def read_limited(path: Path, limit: int, refuse: Refuse, *, empty: bool = True) -> bytes:
+    """The bytes of ``path``, a regular file of at most ``limit`` bytes (and not empty
+    unless ``empty``), checked before it is opened and opened without blocking, or
+    ``refuse``'s exception."""
+    checked_size(path, limit, refuse, empty=empty)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+        with os.fdopen(fd, "rb") as f:
+            mode = os.fstat(f.fileno()).st_mode
+            if not stat.S_ISREG(mode):
+                raise refuse(Refusal(NOT_REGULAR, path, limit, mode=mode))
+            data = f.read(limit + 1)
+    except OSError as exc:
+        raise refuse(Refusal(UNREADABLE, path, limit, error=exc, opened=True)) from None
+    if len(data) > limit:
+        raise refuse(Refusal(GREW, path, limit))
+    return data

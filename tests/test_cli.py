@@ -134,3 +134,30 @@ def test_bench_planners_bad_names(capsys):
     assert code == 1 and "unknown planner 'EST'" in err
     code, _, err = run(capsys, "bench", "planners", "--peer", "moveit", "--n", "1")
     assert code == 1 and "unknown peer 'moveit'" in err and "mplib" in err
+
+
+def test_version_short_help_and_completion(capsys):
+    from recon_cli import __version__
+
+    code, out, _ = run(capsys, "--version")
+    assert code == 0 and out.strip() == f"recon {__version__}"
+    for argv in (["-h"], ["ik", "-h"], ["bench", "planners", "-h"], ["calibrate", "handeye", "-h"],
+                 ["station", "check", "-h"]):
+        code, out, _ = run(capsys, *argv)
+        assert code == 0 and out.startswith("Usage: recon"), argv
+    code, out, _ = run(capsys, "--show-completion", "bash")
+    assert code == 0 and "_RECON_COMPLETE=complete_bash" in out
+
+
+def test_completion_offers_commands_and_options():
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "_RECON_COMPLETE": "complete_bash", "COMP_WORDS": "recon ca", "COMP_CWORD": "1"}
+    code = "from recon_cli.cli import entry; entry()"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60).stdout
+    assert out.split() == ["capture", "calibrate"]
+    env.update(COMP_WORDS="recon autoscan --se", COMP_CWORD="2")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60).stdout
+    assert "--seed" in out.split()

@@ -123,6 +123,8 @@ def _main(command, argv: list[str] | None) -> int:
         return exc.exit_code
     except typer.Exit as exc:
         return exc.exit_code
+    except SystemExit as exc:  # the completion options end the program themselves
+        return exc.code if isinstance(exc.code, int) else 0
     except (typer.Abort, KeyboardInterrupt):
         err_console.print("interrupted", markup=False)
         return 130

@@ -123,21 +123,34 @@ class CellConfig:
                 "camera_rpy": " ".join(repr(float(v)) for v in rpy)}
 
 
+#: largest |R^T R - I| entry a given rotation may have: 5 decimals written by hand are
+#: off by about 1e-5; the rotation used is then the nearest true one
+RIGID_TOLERANCE = 1e-4
+#: below this the rotation is taken as written (calibration output, 9 decimals)
+_EXACT = 1e-9
+
+
 def _rigid(values, what: str) -> tuple[float, ...]:
-    """16 numbers of a rigid 4 x 4 transform (row by row), or a one-line InputError."""
+    """16 numbers of a rigid 4 x 4 transform (row by row), or a one-line InputError. A
+    rotation orthonormal within :data:`RIGID_TOLERANCE` is replaced by the nearest rotation
+    (polar decomposition), so that a matrix written with 5 decimals is accepted."""
+    import numpy as np
+
     m = [float(v) for v in values]
     ok = len(m) == 16 and all(math.isfinite(v) for v in m) and m[12:] == [0.0, 0.0, 0.0, 1.0]
     if ok:
-        R = [m[0:3], m[4:7], m[8:11]]
-        ok = all(abs(sum(R[k][i] * R[k][j] for k in range(3)) - (1.0 if i == j else 0.0)) < 1e-6
-                 for i in range(3) for j in range(3))
-        det = (R[0][0] * (R[1][1] * R[2][2] - R[1][2] * R[2][1]) - R[0][1] * (R[1][0] * R[2][2] - R[1][2] * R[2][0])
-               + R[0][2] * (R[1][0] * R[2][1] - R[1][1] * R[2][0]))
-        ok = ok and det > 0  # a mirror is orthonormal too, but no pose
+        R = np.array([m[0:3], m[4:7], m[8:11]])
+        error = float(np.max(np.abs(R.T @ R - np.eye(3))))
+        ok = error <= RIGID_TOLERANCE and float(np.linalg.det(R)) > 0  # a mirror is orthonormal too, but no pose
+        if ok and error > _EXACT:
+            u, _, vt = np.linalg.svd(R)
+            R = u @ vt
+            for i in range(3):
+                m[4 * i: 4 * i + 3] = [float(v) for v in R[i]]
     if not ok:
         raise InputError(f"{what} is not a rigid 4 x 4 transform",
-                         hint="give 16 numbers row by row with a rotation (orthonormal, determinant +1) "
-                              "and 0 0 0 1 last")
+                         hint=f"give 16 numbers row by row with a rotation (orthonormal within {RIGID_TOLERANCE:g}, "
+                              "determinant +1) and 0 0 0 1 last")
     return tuple(m)
 
 

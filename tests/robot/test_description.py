@@ -81,3 +81,24 @@ def test_unknown_cell_and_bad_arguments():
         CellConfig(safety_distance=-0.1)
     with pytest.raises(InputError, match="table lift"):
         CellConfig(table_lift=2.0)
+
+
+def test_a_hand_eye_matrix_written_with_five_decimals_is_used_as_the_nearest_rotation():
+    import math
+
+    import numpy as np
+
+    from recon_cli.errors import InputError
+    from recon_cli.robot.description import CellConfig
+
+    c, s = math.cos(0.3), math.sin(0.3)
+    rows = [[0.0, round(-s, 5), round(c, 5), -0.0289], [1.0, 0.0, 0.0, 0.0], [0.0, round(c, 5), round(s, 5), 0.05],
+            [0.0, 0.0, 0.0, 1.0]]
+    written = np.array(rows)
+    assert np.abs(written[:3, :3].T @ written[:3, :3] - np.eye(3)).max() > 1e-6  # not orthonormal to 1e-6
+    used = np.array(CellConfig(flange_T_camera=tuple(v for r in rows for v in r)).flange_T_camera).reshape(4, 4)
+    assert np.abs(used[:3, :3].T @ used[:3, :3] - np.eye(3)).max() < 1e-12
+    assert np.abs(used - written).max() < 1e-5 and np.array_equal(used[:3, 3], written[:3, 3])
+    mirrored = [[-1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1.0]]
+    with pytest.raises(InputError, match="not a rigid"):
+        CellConfig(flange_T_camera=tuple(v for r in mirrored for v in r))

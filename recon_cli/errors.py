@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import signal as _signal
 
+from recon_cli import install_hint
+
 
 class ReconError(Exception):
     """An error the user can fix (bad input, unreachable goal, missing file, ...)."""
@@ -128,7 +130,7 @@ class OptionalPackageMissing(ReconError):
             message = f"{what} need the Python package '{package}', which is not installed"
         else:
             message = f"{what} need {package} {wanted}, installed is {found}"
-        super().__init__(message, hint=f"pip install 'recon-cli[{extra}]'")
+        super().__init__(message, hint=install_hint(extra))
 
 
 class RobotFault(ReconError):

@@ -222,7 +222,7 @@ def test_dask_missing_is_one_line_with_the_install_hint(tmp_path, capsys, monkey
     path = write(tmp_path, "jobs:\n  - validate: smoke.xml\n")
     code = main(["batch", str(path), "--cluster", "local", "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
-    assert code == 1 and "pip install recon-cli[cluster]" in err and len(err.strip().splitlines()) == 1
+    assert code == 1 and "pip install 'recon-scan[cluster]'" in err and len(err.strip().splitlines()) == 1
     code = main(["batch", str(path), "--cluster", "local", "--scheduler", "tcp://x:1", "--out", str(tmp_path / "o2")])
     assert code == 1 and "exclude each other" in capsys.readouterr().err
 
@@ -266,7 +266,8 @@ def test_four_jobs_on_the_local_pool(tmp_path, capsys):
 
 
 def test_four_jobs_on_a_dask_local_cluster(tmp_path, capsys):
-    distributed = pytest.importorskip("distributed", reason="Dask is an optional extra: pip install recon-cli[cluster]")
+    distributed = pytest.importorskip("distributed",
+                                      reason="Dask is an optional extra: pip install 'recon-scan[cluster]'")
     path = write(tmp_path, FOUR)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
         code = main(["batch", str(path), "--out", str(tmp_path / "out"), "--scheduler", cluster.scheduler_address])

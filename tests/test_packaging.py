@@ -28,6 +28,15 @@ def test_wheel_install_runs_the_smoke_script_from_anywhere(tmp_path):
                             "import recon_cli, recon_cli.paths as p; print(recon_cli.__file__); print(p.ROBOT_DIR)"],
                            capture_output=True, text=True, cwd="/", env=env, check=True).stdout.split()
     assert all(Path(w).is_relative_to(venv) for w in where), where  # the installed copy, not the checkout
+    from recon_cli import DISTRIBUTION, __version__
+
+    version = subprocess.run([str(venv / "bin" / "python"), "-c",
+                              f"import importlib.metadata as m; print(m.version({DISTRIBUTION!r}))"],
+                             capture_output=True, text=True, cwd="/", env=env, check=True).stdout.strip()
+    assert version == __version__
+    shown = subprocess.run([str(venv / "bin" / "recon"), "--version"], capture_output=True, text=True, cwd="/",
+                           env=env, check=True).stdout.strip()
+    assert shown == f"recon {__version__}"
     out = tmp_path / "run"
     run = subprocess.run([str(venv / "bin" / "recon"), "run", "scripts_xml/smoke.xml", "--out", str(out)],
                          capture_output=True, text=True, cwd="/", env=env, timeout=600)

@@ -23,11 +23,12 @@ from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
+from recon_cli import install_hint
 from recon_cli.batch.job import JobResult, lost_job, run_job, stop_all
 from recon_cli.batch.spec import JobSpec
 from recon_cli.errors import InputError, ReconError
 
-INSTALL_HINT = "pip install recon-cli[cluster]"
+INSTALL_HINT = install_hint("cluster")
 
 
 class DaskUnavailable(InputError):

@@ -48,7 +48,7 @@ def batch(
     list_jobs: Annotated[bool, typer.Option("--list", help="Print the jobs and their commands; run nothing.")]
     = False,
     record: Annotated[bool, typer.Option("--record", help="Every job that can writes a 3D recording of its run "
-                                                          "(recording.rrd in its folder; needs recon-cli[viz]).")]
+                                                          "(recording.rrd in its folder; needs recon-scan[viz]).")]
     = False,
 ) -> None:
     """Run a batch of scans (scripts, autoscans, captures; seeds, objects) as isolated recon processes, check

@@ -82,7 +82,7 @@ ForceOpt = Annotated[bool, typer.Option("--force", help="Use a non-empty --out: 
                                                       "empty.")]
 RecordOpt = Annotated[bool, typer.Option("--record", help="Also write a 3D recording of the run (recording.rrd "
                                                          "in the output folder; recon view opens it; needs "
-                                                         "recon-cli[viz]).")]
+                                                         "recon-scan[viz]).")]
 
 #: the example view of ``recon ik`` and ``recon capture``: the thesis' focus point above the board
 FOCUS = "0,0,0.78"

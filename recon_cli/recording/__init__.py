@@ -9,7 +9,7 @@ candidate views of every autoscan iteration, the board detections, the registere
 before and after local registration, the mesh and, in simulation, the signed distances to
 the ground truth as colours. ``recon view RUN_FOLDER`` opens it.
 
-rerun-sdk is an optional extra (``pip install recon-cli[viz]``), pinned to one version
+rerun-sdk is an optional extra (``pip install 'recon-scan[viz]'``), pinned to one version
 because its API moves between releases; :func:`require_rerun` says how to install it.
 
 Modules: ``recorder`` (the recording stream, its clock and what each event logs),
@@ -26,7 +26,7 @@ from pathlib import Path
 
 from recon_cli.errors import OptionalPackageMissing
 
-#: the rerun-sdk release recon's recordings are written with (``recon-cli[viz]`` pins it)
+#: the rerun-sdk release recon's recordings are written with (``recon-scan[viz]`` pins it)
 RERUN_VERSION = "0.41.0"
 #: the recording's file name inside a run folder
 RECORDING_FILE = "recording.rrd"

@@ -18,7 +18,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-pytest.importorskip("pyads", reason="the ADS adapter needs pyads (pip install recon-cli[ads])")
+pytest.importorskip("pyads", reason="the ADS adapter needs pyads (pip install 'recon-scan[ads]')")
 
 from recon_cli.backends.hardware.ads import AdsConfig, AdsRobot  # noqa: E402
 from recon_cli.errors import InputError, RobotFault  # noqa: E402

@@ -8,7 +8,7 @@ import ctypes
 
 import pytest
 
-pytest.importorskip("pyads", reason="the ADS adapter needs pyads (pip install recon-cli[ads])")
+pytest.importorskip("pyads", reason="the ADS adapter needs pyads (pip install 'recon-scan[ads]')")
 
 from recon_cli.cli import main  # noqa: E402
 

@@ -23,8 +23,8 @@ from recon_cli.errors import CameraFault, HardwareUnavailable, InputError
 
 
 def _producer():
-    pytest.importorskip("harvesters", reason="the GenICam adapter needs harvesters (pip install recon-cli[genicam])")
-    pytest.importorskip("genicam", reason="the GenICam adapter needs genicam (pip install recon-cli[genicam])")
+    pytest.importorskip("harvesters", reason="the GenICam adapter needs harvesters (pip install 'recon-scan[genicam]')")
+    pytest.importorskip("genicam", reason="the GenICam adapter needs genicam (pip install 'recon-scan[genicam]')")
     from recon_cli.backends.hardware.genicam import software_producer
 
     cti = software_producer()
@@ -157,7 +157,7 @@ def test_genicam_without_harvesters_is_a_one_line_install_hint(monkeypatch):
     monkeypatch.setitem(sys.modules, "harvesters.core", None)
     with pytest.raises(HardwareUnavailable) as info:
         open_camera(GenICamConfig())
-    assert info.value.one_line().endswith("pip install recon-cli[genicam]") and "\n" not in info.value.one_line()
+    assert info.value.one_line().endswith("pip install 'recon-scan[genicam]'") and "\n" not in info.value.one_line()
 
 
 # --------------------------------------------------------------------- GenICam conversions (no device)
@@ -217,7 +217,7 @@ def test_fit_intrinsics_recovers_a_pinhole_and_refuses_a_non_pinhole_grid():
 @pytest.fixture()
 def realsense():
     pytest.importorskip("pyrealsense2", reason="the RealSense adapter needs pyrealsense2 "
-                                               "(pip install recon-cli[realsense])")
+                                               "(pip install 'recon-scan[realsense]')")
     from .realsense_standin import SoftwareRealSense
 
     stand_in = SoftwareRealSense().start()
@@ -284,7 +284,7 @@ def test_realsense_config_and_missing_driver(monkeypatch):
         RealSenseConfig.from_mapping({"color_width": 1280})
     assert RealSenseConfig.from_mapping({"color_width": 1280, "color_height": 720}).color_size == (1280, 720)
     monkeypatch.setitem(sys.modules, "pyrealsense2", None)
-    with pytest.raises(HardwareUnavailable, match=r"pip install recon-cli\[realsense\]"):
+    with pytest.raises(HardwareUnavailable, match=r"pip install 'recon-scan\[realsense\]'"):
         open_camera(RealSenseConfig())
 
 

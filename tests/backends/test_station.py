@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("pyads", reason="the ADS adapter needs pyads (pip install recon-cli[ads])")
+pytest.importorskip("pyads", reason="the ADS adapter needs pyads (pip install 'recon-scan[ads]')")
 
 from recon_cli.backends.station_file import load_station  # noqa: E402
 from recon_cli.cli import main  # noqa: E402
@@ -163,7 +163,7 @@ def test_hardware_without_station_says_what_to_do(files, tmp_path, capsys):
 def test_station_check_ads_and_software_gentl_camera(plc, tmp_path, monkeypatch, capsys):
     """`recon station check` against both stand-ins: the ADS robot (pyads test server) and the
     genicam package's software GenTL producer."""
-    pytest.importorskip("harvesters", reason="the GenICam adapter needs harvesters (recon-cli[genicam])")
+    pytest.importorskip("harvesters", reason="the GenICam adapter needs harvesters (recon-scan[genicam])")
     from .test_cameras import _producer
 
     cti = _producer()

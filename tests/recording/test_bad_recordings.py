@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-pytest.importorskip("rerun", reason="recordings need the viz extra (pip install 'recon-cli[viz]')")
+pytest.importorskip("rerun", reason="recordings need the viz extra (pip install 'recon-scan[viz]')")
 
 from recon_cli.cli import main  # noqa: E402
 

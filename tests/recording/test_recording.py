@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-rerun = pytest.importorskip("rerun", reason="recordings need the viz extra (pip install 'recon-cli[viz]')")
+rerun = pytest.importorskip("rerun", reason="recordings need the viz extra (pip install 'recon-scan[viz]')")
 
 from recon_cli.cli import main  # noqa: E402
 from recon_cli.paths import SCRIPTS_DIR  # noqa: E402
@@ -146,5 +146,5 @@ def test_record_without_rerun_is_one_line(tmp_path):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
                        env={**os.environ, "MUJOCO_GL": "egl"})
     assert r.returncode == 1
-    assert r.stderr.strip().count("\n") == 0 and "pip install 'recon-cli[viz]'" in r.stderr
+    assert r.stderr.strip().count("\n") == 0 and "pip install 'recon-scan[viz]'" in r.stderr
     assert not out.exists()

@@ -31,7 +31,7 @@ def test_a_port_in_use_is_still_named_as_such():
 
 
 def test_the_command_says_it_in_one_line(tmp_path, capsys):
-    pytest.importorskip("rerun", reason="recon view needs the viz extra (pip install 'recon-cli[viz]')")
+    pytest.importorskip("rerun", reason="recon view needs the viz extra (pip install 'recon-scan[viz]')")
     from recon_cli.cli import main
     from recon_cli.recording.recorder import Recorder
 

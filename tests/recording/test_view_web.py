@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-pytest.importorskip("rerun", reason="recon view needs the viz extra (pip install 'recon-cli[viz]')")
+pytest.importorskip("rerun", reason="recon view needs the viz extra (pip install 'recon-scan[viz]')")
 
 from recon_cli.cli import main  # noqa: E402
 

@@ -54,6 +54,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from recon_cli import install_hint
 from recon_cli.backends.base import ExecutionReport
 from recon_cli.backends.hardware.ads_config import (  # noqa: F401 (the config is part of the adapter's API)
     PAIRS,
@@ -97,7 +98,7 @@ def _pyads():
         import pyads
     except ImportError:
         raise HardwareUnavailable("the ADS robot adapter needs pyads, which is not installed",
-                                  hint="pip install recon-cli[ads]") from None
+                                  hint=install_hint("ads")) from None
     return pyads
 
 

@@ -11,6 +11,7 @@ import importlib
 from dataclasses import fields
 from typing import Any
 
+from recon_cli import install_hint
 from recon_cli.errors import HardwareUnavailable, InputError
 
 #: intrinsics keys a station file may give (width and height come from the images)
@@ -24,7 +25,7 @@ def require_driver(module: str, extra: str, what: str):
     except ImportError as exc:
         raise HardwareUnavailable(f"the {what} camera adapter needs the Python package '{module.split('.')[0]}' "
                                   f"({exc})",
-                                  hint=f"pip install recon-cli[{extra}]") from None
+                                  hint=install_hint(extra)) from None
 
 
 def check_keys(d: Any, where: str, cls) -> dict:

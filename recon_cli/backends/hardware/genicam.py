@@ -55,7 +55,7 @@ from recon_cli.perception.camera_model import Intrinsics
 log = logging.getLogger(__name__)
 
 ADAPTER = "genicam"
-INSTALL = "genicam"  # pip install recon-cli[genicam]
+INSTALL = "genicam"  # pip install 'recon-scan[genicam]'
 #: metres per unit of Scan3dDistanceUnit
 DISTANCE_UNITS = {"Millimeter": 1e-3, "Centimeter": 1e-2, "Meter": 1.0, "Micrometer": 1e-6, "Inch": 0.0254}
 #: how many bits a texture format carries (shifted to 8 bit)

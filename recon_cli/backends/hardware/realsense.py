@@ -1,4 +1,4 @@
-"""Intel RealSense depth cameras through pyrealsense2 (``pip install recon-cli[realsense]``).
+"""Intel RealSense depth cameras through pyrealsense2 (``pip install 'recon-scan[realsense]'``).
 
 The adapter opens the depth and colour sensors of one device (by serial number) with the
 configured stream modes and feeds both into one ``rs.syncer``; each capture drops what is

@@ -278,7 +278,7 @@ def _recorded_exports(folder: Path) -> list[str]:
         if report.is_symlink() or not report.is_file():
             continue
         from recon_cli.errors import ReconError
-        from recon_cli.reconstruction.metadata import load_json
+        from recon_cli.inputs.jsonfile import load_json
 
         try:
             outputs = load_json(report, "run report").get("outputs") or {}

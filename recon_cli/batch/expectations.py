@@ -71,7 +71,7 @@ def _fmt(value: float) -> str:
 
 def _read(path: Path) -> dict | None:
     from recon_cli.errors import ReconError
-    from recon_cli.reconstruction.metadata import load_json
+    from recon_cli.inputs.jsonfile import load_json
 
     try:
         data = load_json(Path(path), "report")

@@ -135,7 +135,7 @@ def fingerprint(job: JobSpec) -> dict:
 def _done(job: JobSpec, folder: Path) -> JobResult | None:
     """The earlier result of ``job`` in ``folder`` if it is the same job, else None."""
     from recon_cli.errors import ReconError
-    from recon_cli.reconstruction.metadata import load_json
+    from recon_cli.inputs.jsonfile import load_json
 
     try:
         data = load_json(folder / RESULT, "job result")

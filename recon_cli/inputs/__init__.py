@@ -7,6 +7,8 @@
 * :mod:`.numbers` — the number checks the schemas (and adapters) share;
 * :mod:`.files` — the guard every reader starts with: a regular file within its
   size limit, checked before it is opened and opened without blocking;
+* :mod:`.jsonfile` — JSON of scan stores, recordings and run folders: no NaN, bounded
+  nesting and integers, no duplicate keys;
 * :mod:`.images` — PNG/JPEG reads with the header's size checked before decoding;
 * :mod:`.meshes` — OBJ/PLY/STL reads with declared sizes checked before loading and
   NaN, infinite or degenerate geometry refused.

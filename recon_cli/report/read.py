@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from recon_cli.errors import FileError, MetadataError
-from recon_cli.reconstruction.metadata import load_json
+from recon_cli.inputs.jsonfile import load_json
 from recon_cli.report.model import (
     Autoscan,
     Capture,

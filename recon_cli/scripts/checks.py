@@ -9,7 +9,7 @@ Shared by ``recon validate`` and ``recon run`` (which checks before it opens the
 * fragments are defined (scanned, loaded or added) before they are used;
 * files a script reads (realism profiles, object meshes, reference meshes, loaded images
   and clouds) lie inside the script's folder or scripts_xml/ and exist (the rule of
-  :func:`recon_cli.scripts.sandbox.readable`, which the commands apply again when they run);
+  :func:`recon_cli.scripts.readable.readable`, which the commands apply again when they run);
   a realism profile file also parses.
 """
 
@@ -23,7 +23,7 @@ import numpy as np
 
 from recon_cli.errors import JointLimitError, ReconError, ScriptError
 from recon_cli.scripts import commands as C
-from recon_cli.scripts.sandbox import readable
+from recon_cli.scripts.readable import readable
 
 SETUP = (C.SetCell, C.SetObject)
 ACTIONS = (C.Move, C.MoveJoints, C.MoveHome, C.Scan)
@@ -36,7 +36,7 @@ def tag(cmd: C.Command) -> str:
 
 
 def readable_file(script: C.Script, name: str, src: C.Source, what: str) -> Path:
-    """A file a script reads, by the rule of :func:`recon_cli.scripts.sandbox.readable`:
+    """A file a script reads, by the rule of :func:`recon_cli.scripts.readable.readable`:
     a relative path beside the script (or in scripts_xml/) that stays inside those folders
     after resolving links."""
     return readable(name, Path(script.path).resolve().parent, src, what)

@@ -365,7 +365,7 @@ def _confined_load_yaml(script_dir: Path):
     def load_yaml(filename):
         import xacro
 
-        from recon_cli.scripts.sandbox import readable
+        from recon_cli.scripts.readable import readable
 
         name = str(filename)
         if any(ch in name for ch in "$(){}"):

@@ -4,7 +4,7 @@
    refused (scripts need none; it is where entity bombs and external entities live).
 2. ``xacro:include`` files must be plain relative paths found beside the including file or
    in scripts_xml/, inside the script's folder or scripts_xml/ (no substitutions; the rule of
-   ``sandbox.readable``); they get the same checks.
+   ``readable.readable``); they get the same checks.
 3. Every element is tagged with its file and line, xacro expands macros and properties
    (its expression evaluator refuses names like ``__import__``), and the tags are taken off
    again before validation, so each error names the line the user wrote (for elements made

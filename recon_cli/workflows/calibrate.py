@@ -227,7 +227,7 @@ def _truth_flange_T_camera(scans: Path, model: np.ndarray) -> np.ndarray | None:
         return None
     record = Path(scans) / "ground_truth" / "realism.json"
     if record.exists():
-        from recon_cli.reconstruction.metadata import load_json
+        from recon_cli.inputs.jsonfile import load_json
 
         data = load_json(record, "ground_truth/realism.json")
         kin = (data.get("kinematics") if isinstance(data, dict) else None) or {}

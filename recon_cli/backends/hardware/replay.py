@@ -161,7 +161,7 @@ FOCAL_RANGE, CENTRE_RANGE = (1.0, 1e5), (-1e5, 1e5)
 def _read_text(path: Path, what: str, max_bytes: int) -> str:
     """The UTF-8 text of a recording's file: a regular file (checked before it is opened) of
     at most ``max_bytes`` bytes (checked before it is read), or a one-line FileError."""
-    from recon_cli.reconstruction.metadata import read_bytes
+    from recon_cli.inputs.jsonfile import read_bytes
 
     try:
         data = read_bytes(path, what, max_bytes)
@@ -238,7 +238,7 @@ def _check_focal(values: tuple[float, float, float, float], where: str) -> tuple
 def _intrinsics_file(folder: Path) -> tuple[float, float, float, float] | None:
     """fx, fy, cx, cy of the recording's ``intrinsics.json``, None when there is none; read by
     the scan store's JSON reader (regular file, size, nesting, finite numbers)."""
-    from recon_cli.reconstruction.metadata import MAX_METADATA_BYTES, load_json
+    from recon_cli.inputs.jsonfile import MAX_METADATA_BYTES, load_json
 
     path = folder / "intrinsics.json"
     if not (path.exists() or path.is_symlink()):

@@ -86,3 +86,25 @@ def read_limited(path: Path, limit: int, refuse: Refuse, *, empty: bool = True) 
     if len(data) > limit:
         raise refuse(Refusal(GREW, path, limit))
     return data
+
+
+def file_errors(path: Path, what: str, hint: str, too_large: Callable[[int], tuple[str, str]]) -> Refuse:
+    """The refusals of a user's data file as FileErrors ``PATH: WHAT is ...``; ``too_large``
+    gives the message tail and the hint for a file of the given size."""
+    from recon_cli.errors import FileError
+
+    def refuse(r: Refusal):
+        if r.reason == MISSING:
+            return FileError(f"{path}: {what} does not exist", hint="check the path")
+        if r.reason == UNREADABLE:
+            return FileError(f"{path}: {what} cannot be read ({r.error.strerror})", hint=hint)
+        if r.reason == NOT_REGULAR:
+            return FileError(f"{path}: {what} is not a regular file", hint=hint)
+        if r.reason == EMPTY:
+            return FileError(f"{path}: {what} is empty (0 bytes)", hint=hint)
+        tail, large_hint = too_large(r.size)
+        if r.reason == TOO_LARGE:
+            return FileError(f"{path}: {what} is {tail}", hint=large_hint)
+        return FileError(f"{path}: {what} grew past the limit while it was read", hint=large_hint)
+
+    return refuse

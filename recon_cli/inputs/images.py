@@ -383,20 +383,8 @@ def _mp(n: int) -> str:
 def read_file_bytes(path: Path, what: str, limit: int, hint: str) -> bytes:
     """The bytes of a regular file of at most ``limit`` bytes, or a FileError."""
 
-    def refuse(r: files.Refusal) -> FileError:
-        if r.reason == files.MISSING:
-            return FileError(f"{path}: {what} does not exist", hint="check the path")
-        if r.reason == files.UNREADABLE:
-            return FileError(f"{path}: {what} cannot be read ({r.error.strerror})", hint=hint)
-        if r.reason == files.NOT_REGULAR:
-            return FileError(f"{path}: {what} is not a regular file", hint=hint)
-        if r.reason == files.EMPTY:
-            return FileError(f"{path}: {what} is empty (0 bytes)", hint=hint)
-        if r.reason == files.TOO_LARGE:
-            return FileError(f"{path}: {what} is {_size_text(r.size)}, more than the {_size_text(limit)} "
-                             "recon reads", hint=hint)
-        return FileError(f"{path}: {what} grew past {_size_text(limit)} while it was read", hint=hint)
-
+    refuse = files.file_errors(path, what, hint, lambda size: (
+        f"{_size_text(size)}, more than the {_size_text(limit)} recon reads", hint))
     return files.read_limited(path, limit, refuse, empty=False)
 
 

@@ -21,18 +21,9 @@ from .stl import _stl_guard
 
 
 def _check_file(path: Path, what: str, hint: str) -> int:
-    def refuse(r: files.Refusal) -> FileError:
-        if r.reason == files.MISSING:
-            return FileError(f"{path}: {what} does not exist", hint="check the path")
-        if r.reason == files.UNREADABLE:
-            return FileError(f"{path}: {what} cannot be read ({r.error.strerror})", hint=hint)
-        if r.reason == files.NOT_REGULAR:
-            return FileError(f"{path}: {what} is not a regular file", hint=hint)
-        if r.reason == files.EMPTY:
-            return FileError(f"{path}: {what} is empty (0 bytes)", hint=hint)
-        return FileError(f"{path}: {what} is {r.size / 2**20:.1f} MiB, more than the "
-                         f"{MAX_MESH_FILE_BYTES / 2**20:.0f} MiB recon reads", hint="simplify or downsample it")
-
+    refuse = files.file_errors(path, what, hint, lambda size: (
+        f"{size / 2**20:.1f} MiB, more than the {MAX_MESH_FILE_BYTES / 2**20:.0f} MiB recon reads",
+        "simplify or downsample it"))
     return files.checked_size(path, MAX_MESH_FILE_BYTES, refuse, empty=False)
 
 

@@ -1,5 +1,5 @@
-"""Where recon's data folders are: the cell description (robot/), the schemas (schemas/) and
-the shipped scripts (scripts_xml/).
+"""Where recon's data folders are: the cell description (robot/), the schemas (schemas/),
+the shipped scripts (scripts_xml/) and the shipped batches (batches/).
 
 In a checkout (and an editable install) they are the folders beside the package; an
 installed wheel carries them as package data (``recon_cli._data``). ``RECON_HOME`` points
@@ -29,4 +29,5 @@ ROOT = _CHECKOUT
 ROBOT_DIR = _data_dir("robot")
 SCHEMA_DIR = _data_dir("schemas")
 SCRIPTS_DIR = _data_dir("scripts_xml")
+BATCHES_DIR = _data_dir("batches")
 SHARED_DATA_DIR = Path(os.environ.get("RECON_SHARED_DATA", _CHECKOUT.parent / "shared" / "data"))

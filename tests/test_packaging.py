@@ -25,9 +25,11 @@ def test_wheel_install_runs_the_smoke_script_from_anywhere(tmp_path):
     env = {k: v for k, v in os.environ.items() if k not in ("RECON_HOME", "PYTHONPATH")}
     env["MUJOCO_GL"] = os.environ.get("MUJOCO_GL", "egl")
     where = subprocess.run([str(venv / "bin" / "python"), "-c",
-                            "import recon_cli, recon_cli.paths as p; print(recon_cli.__file__); print(p.ROBOT_DIR)"],
+                            "import recon_cli, recon_cli.paths as p; print(recon_cli.__file__); print(p.ROBOT_DIR); "
+                            "print(p.BATCHES_DIR / 'ci.yaml')"],
                            capture_output=True, text=True, cwd="/", env=env, check=True).stdout.split()
     assert all(Path(w).is_relative_to(venv) for w in where), where  # the installed copy, not the checkout
+    assert Path(where[-1]).is_file()  # the shipped batches travel too
     from recon_cli import DISTRIBUTION, __version__
 
     version = subprocess.run([str(venv / "bin" / "python"), "-c",

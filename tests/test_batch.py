@@ -24,7 +24,15 @@ from recon_cli.batch.expectations import Measured, judge
 from recon_cli.batch.job import run_job
 from recon_cli.batch.reports import junit_xml, markdown
 from recon_cli.batch.result import Attempt, BatchResult, JobResult, JobStatus
-from recon_cli.batch.spec import Expectations, JobKind, JobSpec, Overrides, load_batch, load_batch_file
+from recon_cli.batch.spec import (
+    CommandOption,
+    Expectations,
+    JobKind,
+    JobSpec,
+    Overrides,
+    load_batch,
+    load_batch_file,
+)
 from recon_cli.cli import main
 from recon_cli.cli.batch_commands import AppCommands
 from recon_cli.errors import ReconError
@@ -128,6 +136,38 @@ def test_batch_file_errors_are_one_line_with_file_line_and_key(tmp_path, text, n
         load_batch_file(path, COMMANDS)
     message = info.value.one_line()
     assert needle in message and str(path) in message and "\n" not in message
+
+
+class _TwoOptions:
+    """Commands with one number option and one switch; the number must be below 10."""
+
+    def __init__(self) -> None:
+        self.checked: list[tuple[JobKind, tuple[str, ...]]] = []
+
+    def options(self, kind):
+        return {"level": CommandOption("level", "--level", None, False),
+                "fast": CommandOption("fast", "--fast", "--slow", True)}
+
+    def check(self, kind, args):
+        self.checked.append((kind, args))
+        if "--level" in args and float(args[args.index("--level") + 1]) >= 10:
+            return "Invalid value for '--level': must be below 10"
+        return None
+
+
+def test_a_batch_checks_its_jobs_against_the_commands_it_is_given(tmp_path):
+    commands = _TwoOptions()
+    spec = load_batch_file(write(tmp_path, "jobs:\n  - autoscan: {level: 3, fast: false}\n"
+                                           "  - run: smoke.xml\n    options: {level: 4}\n"), commands)
+    assert spec.jobs[0].args == ("--level", "3", "--slow") and spec.jobs[1].args[1:] == ("--level", "4")
+    assert (JobKind.RUN, ("SCRIPT.xml", "--level", "4")) in commands.checked  # a script job's argument first
+    with pytest.raises(ReconError) as info:
+        load_batch_file(write(tmp_path, "jobs:\n  - autoscan: {level: 12}\n", "bad.yaml"), commands)
+    assert info.value.one_line().startswith(f"{tmp_path / 'bad.yaml'}:2 jobs[0].autoscan.level: Invalid value")
+    with pytest.raises(ReconError) as info:
+        load_batch_file(write(tmp_path, "jobs:\n  - autoscan: {resolution: 0.2}\n", "typo.yaml"), commands)
+    assert "recon autoscan has no option 'resolution'" in info.value.one_line()
+    assert "choose one of: level, fast" in info.value.one_line()
 
 
 def test_scripts_and_globs_on_the_command_line(tmp_path, capsys):

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from recon_cli.bench.scenarios import BENCH_CUBE
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.description import CellConfig, CellKind
+from recon_cli.thesis import BENCH_CUBE
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = ROOT.parent / "shared" / "data"

@@ -21,14 +21,24 @@ import pytest
 
 from recon_cli.batch import job as job_module
 from recon_cli.batch.expectations import Measured, judge
-from recon_cli.batch.job import Attempt, JobStatus, run_job
+from recon_cli.batch.job import run_job
 from recon_cli.batch.reports import junit_xml, markdown
-from recon_cli.batch.runner import BatchResult
-from recon_cli.batch.spec import Expectations, JobKind, JobSpec, Overrides, load_batch, load_batch_file
+from recon_cli.batch.result import Attempt, BatchResult, JobResult, JobStatus
+from recon_cli.batch.spec import (
+    CommandOption,
+    Expectations,
+    JobKind,
+    JobSpec,
+    Overrides,
+    load_batch,
+    load_batch_file,
+)
 from recon_cli.cli import main
+from recon_cli.cli.batch_commands import AppCommands
 from recon_cli.errors import ReconError
 
 ROOT = Path(__file__).resolve().parents[1]
+COMMANDS = AppCommands()  # the options of recon's commands, as recon batch hands them in
 
 FOUR = """\
 name: four
@@ -77,7 +87,7 @@ jobs:
     matrix: {seed: [3]}
   - run: smoke.xml
 """)
-    spec = load_batch_file(path)
+    spec = load_batch_file(path, COMMANDS)
     names = [j.name for j in spec.jobs]
     assert names == ["scan-bottle-s0", "scan-bottle-s1", "scan-mug-s0", "capture-seed=3", "smoke"]
     first = spec.jobs[0]
@@ -123,9 +133,41 @@ jobs:
 def test_batch_file_errors_are_one_line_with_file_line_and_key(tmp_path, text, needle):
     path = write(tmp_path, text)
     with pytest.raises(ReconError) as info:
-        load_batch_file(path)
+        load_batch_file(path, COMMANDS)
     message = info.value.one_line()
     assert needle in message and str(path) in message and "\n" not in message
+
+
+class _TwoOptions:
+    """Commands with one number option and one switch; the number must be below 10."""
+
+    def __init__(self) -> None:
+        self.checked: list[tuple[JobKind, tuple[str, ...]]] = []
+
+    def options(self, kind):
+        return {"level": CommandOption("level", "--level", None, False),
+                "fast": CommandOption("fast", "--fast", "--slow", True)}
+
+    def check(self, kind, args):
+        self.checked.append((kind, args))
+        if "--level" in args and float(args[args.index("--level") + 1]) >= 10:
+            return "Invalid value for '--level': must be below 10"
+        return None
+
+
+def test_a_batch_checks_its_jobs_against_the_commands_it_is_given(tmp_path):
+    commands = _TwoOptions()
+    spec = load_batch_file(write(tmp_path, "jobs:\n  - autoscan: {level: 3, fast: false}\n"
+                                           "  - run: smoke.xml\n    options: {level: 4}\n"), commands)
+    assert spec.jobs[0].args == ("--level", "3", "--slow") and spec.jobs[1].args[1:] == ("--level", "4")
+    assert (JobKind.RUN, ("SCRIPT.xml", "--level", "4")) in commands.checked  # a script job's argument first
+    with pytest.raises(ReconError) as info:
+        load_batch_file(write(tmp_path, "jobs:\n  - autoscan: {level: 12}\n", "bad.yaml"), commands)
+    assert info.value.one_line().startswith(f"{tmp_path / 'bad.yaml'}:2 jobs[0].autoscan.level: Invalid value")
+    with pytest.raises(ReconError) as info:
+        load_batch_file(write(tmp_path, "jobs:\n  - autoscan: {resolution: 0.2}\n", "typo.yaml"), commands)
+    assert "recon autoscan has no option 'resolution'" in info.value.one_line()
+    assert "choose one of: level, fast" in info.value.one_line()
 
 
 def test_scripts_and_globs_on_the_command_line(tmp_path, capsys):
@@ -192,8 +234,6 @@ def test_exit_codes_that_say_nothing_about_the_job(tmp_path):
 
 
 def test_junit_and_markdown_of_results(tmp_path):
-    from recon_cli.batch.job import JobResult
-
     def result(name, status, reason="", checks=()):
         return JobResult(name, "run", status, reason, 0, 1.5, (Attempt(0, 1.5),), Measured(coverage=42.0), checks,
                          str(tmp_path / name), ("recon", "run", "x.xml"), "log <&> line\x01", "host", 0.0)
@@ -359,7 +399,7 @@ jobs:
 def test_overrides_replace_the_defaults_not_a_jobs_own(tmp_path):
     path = write(tmp_path, "defaults: {timeout_s: 100}\njobs:\n  - {name: a, validate: smoke.xml}\n"
                            "  - {name: b, validate: smoke.xml, timeout_s: 5}\n")
-    spec = load_batch([str(path)], Overrides(timeout_s=50, retries=0))
+    spec = load_batch([str(path)], COMMANDS, Overrides(timeout_s=50, retries=0))
     assert [(j.timeout_s, j.retries) for j in spec.jobs] == [(50, 0), (5, 0)]
 
 
@@ -368,11 +408,11 @@ def test_the_example_of_the_docs_and_the_shipped_batches_load(tmp_path):
 
     text = (ROOT / "docs" / "batch.md").read_text()
     example = re.search(r"```yaml\n(.*?)```", text, re.S).group(1)
-    spec = load_batch_file(write(tmp_path, example))
+    spec = load_batch_file(write(tmp_path, example), COMMANDS)
     names = [j.name for j in spec.jobs]
     assert len(names) == 4 + 11 + 2 and "eq41-thesis-seed1" in names and "auto-mug-2" not in names
     assert dict(spec.jobs[0].env) == {"OMP_NUM_THREADS": "1"}
-    shipped = load_batch_file(ROOT / "batches" / "shipped.yaml")
+    shipped = load_batch_file(ROOT / "batches" / "shipped.yaml", COMMANDS)
     assert len(shipped.jobs) == 12
-    assert {j.kind for j in load_batch_file(ROOT / "batches" / "ci.yaml").jobs} == {
+    assert {j.kind for j in load_batch_file(ROOT / "batches" / "ci.yaml", COMMANDS).jobs} == {
         JobKind.RUN, JobKind.VALIDATE, JobKind.AUTOSCAN}

@@ -96,7 +96,7 @@ def tripwire(monkeypatch):
     for target in ("recon_cli.workflows.capture.run_capture", "recon_cli.workflows.script_run.ScriptRunner",
                    "recon_cli.workflows.autoscan.Autoscan", "recon_cli.workflows.replay.run_replay",
                    "recon_cli.workflows.register.register_folder", "recon_cli.workflows.calibrate.run_handeye",
-                   "recon_cli.workflows.calibrate.run_intrinsics", "recon_cli.batch.executors.make_executor",
+                   "recon_cli.workflows.calibrate.run_intrinsics", "recon_cli.batch.runner.make_executor",
                    "recon_cli.bench.ik.run_ik_bench", "recon_cli.bench.sim.run_sim_bench",
                    "recon_cli.bench.registration.run_registration_bench",
                    "recon_cli.bench.sequence.run_sequence_bench", "recon_cli.bench.viewplan.run_viewplan_bench",

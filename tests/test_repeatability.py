@@ -20,10 +20,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo is imported
 
 from typer.testing import CliRunner  # noqa: E402
 
-from recon_cli.bench.scenarios import TABLE_4_1_GOAL, TABLE_4_1_START  # noqa: E402
 from recon_cli.cli import app  # noqa: E402
 from recon_cli.paths import SCRIPTS_DIR  # noqa: E402
 from recon_cli.planning.planner import MotionPlanner, PlanOptions, ompl_seed  # noqa: E402
+from recon_cli.thesis import TABLE_4_1_GOAL, TABLE_4_1_START  # noqa: E402
 
 #: keys of wall-clock times (and of the creation instant) in the reports and scan files
 CLOCK_KEYS = frozenset({

@@ -24,9 +24,10 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 from recon_cli import install_hint
-from recon_cli.batch.job import JobResult, lost_job, run_job, stop_all
+from recon_cli.batch.job import lost_job, run_job, stop_all
+from recon_cli.batch.result import JobResult
 from recon_cli.batch.spec import JobSpec
-from recon_cli.errors import InputError, ReconError
+from recon_cli.errors import InputError, ReconError, UnknownNameError
 
 INSTALL_HINT = install_hint("cluster")
 
@@ -161,8 +162,6 @@ def make_executor(workers: int, scheduler: str | None = None, cluster: str | Non
         return DaskExecutor(address=scheduler)
     if cluster is not None:
         if cluster != "local":
-            from recon_cli.errors import UnknownNameError
-
             raise UnknownNameError("cluster", cluster, ["local"])
         return DaskExecutor(workers=workers)
     return LocalPool(workers)

@@ -19,20 +19,17 @@ time out again), Ctrl-C.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import shutil
 import signal
 import socket
 import subprocess
-import sys
 import threading
 import time
-from dataclasses import dataclass
-from enum import StrEnum
 from pathlib import Path
 
-from recon_cli.batch.expectations import Check, Measured, judge, measure
+from recon_cli.batch.expectations import judge, measure
+from recon_cli.batch.result import Attempt, JobResult, JobStatus
 from recon_cli.batch.spec import JobSpec
 
 TERM_GRACE_S = 10.0  # [s] between SIGTERM and SIGKILL of a job's process group
@@ -42,65 +39,6 @@ LOG_TAIL_CHARS = 6000
 #: meaning of recon's exit codes (README, "Exit codes")
 EXIT_MEANING = {1: "error before or outside the work", 2: "usage error", 3: "some commands failed",
                 4: "aborted", 130: "interrupted (SIGINT)", 143: "stopped by SIGTERM"}
-
-
-class JobStatus(StrEnum):
-    PASSED = "passed"  # the command succeeded and every expectation holds
-    FAILED = "failed"  # the command failed, or an expectation does not hold
-    TIMEOUT = "timeout"  # the job ran longer than its timeout and was killed
-    ERROR = "error"  # an infrastructure failure on every attempt (killed, lost worker, no process)
-
-
-@dataclass(frozen=True)
-class Attempt:
-    exit_code: int | None  # None: no process (it could not be started, or the worker was lost)
-    seconds: float  # [s] wall time
-    timed_out: bool = False
-    infrastructure: str | None = None  # why this attempt says nothing about the job (then it is retried)
-
-
-@dataclass(frozen=True)
-class JobResult:
-    name: str
-    kind: str
-    status: JobStatus
-    reason: str  # one line: why it failed ("" when it passed)
-    exit_code: int | None
-    wall_s: float  # [s] of the last attempt
-    attempts: tuple[Attempt, ...]
-    measured: Measured
-    checks: tuple[Check, ...]
-    folder: str
-    command: tuple[str, ...]  # as the user would type it
-    log_tail: str
-    host: str
-    started: float  # [s since the epoch]
-    fingerprint: dict = dataclasses.field(default_factory=dict)
-    resumed: bool = False  # read back from an earlier run of the batch (--resume)
-
-    @property
-    def passed(self) -> bool:
-        return self.status is JobStatus.PASSED
-
-    def to_dict(self) -> dict:
-        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        d["status"] = self.status.value
-        d["attempts"] = [dataclasses.asdict(a) for a in self.attempts]
-        d["measured"] = self.measured.to_dict()
-        d["checks"] = [c.to_dict() for c in self.checks]
-        d["command"] = list(self.command)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict) -> JobResult:
-        return cls(name=d["name"], kind=d["kind"], status=JobStatus(d["status"]), reason=d.get("reason", ""),
-                   exit_code=d.get("exit_code"), wall_s=float(d.get("wall_s", 0.0)),
-                   attempts=tuple(Attempt(**a) for a in d.get("attempts", [])),
-                   measured=Measured(**d.get("measured", {})),
-                   checks=tuple(Check(c["key"], c["bound"], c["value"], c["passed"]) for c in d.get("checks", [])),
-                   folder=d.get("folder", ""), command=tuple(d.get("command", ())), log_tail=d.get("log_tail", ""),
-                   host=d.get("host", ""), started=float(d.get("started", 0.0)),
-                   fingerprint=d.get("fingerprint", {}), resumed=bool(d.get("resumed", False)))
 
 
 # ----------------------------------------------------------------------------- running processes
@@ -181,7 +119,8 @@ def _tail(log: Path, lines: int = LOG_TAIL_LINES) -> str:
 
 
 def _attempt(job: JobSpec, out: Path, log: Path, number: int) -> Attempt:
-    argv = [sys.executable, "-m", "recon_cli.batch.child", str(os.getpid()), *job.command(out)[3:]]
+    python, _, module, *args = job.command(out)  # python -m ENTRY_MODULE ARGS...
+    argv = [python, "-m", "recon_cli.batch.child", str(os.getpid()), module, *args]
     t0 = time.monotonic()
     with open(log, "ab") as f:
         f.write(f"$ {' '.join(display_command(job, out))}   # attempt {number}, {socket.gethostname()}, "

@@ -1,6 +1,6 @@
 """The reports of a batch: JUnit XML (one testcase per job), a JSON summary, a Markdown
 summary (for a CI job summary, e.g. ``$GITHUB_STEP_SUMMARY``) and an HTML index page that
-links every job's report page (:mod:`recon_cli.report.batch_index`).
+links every job's report page (:mod:`recon_cli.batch.index_page`).
 
 JUnit: a job that failed (exit code, expectation) or timed out is a ``<failure>`` whose
 ``message`` names the measured value and the bound; an infrastructure failure on every
@@ -16,7 +16,10 @@ import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from recon_cli.batch.job import JobResult, JobStatus
+from recon_cli.batch.index_page import write_index
+from recon_cli.batch.result import BatchResult, JobResult, JobStatus, measured_text
+from recon_cli.console import write_json
+from recon_cli.outputs import atomic_write_text
 
 _CONTROL = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f]")  # not allowed in XML 1.0
 
@@ -32,8 +35,8 @@ def _details(r: JobResult) -> str:
     return "\n".join(lines)
 
 
-def junit_xml(batch) -> ET.ElementTree:
-    """The JUnit XML of a :class:`~recon_cli.batch.runner.BatchResult`."""
+def junit_xml(batch: BatchResult) -> ET.ElementTree:
+    """The JUnit XML of a batch."""
     counts = batch.counts
     failures = counts["failed"] + counts["timeout"]
     errors = counts["error"]
@@ -67,7 +70,7 @@ def junit_xml(batch) -> ET.ElementTree:
     return ET.ElementTree(root)
 
 
-def summary(batch) -> dict:
+def summary(batch: BatchResult) -> dict:
     """The JSON summary."""
     return {"name": batch.name, "folder": str(batch.folder), "started": batch.started, "wall_s": batch.wall_s,
             "executor": batch.executor, "workers": batch.workers, "interrupted": batch.interrupted,
@@ -83,21 +86,7 @@ def _md(text: str) -> str:
     return text.replace("|", "\\|").replace("\n", " ")
 
 
-def measured_text(r: JobResult) -> str:
-    m = r.measured
-    parts = []
-    if m.coverage is not None:
-        parts.append(f"coverage {m.coverage:.2f} %")
-    if m.std is not None:
-        parts.append(f"std {m.std:.3f} mm")
-    if m.pose_error is not None:
-        parts.append(f"pose {m.pose_error:.3f} mm")
-    if m.planning_failures is not None:
-        parts.append(f"planning failures {m.planning_failures}")
-    return ", ".join(parts) or "-"
-
-
-def markdown(batch) -> str:
+def markdown(batch: BatchResult) -> str:
     """The Markdown summary: counts, then one row per job."""
     c = batch.counts
     head = f"## recon batch `{batch.name}`: " + ("all passed" if batch.exit_code == 0 else "FAILED")
@@ -115,13 +104,9 @@ def markdown(batch) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_reports(batch, extra: dict[str, Path | None]) -> dict[str, Path]:
+def write_reports(batch: BatchResult, extra: dict[str, Path | None]) -> dict[str, Path]:
     """junit.xml, summary.json, summary.md and index.html in the batch folder, and copies
     where ``extra`` says (keys "junit", "json", "markdown")."""
-    from recon_cli.console import write_json
-    from recon_cli.outputs import atomic_write_text
-    from recon_cli.report.batch_index import write_index
-
     tree = junit_xml(batch)
     xml = ET.tostring(tree.getroot(), encoding="unicode", xml_declaration=True) + "\n"
     texts = {"junit": xml, "markdown": markdown(batch)}

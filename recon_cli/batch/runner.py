@@ -21,14 +21,20 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from pathlib import Path
 
-from recon_cli.batch.job import JobResult, JobStatus, allow_runs
+from recon_cli.batch.executors import make_executor
+from recon_cli.batch.job import allow_runs
+from recon_cli.batch.reports import write_reports
+from recon_cli.batch.result import BatchResult, JobResult
 from recon_cli.batch.spec import BatchSpec, JobSpec
-from recon_cli.errors import FileError
+from recon_cli.console import write_json
+from recon_cli.errors import FileError, ReconError
+from recon_cli.inputs.jsonfile import load_json
+from recon_cli.interrupts import signal_name
+from recon_cli.outputs import OutputMode, claim_output, remove_inside
 
-EXIT_FAILED = 3  # like recon run: the batch finished, but some jobs failed
 RESULT = "result.json"
 
 
@@ -45,44 +51,9 @@ class BatchOptions:
     force: bool = False  # a used --out: remove what recon wrote there first (recon_cli.outputs)
 
 
-@dataclass(frozen=True)
-class BatchResult:
-    name: str
-    folder: Path
-    jobs: tuple[JobResult, ...]  # in the order of the batch; only the jobs that finished
-    pending: tuple[str, ...]  # jobs that did not finish (the batch was interrupted)
-    wall_s: float  # [s]
-    executor: str
-    workers: int
-    started: float  # [s since the epoch]
-    interrupted: str | None = None  # the signal that stopped the batch (SIGINT, SIGTERM)
-    reports: dict[str, Path] = field(default_factory=dict)
-
-    @property
-    def counts(self) -> dict[str, int]:
-        out = {s.value: 0 for s in JobStatus}
-        for r in self.jobs:
-            out[r.status.value] += 1
-        return out
-
-    @property
-    def failed(self) -> list[JobResult]:
-        return [r for r in self.jobs if not r.passed]
-
-    @property
-    def exit_code(self) -> int:
-        if self.interrupted:
-            from recon_cli.interrupts import exit_code
-
-            return exit_code(self.interrupted)
-        return EXIT_FAILED if self.failed or self.pending else 0
-
-
 def _folder(options: BatchOptions) -> Path:
     """The batch folder, claimed (recon_cli.outputs): new or empty, the folder of the batch to
     resume (no link anywhere in it), or with --force what recon wrote there removed first."""
-    from recon_cli.outputs import OutputMode, claim_output
-
     mode = OutputMode.of(options.resume, options.force, append_option="--resume")
     out = options.out
     if options.resume and out is None:
@@ -134,9 +105,6 @@ def fingerprint(job: JobSpec) -> dict:
 
 def _done(job: JobSpec, folder: Path) -> JobResult | None:
     """The earlier result of ``job`` in ``folder`` if it is the same job, else None."""
-    from recon_cli.errors import ReconError
-    from recon_cli.inputs.jsonfile import load_json
-
     try:
         data = load_json(folder / RESULT, "job result")
         result = JobResult.from_dict(data)
@@ -144,8 +112,6 @@ def _done(job: JobSpec, folder: Path) -> JobResult | None:
         return None
     if result.fingerprint != fingerprint(job):
         return None
-    from dataclasses import replace
-
     return replace(result, resumed=True)
 
 
@@ -153,14 +119,6 @@ def run_batch(spec: BatchSpec, options: BatchOptions,
               update: Callable[[str, int, int], None] | None = None,
               on_result: Callable[[JobResult, int, int], None] | None = None) -> BatchResult:
     """Run every job of ``spec`` (resume: those not done yet) and write the reports."""
-    from dataclasses import replace
-
-    from recon_cli.batch.executors import make_executor
-    from recon_cli.batch.reports import write_reports
-    from recon_cli.console import write_json
-    from recon_cli.interrupts import signal_name
-    from recon_cli.outputs import remove_inside
-
     out = _folder(options)
     t0, started = time.monotonic(), time.time()
     with _Lock(out):

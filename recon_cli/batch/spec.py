@@ -17,7 +17,9 @@ Each job is one ``recon <command>`` process; a ``matrix`` expands a job into one
 combination of its values (a key that is an option of the command sets that option; every
 key can be used as ``{key}`` in the name, the script path and string option values).
 Options are checked against the command's own options (names, types), so a typo fails when
-the batch is read, as ``file:line key: what is wrong``.
+the batch is read, as ``file:line key: what is wrong``. The commands are the command line's:
+``recon batch`` hands them in as :class:`Commands` (this package does not read the command
+line, which sits above it).
 
 One module on purpose (about 540 lines): the batch file grammar (keys, matrix expansion,
 substitution, pass criteria) is read in one place so that every error names file:key the
@@ -32,17 +34,22 @@ import itertools
 import math
 import re
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
-from functools import cache
 from pathlib import Path
+from typing import Protocol
 
 from recon_cli.errors import FileError, InputError
+from recon_cli.inputs.schema import check as check_schema
 from recon_cli.inputs.yamlfile import Map, read_yaml
+from recon_cli.paths import SCRIPTS_DIR
 
 MAX_JOBS = 10_000
 DEFAULT_TIMEOUT_S = 3600.0  # [s] per job attempt
 DEFAULT_RETRIES = 1  # extra attempts after an infrastructure failure
+#: the module a job's process runs (``python -m recon_cli <command> ...``)
+ENTRY_MODULE = "recon_cli"
 
 
 class JobKind(StrEnum):
@@ -130,7 +137,7 @@ class JobSpec:
 
     def command(self, out: Path | None) -> list[str]:
         """The argv of one attempt (``out``: the job's recon output folder)."""
-        argv = [sys.executable, "-m", "recon_cli", self.kind.value, *self.args]
+        argv = [sys.executable, "-m", ENTRY_MODULE, self.kind.value, *self.args]
         if self.kind.writes_out and out is not None:
             argv += ["--out", str(out)]
         return argv
@@ -163,51 +170,33 @@ class Overrides:
 
 # ----------------------------------------------------------------------------- the options of a command
 @dataclass(frozen=True)
-class _Option:
-    key: str  # how a batch file names it: the long option without dashes, '-' as '_'
+class CommandOption:
+    """An option of a recon command, as a batch file names it."""
+
+    key: str  # the long option without dashes, '-' as '_' (resolution, pictures)
     flag: str  # --resolution
     off: str | None  # --no-pictures of a --pictures/--no-pictures pair
     is_flag: bool
 
 
-@cache
-def _command(kind: JobKind):
-    import typer
+class Commands(Protocol):
+    """The recon commands that jobs run, as the command line defines them (``recon batch``
+    gives them; a batch checks every job's options against them before anything runs)."""
 
-    from recon_cli.cli import app
+    def options(self, kind: JobKind) -> Mapping[str, CommandOption]:
+        """The options of ``recon <kind>`` by their batch-file key."""
+        ...
 
-    return typer.main.get_command(app).get_command(None, kind.value)
-
-
-@cache
-def command_options(kind: JobKind) -> dict[str, _Option]:
-    """The options of ``recon <kind>`` as a batch file names them, read from the app itself."""
-    out = {}
-    for p in _command(kind).params:
-        longs = [o for o in getattr(p, "opts", ()) if o.startswith("--")]
-        if not longs or type(p).__name__.endswith("Argument"):
-            continue
-        key = longs[0][2:].replace("-", "_")
-        off = next(iter(getattr(p, "secondary_opts", ()) or ()), None)
-        out[key] = _Option(key, longs[0], off, bool(getattr(p, "is_flag", False)))
-    return out
+    def check(self, kind: JobKind, args: tuple[str, ...]) -> str | None:
+        """The command's own message when it would refuse ``recon <kind> ARGS`` (parsed, not
+        run), else None."""
+        ...
 
 
-@cache
-def _check_args(kind: JobKind, args: tuple[str, ...]) -> str | None:
-    """The command's own message when it would refuse ``args`` (parsed, not run), else None."""
-    try:
-        _command(kind).make_context(f"recon {kind.value}", ["SCRIPT.xml"] * kind.takes_script + list(args))
-    except Exception as exc:  # the parser's BadParameter / UsageError
-        fmt = getattr(exc, "format_message", None)
-        return fmt() if callable(fmt) else str(exc)
-    return None
-
-
-def _option_args(kind: JobKind, options: dict, where: dict) -> tuple[str, ...]:
+def _option_args(kind: JobKind, options: dict, where: dict, commands: Commands) -> tuple[str, ...]:
     """``--flag value`` arguments of ``options`` for ``recon <kind>``, each checked by the
     command's own parser (``where[key]``: the location of the key, for the message)."""
-    known = command_options(kind)
+    known = commands.options(kind)
     args: list[str] = []
     for key, value in options.items():
         w = where[key]
@@ -225,7 +214,7 @@ def _option_args(kind: JobKind, options: dict, where: dict) -> tuple[str, ...]:
             raise InputError(f"{w}: '{key}' needs one value, not {type(value).__name__}")
         else:
             piece = [opt.flag, _format_number(value)]
-        problem = _check_args(kind, tuple(piece))
+        problem = commands.check(kind, ("SCRIPT.xml",) * kind.takes_script + tuple(piece))
         if problem:
             raise InputError(f"{w}: {problem}")
         args += piece
@@ -353,8 +342,6 @@ def _substitute(text: str, values: dict[str, str], loc: Loc) -> str:
 
 
 def _resolve_script(text: str, base: Path, loc: Loc) -> Path:
-    from recon_cli.paths import SCRIPTS_DIR
-
     p = Path(text).expanduser()
     candidates = [p] if p.is_absolute() else [base / p, SCRIPTS_DIR / p]
     if not p.is_absolute() and len(p.parts) > 1 and p.parts[0] == SCRIPTS_DIR.name:
@@ -377,7 +364,8 @@ def _uses(text, key: str) -> bool:
     return isinstance(text, str) and f"{{{key}}}" in text
 
 
-def _expand(path: Path, entry: Map, loc: Loc, defaults: dict, overrides: Overrides) -> list[JobSpec]:
+def _expand(path: Path, entry: Map, loc: Loc, defaults: dict, overrides: Overrides,
+            commands: Commands) -> list[JobSpec]:
     """The jobs of one entry of ``jobs:`` (one per matrix combination)."""
     base = path.parent.resolve()
     _known_keys(entry, _JOB_KEYS, loc)
@@ -405,7 +393,7 @@ def _expand(path: Path, entry: Map, loc: Loc, defaults: dict, overrides: Overrid
     # the matrix: one job per combination, minus the excluded ones
     mat_loc = loc.at(entry, "matrix")
     matrix = _mapping(entry.get("matrix"), mat_loc, "matrix")
-    command_keys = command_options(kind)
+    command_keys = commands.options(kind)
     for key, values in matrix.items():
         if not isinstance(values, list) or not values:
             raise InputError(f"{mat_loc.at(matrix, key)}: a matrix key needs a non-empty list of values",
@@ -475,7 +463,7 @@ def _expand(path: Path, entry: Map, loc: Loc, defaults: dict, overrides: Overrid
             stem = script.stem
         else:
             stem = kind.value
-        args += _option_args(kind, opts, where)
+        args += _option_args(kind, opts, where, commands)
         suffix = "".join(f"-{k}={v}" for k, v in values.items())
         if name_template is not None:
             name = _substitute(name_template, values, loc.at(entry, "name"))
@@ -488,13 +476,11 @@ def _expand(path: Path, entry: Map, loc: Loc, defaults: dict, overrides: Overrid
     return jobs
 
 
-def load_batch_file(path: Path, overrides: Overrides = Overrides()) -> BatchSpec:
-    """Read, expand and check a batch file."""
-    from recon_cli.inputs.schema import check
-
+def load_batch_file(path: Path, commands: Commands, overrides: Overrides = Overrides()) -> BatchSpec:
+    """Read, expand and check a batch file (its jobs' options against ``commands``)."""
     path = Path(path)
     data = read_yaml(path, "batch file", hint="see docs/batch.md for the format")
-    check(data, "batch", path)
+    check_schema(data, "batch", path)
     top = Loc(path)
     if not isinstance(data, dict):
         raise InputError(f"{path}: a batch file is a mapping with 'jobs:'", hint="see docs/batch.md")
@@ -510,7 +496,7 @@ def load_batch_file(path: Path, overrides: Overrides = Overrides()) -> BatchSpec
     if "retries" in d:
         defaults["retries"] = _number(d["retries"], d_loc.at(d, "retries"), integer=True)
     for key in defaults["options"]:
-        if key in RESERVED or not any(key in command_options(k) for k in JobKind):
+        if key in RESERVED or not any(key in commands.options(k) for k in JobKind):
             raise InputError(f"{d_loc.at(d, 'options').at(defaults['options'], key)}: no job command has this "
                              "option, or a batch sets it itself")
     entries = data.get("jobs")
@@ -521,7 +507,7 @@ def load_batch_file(path: Path, overrides: Overrides = Overrides()) -> BatchSpec
         loc = top.at(data, "jobs").item(entries, i)
         if not isinstance(entry, dict):
             raise InputError(f"{loc}: a job is a mapping, e.g. '- run: smoke.xml'")
-        jobs += _expand(path, entry, loc, defaults, overrides)
+        jobs += _expand(path, entry, loc, defaults, overrides, commands)
         if len(jobs) > MAX_JOBS:  # before the next entry is expanded
             raise InputError(f"{loc}: the batch has more than {MAX_JOBS:,} jobs with this entry",
                              hint="split the batch")
@@ -551,9 +537,9 @@ def _unique(jobs: list[JobSpec]) -> tuple[JobSpec, ...]:
     return tuple(jobs)
 
 
-def load_batch(sources: list[str], overrides: Overrides = Overrides()) -> BatchSpec:
+def load_batch(sources: list[str], commands: Commands, overrides: Overrides = Overrides()) -> BatchSpec:
     """The batch of the command line: batch files (.yaml/.yml), scripts (.xml) and globs of
-    them, in the order given."""
+    them, in the order given (the jobs' options checked against ``commands``)."""
     if not sources:
         raise InputError("no batch file or script given", hint="recon batch BATCH.yaml or recon batch 'dir/*.xml'")
     jobs: list[JobSpec] = []
@@ -566,7 +552,7 @@ def load_batch(sources: list[str], overrides: Overrides = Overrides()) -> BatchS
                 raise FileError(f"{src} matches no file")
         for p in map(Path, paths):
             if p.suffix.lower() in (".yaml", ".yml"):
-                spec = load_batch_file(p, overrides)
+                spec = load_batch_file(p, commands, overrides)
                 jobs += spec.jobs
                 names.append(spec.name)
             elif p.suffix.lower() == ".xml":
@@ -578,5 +564,5 @@ def load_batch(sources: list[str], overrides: Overrides = Overrides()) -> BatchS
     name = names[0] if len(names) == 1 and len(sources) == 1 else "batch"
     if overrides.record:
         jobs = [dataclasses.replace(j, args=(*j.args, "--record"))
-                if "record" in command_options(j.kind) and "--record" not in j.args else j for j in jobs]
+                if "record" in commands.options(j.kind) and "--record" not in j.args else j for j in jobs]
     return BatchSpec(name, _unique(jobs), tuple(sources))

@@ -25,11 +25,11 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
-from recon_cli.bench.scenarios import BENCH_CUBE, TABLE_4_1_GOAL, TABLE_4_1_START
 from recon_cli.errors import ReconError
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.collision import allowed_link_pairs
 from recon_cli.robot.description import CellConfig
+from recon_cli.thesis import BENCH_CUBE, TABLE_4_1_GOAL, TABLE_4_1_START
 
 VENV = Path(os.environ.get("RECON_MPLIB_VENV", Path.home() / ".cache" / "recon" / "venv-mplib"))
 PEER_SCRIPT = Path(__file__).with_name("peer_mplib.py")

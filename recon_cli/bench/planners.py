@@ -22,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from recon_cli.bench.scenarios import BENCH_CUBE, TABLE_4_1_GOAL, TABLE_4_1_START
 from recon_cli.paths import SHARED_DATA_DIR
 from recon_cli.planning.planner import MotionPlanner, PlanOptions
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.description import CellConfig
+from recon_cli.thesis import BENCH_CUBE, TABLE_4_1_GOAL, TABLE_4_1_START
 
 #: planners that stop at a first solution by design; the optimizing ones are asked for
 #: their first exact solution too (PlanOptions), so all of them answer the same request

@@ -24,14 +24,17 @@ from pathlib import Path
 
 import numpy as np
 
-from recon_cli.bench.scenarios import eq_4_1_views
 from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig
+from recon_cli.geometry.transforms import pose_error
+from recon_cli.inputs.meshes import read_cloud, read_mesh
 from recon_cli.perception.sensor import motioncam_3d_m
 from recon_cli.realism import IDEAL, RealismProfile
 from recon_cli.reconstruction.assessment import run_evaluate
 from recon_cli.reconstruction.evaluation import histogram_png, signed_distances
 from recon_cli.reconstruction.pipeline import RegisterOptions, RegisterResult, run_register
+from recon_cli.reconstruction.scan_store import ScanStore
 from recon_cli.session import resolve_object_name
+from recon_cli.thesis import eq_4_1_views
 from recon_cli.workflows.capture import CaptureOptions, run_capture
 
 THESIS_CHARUCO_ERROR = (1.532e-3, np.radians(0.0853))  # Table 4.2 means [m, rad]
@@ -104,8 +107,6 @@ def run_registration_bench(out: Path, object_name: str = "auto", seed: int = 0, 
                   "kinematics_translation_mm": kinematic.get(r.index, (None, None))[0],
                   "kinematics_rotation_deg": kinematic.get(r.index, (None, None))[1]}
                  for r in first.scans]
-    from recon_cli.inputs.meshes import read_cloud, read_mesh
-
     mesh = read_mesh(reference, "reference mesh")
     curves = {}
     for name in ("global only", "pose graph (ICP loop closures)", "perturbed, global only",
@@ -135,9 +136,6 @@ def run_registration_bench(out: Path, object_name: str = "auto", seed: int = 0, 
 def _kinematic_errors(scans: Path) -> dict[int, tuple[float, float]]:
     """Per scan index: camera pose from forward kinematics of the measured joints against
     the true camera pose [mm, deg] (simulation ground truth)."""
-    from recon_cli.geometry.transforms import pose_error
-    from recon_cli.reconstruction.scan_store import ScanStore
-
     out = {}
     for scan in ScanStore(scans):
         if scan.ground_truth:

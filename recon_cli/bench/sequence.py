@@ -27,7 +27,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from recon_cli.bench.scenarios import BENCH_CUBE, TABLE_4_1_START, eq_4_1_views
 from recon_cli.planning.lower_bound import duration_lower_bound
 from recon_cli.planning.planner import MotionPlanner, PlanOptions, seed_ompl
 from recon_cli.robot.cell import Cell
@@ -36,6 +35,7 @@ from recon_cli.robot.ik import IKOptions
 from recon_cli.sequence.graph import ViewGraph
 from recon_cli.sequence.optimize import local_search_sequence, optimize_graph
 from recon_cli.sequence.tsp import finish, lazy_mst_sequence
+from recon_cli.thesis import BENCH_CUBE, TABLE_4_1_START, eq_4_1_views
 
 CASES = ("A", "B", "C", "D", "A0")
 #: D weighs a new planning request like this much trajectory time [s] in its local search

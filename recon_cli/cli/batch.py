@@ -57,6 +57,7 @@ def batch(
 
     from recon_cli.batch import BatchOptions, Overrides, load_batch, run_batch
     from recon_cli.batch.job import display_command
+    from recon_cli.cli.batch_commands import AppCommands
     from recon_cli.console import console, progress_bar, styled
     from recon_cli.interrupts import stop_signals
 
@@ -66,7 +67,7 @@ def batch(
         from recon_cli.recording import require_rerun
 
         require_rerun()
-    spec = load_batch(sources, Overrides(timeout, retries, record))
+    spec = load_batch(sources, AppCommands(), Overrides(timeout, retries, record))
     if list_jobs:
         for job in spec.jobs:
             bounds = ", ".join(f"{k} {v:g}" for k, v in job.expect.items())
@@ -101,7 +102,7 @@ def batch(
 def _print_table(result) -> None:
     from rich.table import Table
 
-    from recon_cli.batch.reports import measured_text
+    from recon_cli.batch.result import measured_text
     from recon_cli.console import console
 
     table = Table(title=f"batch {result.name}", title_justify="left")

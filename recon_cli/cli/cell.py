@@ -41,7 +41,7 @@ def cell(
     c = make_cell(cell, safety)
     q_show, label = c.kin.neutral(), "q = 0"
     if "base_joint_1" in c.joint_names:
-        from recon_cli.bench.scenarios import TABLE_4_1_START
+        from recon_cli.thesis import TABLE_4_1_START
 
         q_show, label = TABLE_4_1_START.copy(), "the Table 4.1 start"
     for table in cell_tables(c, q_show, label):

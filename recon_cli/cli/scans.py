@@ -94,7 +94,7 @@ def capture(
     if one_of(views, VIEW_SETS, "view set") == "single":
         view_list = (make_view(focus, radius, theta, phi, alpha, frame),)
     else:
-        from recon_cli.bench.scenarios import eq_4_1_views
+        from recon_cli.thesis import eq_4_1_views
 
         view_list = tuple(eq_4_1_views())
     covered = index_list(cover_board, "--cover-board", len(view_list))

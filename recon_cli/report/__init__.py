@@ -1,15 +1,14 @@
-"""A report page per run folder (``report.html``, no server needed) and an index page per
-batch.
+"""A report page per run folder (``report.html``, no server needed).
 
     options.py      what a page shows, image sizes (light: no Open3D, no matplotlib)
     model.py        what a run folder holds, as typed values
     read.py         a run folder (recon run, autoscan, capture, register) -> RunFolder
     figures.py      charts the run has numbers but no figure for, scan thumbnails
     mesh_view.py    grey pictures of the mesh from a few directions (CPU ray casting), blank check
-    markup.py       escaped HTML building blocks, relative links, the page shell
+    markup.py       escaped HTML building blocks, relative links, the page shell (also of a
+                    batch's index page, recon_cli.batch.index_page)
     sections.py     the sections of a run's page
     page.py         write_page: read, draw, render, write (report.html + report_files/)
-    batch_index.py  index.html of a batch: every job's verdict, linked to its page
 
 Every command that makes a run folder writes its page at the end, also when the run ends
 early (:func:`write_page_after_run`); ``recon report FOLDER`` rebuilds it. Links are

@@ -12,7 +12,6 @@ import pytest
 
 from recon_cli.backends.sim.camera import render_rgbd
 from recon_cli.backends.sim.station import SimStation
-from recon_cli.bench.scenarios import eq_4_1_views
 from recon_cli.config import DEFAULTS
 from recon_cli.errors import FileError, InputError
 from recon_cli.geometry.transforms import invert, pose_error
@@ -23,6 +22,7 @@ from recon_cli.perception.charuco import detect, estimate_pose, thesis_board
 from recon_cli.realism import IDEAL, CameraErrors, RealismProfile, load_profile, parse_profile
 from recon_cli.robot.ik import IKOptions
 from recon_cli.robot.poses import named_configuration
+from recon_cli.thesis import eq_4_1_views
 
 RES = 0.25  # 400 x 300 images: the board is still found at 0.6 m
 

@@ -261,8 +261,8 @@ def test_every_refusal_in_bounded_time_and_memory(tmp_path):
 # ----------------------------------------------------------------------------- through the CLI
 @pytest.fixture(scope="module")
 def store(tmp_path_factory):
-    from recon_cli.bench.scenarios import eq_4_1_views
     from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig
+    from recon_cli.thesis import eq_4_1_views
     from recon_cli.workflows.capture import CaptureOptions, run_capture
 
     out = tmp_path_factory.mktemp("store") / "s"

@@ -25,7 +25,6 @@ from hypothesis import strategies as st
 
 from recon_cli.backends.hardware import replay
 from recon_cli.backends.hardware.replay import ReplayConfig, open_camera, read_poses
-from recon_cli.bench.scenarios import eq_4_1_views
 from recon_cli.cli import main
 from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig
 from recon_cli.errors import FileError, InputError, MetadataError, ReconError
@@ -35,6 +34,7 @@ from recon_cli.reconstruction.crop import CropBox, box_pixels, crop_cloud
 from recon_cli.reconstruction.metadata import load_json, parse_json, read_session
 from recon_cli.reconstruction.pipeline import RegisterOptions, crop_box_marker, in_box_pixels, run_register
 from recon_cli.reconstruction.scan_store import read_scan
+from recon_cli.thesis import eq_4_1_views
 from recon_cli.workflows.capture import CaptureOptions, run_capture
 from tests.inputs.measure import run_cli
 

@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from recon_cli.backends.station_file import load_station
 from recon_cli.batch.spec import load_batch_file
 from recon_cli.calibration.camera_file import load_camera_file
+from recon_cli.cli.batch_commands import AppCommands
 from recon_cli.errors import FileError, InputError, ReconError
 from recon_cli.inputs.schema import KINDS, check, load_schema, range_rows
 from recon_cli.inputs.yamlfile import LIMITS, parse_yaml, read_yaml
@@ -22,6 +23,7 @@ from recon_cli.realism import parse_profile
 from tests.inputs.measure import run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
+COMMANDS = AppCommands()  # the options of recon's commands, as recon batch hands them in
 SIM_STATION = "format: 1\nrobot: {adapter: sim}\ncamera: {adapter: sim}\n"
 BOMB = textwrap.dedent("""\
     a: &a ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]
@@ -151,11 +153,11 @@ def test_batch_matrix_is_counted_before_it_is_expanded(tmp_path):
                             f"    matrix: {{a: [{values}], b: [{values}], c: [{values}]}}\n", "batch.yaml")
     t0 = time.monotonic()
     with pytest.raises(InputError, match=r"batch.yaml:4 jobs\[0\].matrix: expands to 1,000,000,000 combinations"):
-        load_batch_file(path)
+        load_batch_file(path, COMMANDS)
     assert time.monotonic() - t0 < 5.0
     many = "".join(f"  - validate: smoke.xml\n    name: v{i}{{a}}\n    matrix: {{a: [{values}]}}\n" for i in range(12))
     with pytest.raises(InputError, match="the batch has more than 10,000 jobs"):
-        load_batch_file(_write(tmp_path, "jobs:\n" + many, "many.yaml"))
+        load_batch_file(_write(tmp_path, "jobs:\n" + many, "many.yaml"), COMMANDS)
 
 
 @pytest.mark.parametrize("name", ["PYTHONPATH", "PYTHONSTARTUP", "LD_PRELOAD", "LD_LIBRARY_PATH", "PATH",
@@ -163,12 +165,12 @@ def test_batch_matrix_is_counted_before_it_is_expanded(tmp_path):
 def test_batch_jobs_cannot_set_loader_variables(tmp_path, name):
     path = _write(tmp_path, f"jobs:\n  - run: smoke.xml\n    env: {{{name}: .}}\n", "batch.yaml")
     with pytest.raises(InputError, match=f"a job may not set {name}"):
-        load_batch_file(path)
+        load_batch_file(path, COMMANDS)
 
 
 def test_batch_jobs_may_set_their_own_variables(tmp_path):
     path = _write(tmp_path, "jobs:\n  - run: smoke.xml\n    env: {RECON_PROGRESS: '0', OMP_NUM_THREADS: 1}\n", "b.yaml")
-    assert dict(load_batch_file(path).jobs[0].env) == {"RECON_PROGRESS": "0", "OMP_NUM_THREADS": "1"}
+    assert dict(load_batch_file(path, COMMANDS).jobs[0].env) == {"RECON_PROGRESS": "0", "OMP_NUM_THREADS": "1"}
 
 
 def test_shipped_files_match_their_schemas():
@@ -307,12 +309,16 @@ def test_fuzz_batch_files(tmp_path_factory, doc):
     path = tmp_path_factory.mktemp("b") / "batch.yaml"
     path.write_text(_dump(doc))
     try:
-        load_batch_file(path)
+        load_batch_file(path, COMMANDS)
     except ReconError as exc:
         assert "\n" not in exc.one_line()
 
 
 # mutated valid documents reach the builders behind the schemas
+def _load_batch(path: Path):
+    return load_batch_file(path, COMMANDS)
+
+
 VALID = {
     "station": {"format": 1, "name": "cell", "cell": {"kind": "gantry", "safety_distance": 0.03, "table_lift": 0.0},
                 "hand_eye": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0.1], [0, 0, 0, 1]],
@@ -368,7 +374,7 @@ def test_fuzz_mutated_valid_files(tmp_path_factory, kind, data):
     path = tmp_path_factory.mktemp(kind) / f"{kind}.yaml"
     path.write_text(_dump(doc))
     load = {"station": load_station, "realism": lambda p: parse_profile(p.read_text(), str(p)),
-            "camera": load_camera_file, "batch": load_batch_file}[kind]
+            "camera": load_camera_file, "batch": _load_batch}[kind]
     try:
         load(path)
     except ReconError as exc:
@@ -380,4 +386,4 @@ def test_the_valid_documents_are_valid(tmp_path):
         path = tmp_path / f"{kind}.yaml"
         path.write_text(_dump(doc))
         {"station": load_station, "realism": lambda p: parse_profile(p.read_text(), str(p)),
-         "camera": load_camera_file, "batch": load_batch_file}[kind](path)
+         "camera": load_camera_file, "batch": _load_batch}[kind](path)

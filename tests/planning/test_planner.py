@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recon_cli.bench.scenarios import TABLE_4_1_GOAL, TABLE_4_1_START
 from recon_cli.errors import UnknownNameError
 from recon_cli.planning.checks import check_trajectory
 from recon_cli.planning.planner import MotionPlanner, PlanOptions, PlanStatus
+from recon_cli.thesis import TABLE_4_1_GOAL, TABLE_4_1_START
 
 
 @pytest.fixture(scope="module")

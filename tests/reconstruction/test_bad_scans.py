@@ -11,13 +11,13 @@ import cv2
 import numpy as np
 import pytest
 
-from recon_cli.bench.scenarios import eq_4_1_views
 from recon_cli.cli import main
 from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig
 from recon_cli.errors import InputError, MetadataError
 from recon_cli.reconstruction.metadata import read_session
 from recon_cli.reconstruction.pipeline import RegisterOptions, run_register
 from recon_cli.reconstruction.scan_store import read_scan
+from recon_cli.thesis import eq_4_1_views
 from recon_cli.workflows.capture import CaptureOptions, run_capture
 
 BAD = 2  # the scan that is spoiled in each case

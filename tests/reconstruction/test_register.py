@@ -9,13 +9,13 @@ import shutil
 import numpy as np
 import pytest
 
-from recon_cli.bench.scenarios import eq_4_1_views
 from recon_cli.cli import main
 from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig
 from recon_cli.errors import FileError, InputError
 from recon_cli.perception.sensor import motioncam_3d_m
 from recon_cli.reconstruction.assessment import run_evaluate
 from recon_cli.reconstruction.pipeline import RegisterOptions, run_register
+from recon_cli.thesis import eq_4_1_views
 from recon_cli.workflows.capture import CaptureOptions, run_capture
 
 from ..conftest import SHARED_DATA

@@ -283,9 +283,8 @@ def test_many_icp_results_are_one_matrix(tmp_path):
 # ----------------------------------------------------------------------------- batches
 def test_the_batch_index_links_every_job_page(smoke, tmp_path):
     from recon_cli.batch.expectations import Measured, judge
-    from recon_cli.batch.job import Attempt, JobResult, JobStatus
     from recon_cli.batch.reports import write_reports
-    from recon_cli.batch.runner import BatchResult
+    from recon_cli.batch.result import Attempt, BatchResult, JobResult, JobStatus
     from recon_cli.batch.spec import Expectations
 
     folder = tmp_path / "batch"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recon_cli.bench.scenarios import TABLE_4_1_GOAL, TABLE_4_1_START
+from recon_cli.thesis import TABLE_4_1_GOAL, TABLE_4_1_START
 
 DEG = np.pi / 180.0
 

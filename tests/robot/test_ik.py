@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from recon_cli.bench.ik import IKBenchConfig, sample_poses
-from recon_cli.bench.scenarios import EQ_4_1_FOCUS
 from recon_cli.errors import InvalidViewError, UnreachableViewError
 from recon_cli.geometry.transforms import pose_error
 from recon_cli.geometry.view import View, look_at_pose
 from recon_cli.robot.ik import IKOptions, IKStatus
+from recon_cli.thesis import EQ_4_1_FOCUS
 
 
 def _check_solutions(cell, T, result, k):

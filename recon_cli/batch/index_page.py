@@ -5,14 +5,11 @@ folder and its log."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
+from recon_cli.batch.result import BatchResult, JobResult, measured_text
+from recon_cli.outputs import atomic_write_text
 from recon_cli.report.markup import Content, Html, facts, link, note, num, page, section, status, table, tag
 from recon_cli.report.page import PAGE
-
-if TYPE_CHECKING:
-    from recon_cli.batch.job import JobResult
-    from recon_cli.batch.runner import BatchResult
 
 INDEX = "index.html"
 
@@ -28,8 +25,6 @@ def _checks(result: JobResult) -> Html:
 
 
 def _row(result: JobResult, folder: Path) -> list[Content]:
-    from recon_cli.batch.reports import measured_text
-
     page_path = job_page(folder, result.name)
     job_dir = folder / "jobs" / result.name
     log = job_dir / "log.txt"
@@ -42,9 +37,7 @@ def _row(result: JobResult, folder: Path) -> list[Content]:
 
 
 def write_index(batch: BatchResult) -> Path:
-    """``index.html`` of a :class:`~recon_cli.batch.runner.BatchResult` in its folder."""
-    from recon_cli.outputs import atomic_write_text
-
+    """``index.html`` of a :class:`~recon_cli.batch.result.BatchResult` in its folder."""
     folder = Path(batch.folder)
     c = batch.counts
     verdict = "all passed" if batch.exit_code == 0 else "failed"

@@ -1,4 +1,6 @@
-"""Problem data of the thesis benchmarks (chapter 4), in SI units and joint-vector order.
+"""Problem data of the thesis (chapter 4), in SI units and joint-vector order: the start and
+goal of Table 4.1, the cube of sections 4.1/4.2, the 24 views of eq. 4.1. The benchmarks
+(recon_cli.bench), ``recon capture --views eq-4.1``, ``recon cell`` and the tests use them.
 
 Table 4.1 rounds the goal to whole degrees and centimetres; the exact values below are the
 ones of the thesis' benchmark logs (the thesis cell facts, benchmark logs).

@@ -39,6 +39,9 @@ def test_wheel_install_runs_the_smoke_script_from_anywhere(tmp_path):
     shown = subprocess.run([str(venv / "bin" / "recon"), "--version"], capture_output=True, text=True, cwd="/",
                            env=env, check=True).stdout.strip()
     assert shown == f"recon {__version__}"
+    listed = subprocess.run([str(venv / "bin" / "recon"), "batch", "ci.yaml", "--list"], capture_output=True,
+                            text=True, cwd="/", env=env, timeout=300)
+    assert listed.returncode == 0 and "jobs in batch 'ci'" in listed.stdout, listed.stdout[-2000:] + listed.stderr
     out = tmp_path / "run"
     run = subprocess.run([str(venv / "bin" / "recon"), "run", "scripts_xml/smoke.xml", "--out", str(out)],
                          capture_output=True, text=True, cwd="/", env=env, timeout=600)

@@ -43,7 +43,7 @@ from typing import Protocol
 from recon_cli.errors import FileError, InputError
 from recon_cli.inputs.schema import check as check_schema
 from recon_cli.inputs.yamlfile import Map, read_yaml
-from recon_cli.paths import SCRIPTS_DIR
+from recon_cli.paths import BATCHES_DIR, SCRIPTS_DIR
 
 MAX_JOBS = 10_000
 DEFAULT_TIMEOUT_S = 3600.0  # [s] per job attempt
@@ -537,6 +537,14 @@ def _unique(jobs: list[JobSpec]) -> tuple[JobSpec, ...]:
     return tuple(jobs)
 
 
+def shipped_batch(path: Path) -> Path:
+    """``path``, or the shipped batch of that name (``ci.yaml``, ``batches/ci.yaml``) where no
+    such file is here: the shipped batches travel with the package."""
+    if not path.exists() and path.parent.name in ("", BATCHES_DIR.name) and (BATCHES_DIR / path.name).is_file():
+        return BATCHES_DIR / path.name
+    return path
+
+
 def load_batch(sources: list[str], commands: Commands, overrides: Overrides = Overrides()) -> BatchSpec:
     """The batch of the command line: batch files (.yaml/.yml), scripts (.xml) and globs of
     them, in the order given (the jobs' options checked against ``commands``)."""
@@ -552,7 +560,7 @@ def load_batch(sources: list[str], commands: Commands, overrides: Overrides = Ov
                 raise FileError(f"{src} matches no file")
         for p in map(Path, paths):
             if p.suffix.lower() in (".yaml", ".yml"):
-                spec = load_batch_file(p, commands, overrides)
+                spec = load_batch_file(shipped_batch(p), commands, overrides)
                 jobs += spec.jobs
                 names.append(spec.name)
             elif p.suffix.lower() == ".xml":

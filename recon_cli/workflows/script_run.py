@@ -23,7 +23,7 @@ from recon_cli.config import DEFAULTS, SceneConfig
 from recon_cli.errors import ReconError, RobotFault, RunInterrupted, ScriptAborted
 from recon_cli.interrupts import exit_code, signal_name
 from recon_cli.runs.codec import from_json, plain
-from recon_cli.runs.script_run import Interruption
+from recon_cli.runs.script_run import RUN_REPORT, Interruption
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.checks import ACTIONS, check_script
 from recon_cli.scripts.handlers import handler_for
@@ -98,7 +98,7 @@ class ScriptRunner:
         self.out.mkdir(parents=True, exist_ok=True)
         if self.options.append:
             refuse_links(self.out)
-            self._keep_earlier("run_report.json", "script.expanded.xml", "config.yaml", "recording.rrd")
+            self._keep_earlier(RUN_REPORT, "script.expanded.xml", "config.yaml", "recording.rrd")
         atomic_write_text(self.out / "script.expanded.xml", self.script.expanded_xml)
         if self.options.record and not self.options.dry_run:
             from recon_cli.recording import open_recorder

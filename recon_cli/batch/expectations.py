@@ -9,16 +9,21 @@ What each kind of job measures (read from the files the command wrote into its f
 | pose error [mm] | pose_error_mean.final of the registration report | the same of reconstruction/report.json | - |
 | planning failures | failed ``move ...`` commands | infeasible_views | views without a scan |
 
-Wall time [s] is the job's own, measured around its process. A metric that a job's
+The reports are read through :mod:`recon_cli.runs`; one that cannot be read measures
+nothing. Wall time [s] is the job's own, measured around its process. A metric that a job's
 outputs do not hold (a script without ``<evaluate>``) fails its check as "not measured".
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TypeVar
 
 from recon_cli.batch.spec import LABELS, METRICS, Expectations, JobKind, JobSpec
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -69,57 +74,51 @@ def _fmt(value: float) -> str:
     return f"{value:d}" if isinstance(value, int) else f"{value:.4g}" if abs(value) < 1000 else f"{value:.1f}"
 
 
-def _read(path: Path) -> dict | None:
+def _read(reader: Callable[[Path], T], path: Path) -> T | None:
+    """A report read through :mod:`recon_cli.runs`, or None when it cannot be read."""
     from recon_cli.errors import ReconError
-    from recon_cli.inputs.jsonfile import load_json
 
     try:
-        data = load_json(Path(path), "report")
+        return reader(Path(path))
     except ReconError:
         return None
-    return data if isinstance(data, dict) else None
 
 
-def _pose_error(report: dict | None) -> float | None:
-    try:
-        return float(report["pose_error_mean"]["final"]["translation_mm"])
-    except (TypeError, KeyError, ValueError):
-        return None
+def _pose_error(path: Path | None) -> float | None:
+    """The mean final pose error [mm] of a registration report."""
+    from recon_cli.runs import register
 
-
-def _float(value) -> float | None:
-    try:
-        return None if value is None else float(value)
-    except (TypeError, ValueError):
-        return None
+    report = None if path is None else _read(register.read, path)
+    mean = None if report is None else report.pose_error_mean
+    return None if mean is None or mean.final is None else mean.final.translation_mm
 
 
 def measure(job: JobSpec, out: Path, wall_time: float) -> Measured:
     """What the outputs of ``job`` in ``out`` (its recon output folder) say."""
+    from recon_cli.runs import autoscan, script_run
+
     out = Path(out)
     if job.kind is JobKind.RUN:
-        report = _read(out / "run_report.json")
-        if report is None:
+        run = _read(script_run.read, out / script_run.RUN_REPORT)
+        if run is None:
             return Measured(wall_time=wall_time)
-        commands = [c for c in report.get("commands", []) if isinstance(c, dict)]
-        evaluation = next((c for c in reversed(commands) if "coverage" in c and c.get("status") == "done"), {})
-        failures = sum(1 for c in commands if c.get("status") == "failed" and str(c.get("command", "")).startswith(
-            "move"))
-        reg = report.get("outputs", {}).get("registration_report")
-        coverage = _float(evaluation.get("coverage"))
-        return Measured(coverage=None if coverage is None else coverage * 100, std=_float(evaluation.get("std_mm")),
-                        pose_error=_pose_error(_read(Path(reg)) if reg else None), planning_failures=failures,
-                        wall_time=wall_time, scans=report.get("scans"), commands_ok=report.get("status") == "done")
-    if job.kind is JobKind.AUTOSCAN:
-        report = _read(out / "autoscan_report.json")
-        if report is None:
-            return Measured(wall_time=wall_time)
-        coverage = _float(report.get("coverage_1mm"))
+        evaluation = next((c for c in reversed(run.commands) if "coverage" in c.details and c.status == "done"), None)
+        failures = sum(1 for c in run.commands if c.status == "failed" and c.command.startswith("move"))
+        reg = run.outputs.get("registration_report")
+        coverage = None if evaluation is None else evaluation.number("coverage")
         return Measured(coverage=None if coverage is None else coverage * 100,
-                        std=_float((report.get("accuracy") or {}).get("std_mm")),
-                        pose_error=_pose_error(_read(out / "reconstruction" / "report.json")),
-                        planning_failures=report.get("infeasible_views"), wall_time=wall_time,
-                        scans=report.get("scans"))
+                        std=None if evaluation is None else evaluation.number("std_mm"),
+                        pose_error=_pose_error(Path(reg) if reg else None), planning_failures=failures,
+                        wall_time=wall_time, scans=run.scans, commands_ok=run.status == "done")
+    if job.kind is JobKind.AUTOSCAN:
+        report = _read(autoscan.read, out / autoscan.AUTOSCAN_REPORT)
+        if report is None:
+            return Measured(wall_time=wall_time)
+        coverage = report.coverage_1mm
+        return Measured(coverage=None if coverage is None else coverage * 100,
+                        std=None if report.accuracy is None else report.accuracy.std_mm,
+                        pose_error=_pose_error(out / "reconstruction" / "report.json"),
+                        planning_failures=report.infeasible_views, wall_time=wall_time, scans=report.scans)
     if job.kind is JobKind.CAPTURE:
         scans = sum(1 for p in out.glob("scan_*") if (p / "scan.json").is_file()) if out.is_dir() else 0
         return Measured(planning_failures=max(0, (job.views or 0) - scans), wall_time=wall_time, scans=scans)

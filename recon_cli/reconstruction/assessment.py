@@ -84,7 +84,8 @@ def run_evaluate(reconstruction: Path, reference: Path, tolerance: float = 0.001
                  align: str = "none", samples: int = 200_000, out: Path | None = None,
                  seed: int = 0) -> EvaluateResult:
     """``seed``: of every sampling (the reconstruction when it is a mesh, the reference)."""
-    from recon_cli.console import write_json
+    from recon_cli.runs import evaluation as evaluation_file
+    from recon_cli.runs.codec import from_json, plain
 
     points = load_points(reconstruction, seed=seed)
     mesh = load_mesh(reference)
@@ -102,8 +103,7 @@ def run_evaluate(reconstruction: Path, reference: Path, tolerance: float = 0.001
     hist = out / f"{stem}_distances.png"
     histogram_png(hist, {stem: signed_distances(points, mesh)},
                   f"{Path(reconstruction).name} vs {Path(reference).name}")
-    report = out / f"{stem}_evaluation.json"
-    write_json(report, {"reconstruction": str(reconstruction), "reference": str(reference),
-                        "alignment": align, "alignment_transform": T if alignment else None,
-                        **result.to_dict()})
+    report = evaluation_file.write(out, from_json(evaluation_file.EvaluationReport, plain({
+        "reconstruction": str(reconstruction), "reference": str(reference), "alignment": align,
+        "alignment_transform": T if alignment else None, **result.to_dict()})))
     return EvaluateResult(result, alignment, report, hist)

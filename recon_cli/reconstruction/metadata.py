@@ -65,8 +65,8 @@ def check(data: Any, schema: str, path: Path, what: str, hint: str | None = None
         raise MetadataError(f"{path}: {what} holds {kind}, not a JSON object", path=str(path),
                             hint=hint or f"see schemas/{schema} for what {what} holds")
     fmt = data.get("format")
-    newest = _validator(schema).schema["properties"]["format"]["maximum"]
-    if isinstance(fmt, int) and not isinstance(fmt, bool) and fmt > newest:
+    newest = _validator(schema).schema["properties"].get("format", {}).get("maximum")
+    if newest is not None and isinstance(fmt, int) and not isinstance(fmt, bool) and fmt > newest:
         raise MetadataError(f"{path}: {what} has format {fmt}, this recon reads format {newest} and older",
                             path=str(path), where="format", hint="update recon to read this scan store")
     error = jsonschema.exceptions.best_match(_validator(schema).iter_errors(data))

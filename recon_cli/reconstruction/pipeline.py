@@ -197,7 +197,8 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
     it is made, and what ``--force`` removes is removed, only when there is something to
     write). Scans that cannot be read, or that are links out of the store, are skipped with
     their reason."""
-    from recon_cli.console import write_json
+    from recon_cli.runs import register as reg_file
+    from recon_cli.runs.codec import from_json, matrix, plain
 
     t0 = time.perf_counter()
     step = progress or (lambda *a: None)
@@ -315,37 +316,37 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
     t_end = time.perf_counter()
     timings = {"global_s": t_global - t0, "local_s": t_local - t_global, "surface_s": t_end - t_local,
                "total_s": t_end - t0}
-    report = out / "report.json"
     errors = [r.charuco_error for r in records if r.charuco_error is not None]
     truth = [r.pose_errors() for r in used if r.pose_errors()]
-    write_json(report, {
-        "scan_store": str(folder), "frame": frame, "world_T_marker": world_T_marker,
-        "scans_registered": len(used), "scans_skipped": len(records) - len(used),
-        "crop_box_marker": {"marker_T_box": box.frame_T_box, "size": box.size,
-                            "support_margin": box.support_margin},
-        "scans": [r.to_dict() for r in records],
-        "pose_sources": pose_source_counts(used),
-        "kinematic_correction": None if correction is None else correction.to_dict(),
-        "charuco_error_mean": None if not errors else {
-            "translation_mm": float(np.mean([e[0] for e in errors]) * 1e3),
-            "rotation_deg": float(np.degrees(np.mean([e[1] for e in errors])))},
-        "pose_error_mean": None if not truth else {
-            name: {"translation_mm": float(np.mean([t[name][0] for t in truth]) * 1e3),
-                   "rotation_deg": float(np.degrees(np.mean([t[name][1] for t in truth])))}
-            for name in truth[0]},
-        "pose_graph": None if multiway is None else {
-            "edges": [e.to_dict() for e in multiway.edges], "pruned_loop_closures": multiway.pruned,
-            "odometry_edges": sum(e.kind == "odometry" for e in multiway.edges),
-            "loop_closures": sum(e.kind == "loop_closure" for e in multiway.edges),
-            "rejected_edges": sum(e.rejected for e in multiway.edges)},
-        "points": {"fused": len(fused.points)},
-        "options": {"use_board": options.use_board, "board_plane": options.board_plane,
-                    "correct_kinematics": options.correct_kinematics, "local": options.local,
-                    "perturb": options.perturb,
-                    "multiway": options.multiway, "surface": options.surface},
-        "timings": timings,
-        "outputs": {"cloud": cloud_path.name, "cloud_global": cloud_global.name,
-                    "mesh": None if mesh_path is None else mesh_path.name},
-    })
+
+    def mean_error(pairs: list[tuple[float, float]]) -> reg_file.PoseError:
+        return reg_file.PoseError(float(np.mean([p[0] for p in pairs]) * 1e3),
+                                  float(np.degrees(np.mean([p[1] for p in pairs]))))
+
+    report = reg_file.write(out, reg_file.RegisterReport(
+        scan_store=str(folder), frame=frame, world_T_marker=matrix(world_T_marker),
+        scans_registered=len(used), scans_skipped=len(records) - len(used),
+        crop_box_marker=reg_file.CropBoxRecord(matrix(box.frame_T_box), tuple(map(float, box.size)),
+                                               box.support_margin),
+        scans=tuple(from_json(reg_file.ScanRegistration, plain(r.to_dict())) for r in records),
+        pose_sources=pose_source_counts(used),
+        kinematic_correction=None if correction is None else from_json(reg_file.KinematicCorrection,
+                                                                         plain(correction.to_dict())),
+        charuco_error_mean=mean_error(errors) if errors else None,
+        pose_error_mean=None if not truth else from_json(reg_file.PoseErrorMean, {
+            name: plain(mean_error([t[name] for t in truth])) for name in truth[0]}),
+        pose_graph=None if multiway is None else reg_file.PoseGraph(
+            edges=tuple(from_json(reg_file.PairEdge, plain(e.to_dict())) for e in multiway.edges),
+            pruned_loop_closures=multiway.pruned,
+            odometry_edges=sum(e.kind == "odometry" for e in multiway.edges),
+            loop_closures=sum(e.kind == "loop_closure" for e in multiway.edges),
+            rejected_edges=sum(e.rejected for e in multiway.edges)),
+        points=reg_file.PointCounts(len(fused.points)),
+        options=plain({"use_board": options.use_board, "board_plane": options.board_plane,
+                       "correct_kinematics": options.correct_kinematics, "local": options.local,
+                       "perturb": options.perturb, "multiway": options.multiway, "surface": options.surface}),
+        timings=timings,
+        outputs=reg_file.RegisterOutputs(cloud_path.name, cloud_global.name,
+                                         None if mesh_path is None else mesh_path.name)))
     return RegisterResult(out, cloud_path, cloud_global, mesh_path, report, frame, records, multiway, timings,
                           clouds, to_out)

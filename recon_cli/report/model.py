@@ -1,5 +1,10 @@
-"""What a run folder holds, as small typed values: read by :mod:`recon_cli.report.read`,
+"""What a run folder holds, as the page shows it: read by :mod:`recon_cli.report.read`,
 shown by :mod:`recon_cli.report.sections`.
+
+The report files are the models of :mod:`recon_cli.runs` and ``session.json`` is
+:class:`~recon_cli.reconstruction.metadata.SessionInfo`; what is defined here is what the
+page puts together from them (moves, scans with their registration, the pose graph's edges
+by scan folder, evaluations with their histograms, the files of the folder).
 
 Lengths here are in millimetres and times in seconds (the reports' own units), shares in
 [0, 1]. ``None`` means the folder does not say (not measured, not recorded).
@@ -10,6 +15,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
+
+from recon_cli.reconstruction.metadata import SessionInfo
+from recon_cli.runs.autoscan import AutoscanReport
+from recon_cli.runs.capture import CaptureReport
+from recon_cli.runs.register import PoseError
+from recon_cli.runs.script_run import ScriptRunReport
 
 
 class RunKind(StrEnum):
@@ -27,21 +38,6 @@ class RunKind(StrEnum):
 
 
 @dataclass(frozen=True)
-class Session:
-    """``session.json``: what produced the scans."""
-
-    mode: str | None = None
-    backend: str | None = None
-    object_name: str | None = None
-    cell: str | None = None
-    sensor: str | None = None
-    noise: bool | None = None
-    seed: int | None = None
-    realism: str | None = None  # the realism profile's name (simulation)
-    created: float | None = None  # [s since the epoch]
-
-
-@dataclass(frozen=True)
 class Move:
     """One planned (and usually executed) move."""
 
@@ -49,87 +45,6 @@ class Move:
     planner: str | None
     plan_s: float | None  # planning time (with simplification)
     trajectory_s: float | None  # duration of the timed trajectory
-
-
-@dataclass(frozen=True)
-class Command:
-    """One command of a script run (run_report.json)."""
-
-    source: str  # file:line
-    command: str
-    status: str
-    seconds: float
-    message: str
-
-
-@dataclass(frozen=True)
-class ScriptRun:
-    """``run_report.json``."""
-
-    script: str
-    name: str
-    dialect: str
-    status: str  # done | failed | aborted | interrupted
-    exit_code: int | None
-    seconds: float | None
-    scans: int | None
-    backend: str | None
-    seed: int | None
-    dry_run: bool
-    on_failure: str | None
-    stopped: str | None  # why the run ended early (aborted or interrupted), else None
-    commands: tuple[Command, ...]
-
-
-@dataclass(frozen=True)
-class ViewOutcome:
-    """One view of an autoscan: planned and scanned, or found infeasible."""
-
-    iteration: int
-    status: str  # completed | infeasible
-    planning_s: float | None = None  # completed: planning of the move to it (view selection)
-    trajectory_s: float | None = None  # completed: duration of that move
-
-
-@dataclass(frozen=True)
-class Autoscan:
-    """``autoscan_report.json``."""
-
-    method: str
-    object_name: str | None
-    cell: str | None
-    n: int | None
-    d_c_m: float | None  # [m]
-    seed: int | None
-    scans: int
-    interrupted: bool
-    error: str | None  # the error that ended the run early
-    infeasible_views: int | None
-    planning_requests: int | None
-    trajectory_s: float | None
-    coverage_1mm: float | None  # share of the true surface
-    accuracy_mean_mm: float | None
-    accuracy_std_mm: float | None
-    seconds_total: float | None
-    views: tuple[ViewOutcome, ...]
-
-
-@dataclass(frozen=True)
-class ViewFailure:
-    view: int  # 1-based
-    message: str
-
-
-@dataclass(frozen=True)
-class Capture:
-    """``capture_report.json``."""
-
-    status: str  # done | failed | interrupted
-    views: int
-    scans: int
-    seconds: float | None
-    failures: tuple[ViewFailure, ...]
-    error: str | None  # the error that ended the capture early
 
 
 @dataclass(frozen=True)
@@ -145,12 +60,6 @@ class Scan:
     height: int | None
     move: Move | None  # the move that led to it (when the scan records it)
     problem: str | None = None  # why its scan.json cannot be read
-
-
-@dataclass(frozen=True)
-class PoseError:
-    translation_mm: float
-    rotation_deg: float
 
 
 @dataclass(frozen=True)
@@ -238,10 +147,10 @@ class RunFolder:
 
     kind: RunKind
     folder: Path  # where the page is written
-    session: Session | None = None
-    script_run: ScriptRun | None = None
-    autoscan: Autoscan | None = None
-    capture: Capture | None = None
+    session: SessionInfo | None = None
+    script_run: ScriptRunReport | None = None
+    autoscan: AutoscanReport | None = None
+    capture: CaptureReport | None = None
     scans: tuple[Scan, ...] = ()
     moves: tuple[Move, ...] = ()  # a script run's move commands, else the moves the scans record
     registration: Registration | None = None
@@ -256,7 +165,7 @@ class RunFolder:
         if self.script_run is not None:
             return self.script_run.status
         if self.autoscan is not None:
-            return "interrupted" if self.autoscan.interrupted else "failed" if self.autoscan.error else "done"
+            return self.autoscan.status
         if self.capture is not None:
             return self.capture.status
         return "done"
@@ -265,6 +174,6 @@ class RunFolder:
     def title(self) -> str:
         if self.script_run is not None:
             return f"{self.kind.title}: {self.script_run.name}"
-        obj = (self.autoscan.object_name if self.autoscan else None) or (
+        obj = (self.autoscan.object if self.autoscan else None) or (
             self.session.object_name if self.session else None)
         return f"{self.kind.title}" + (f": {obj}" if obj else "")

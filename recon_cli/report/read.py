@@ -10,35 +10,38 @@ instead of an error, so a page can always show what is there.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from recon_cli.errors import FileError, MetadataError
 from recon_cli.inputs.jsonfile import load_json
+from recon_cli.reconstruction.metadata import SessionInfo, read_session
 from recon_cli.report.model import (
-    Autoscan,
-    Capture,
-    Command,
     Edge,
     Evaluation,
     Move,
     OutputFile,
-    PoseError,
     Registration,
     RunFolder,
     RunKind,
     Scan,
     ScanPose,
-    ScriptRun,
-    Session,
-    ViewFailure,
-    ViewOutcome,
 )
+from recon_cli.runs import autoscan as autoscan_file
+from recon_cli.runs import capture as capture_file
+from recon_cli.runs import evaluation as evaluation_file
+from recon_cli.runs import register as register_file
+from recon_cli.runs import script_run as run_file
+from recon_cli.runs.autoscan import AutoscanReport
+from recon_cli.runs.register import RegisterReport
+from recon_cli.runs.script_run import ScriptRunReport
 
 RUN_REPORT, AUTOSCAN_REPORT, CAPTURE_REPORT, REGISTER_REPORT = (
-    "run_report.json", "autoscan_report.json", "capture_report.json", "report.json")
-PAGE_FILES = "report_files"  # the page's own images, beside it
+    run_file.RUN_REPORT, autoscan_file.AUTOSCAN_REPORT, capture_file.CAPTURE_REPORT, register_file.REGISTER_REPORT)
+PAGE_FILES = "report_files"
+T = TypeVar("T")  # the page's own images, beside it
 _HINT = "give the folder a recon run, autoscan, capture or register wrote (its --out)"
 
 
@@ -63,45 +66,24 @@ def _dict(value: Any) -> dict:
     return value if isinstance(value, dict) else {}
 
 
-def _list(value: Any) -> list:
-    return value if isinstance(value, list) else []
-
-
-def _pose_error(value: Any) -> PoseError | None:
-    d = _dict(value)
-    t, r = _float(d.get("translation_mm")), _float(d.get("rotation_deg"))
-    return None if t is None or r is None else PoseError(t, r)
-
-
 class _Notes:
     """What could not be read, for the page."""
 
     def __init__(self) -> None:
         self.items: list[str] = []
 
-    def load(self, path: Path, what: str) -> dict | None:
+    def read(self, path: Path, reader: Callable[[Path], T]) -> T | None:
+        """``reader(path)``, or None (with the reason as a note) when the file cannot be read."""
         if not path.is_file():
             return None
         try:
-            data = load_json(path, what)
+            return reader(path)
         except MetadataError as exc:
             self.items.append(exc.one_line())
             return None
-        if not isinstance(data, dict):
-            self.items.append(f"{path}: {what} holds no JSON object")
-            return None
-        return data
 
 
 # ----------------------------------------------------------------------------- the kind of folder
-def _is_registration_report(path: Path) -> bool:
-    try:
-        data = load_json(path, path.name)
-    except MetadataError:
-        return path.is_file()  # a broken report.json: still the register folder (the page says why)
-    return isinstance(data, dict) and isinstance(data.get("scans"), list)
-
-
 def _scan_folders(store: Path) -> list[tuple[int, Path]]:
     from recon_cli.reconstruction.scan_store import ScanStore
 
@@ -119,7 +101,7 @@ def run_kind(folder: Path) -> RunKind:
         return RunKind.RUN
     if (folder / AUTOSCAN_REPORT).is_file():
         return RunKind.AUTOSCAN
-    if (folder / REGISTER_REPORT).is_file() and _is_registration_report(folder / REGISTER_REPORT):
+    if (folder / REGISTER_REPORT).is_file() and register_file.is_registration(folder / REGISTER_REPORT):
         return RunKind.REGISTER
     if (folder / "session.json").is_file() or _scan_folders(folder):
         return RunKind.SCANS
@@ -128,74 +110,27 @@ def run_kind(folder: Path) -> RunKind:
 
 
 # ----------------------------------------------------------------------------- reports
-def _session(data: dict | None) -> Session | None:
-    if data is None:
-        return None
-    cell, obj, realism = _dict(data.get("cell")), _dict(data.get("object")), _dict(data.get("realism"))
-    noise = data.get("noise")
-    return Session(mode=_str(data.get("mode")), backend=_str(data.get("backend")), object_name=_str(obj.get("name")),
-                   cell=_str(cell.get("kind")), sensor=_str(data.get("sensor")),
-                   noise=noise if isinstance(noise, bool) else None, seed=_int(data.get("seed")),
-                   realism=_str(realism.get("name")), created=_float(data.get("created")))
+def _script_moves(run: ScriptRunReport) -> tuple[Move, ...]:
+    """The moves of a script run (its commands that planned a move)."""
+    return tuple(Move(c.source, c.planner, c.number("plan_time_s"), c.number("trajectory_s")) for c in run.moves)
 
 
-def _script_run(data: dict) -> tuple[ScriptRun, tuple[Move, ...]]:
-    commands, moves = [], []
-    for c in _list(data.get("commands")):
-        c = _dict(c)
-        cmd = Command(str(c.get("source", "")), str(c.get("command", "")), str(c.get("status", "")),
-                      _float(c.get("seconds")) or 0.0, str(c.get("message", "")))
-        commands.append(cmd)
-        if "plan_time_s" in c or "trajectory_s" in c:  # a move (its command is in the commands table)
-            moves.append(Move(cmd.source, _str(c.get("planner")), _float(c.get("plan_time_s")),
-                              _float(c.get("trajectory_s"))))
-    interrupted = _dict(data.get("interrupted"))
-    run = ScriptRun(script=str(data.get("script", "")), name=str(data.get("name", "")),
-                    dialect=str(data.get("dialect", "")), status=str(data.get("status", "unknown")),
-                    exit_code=_int(data.get("exit_code")), seconds=_float(data.get("seconds")),
-                    scans=_int(data.get("scans")), backend=_str(data.get("backend")), seed=_int(data.get("seed")),
-                    dry_run=bool(data.get("dry_run", False)), on_failure=_str(data.get("on_failure")),
-                    stopped=_str(interrupted.get("reason") or data.get("aborted")), commands=tuple(commands))
-    return run, tuple(moves)
-
-
-def _autoscan(path: Path, data: dict, reg_dir: Path) -> tuple[Autoscan, tuple[Move, ...], Evaluation | None]:
-    """The autoscan, its moves (one per completed view) and its evaluation against the truth
-    (when the run got that far)."""
-    accuracy = _dict(data.get("accuracy"))
-    views = tuple(ViewOutcome(_int(v.get("iteration")) or 0, str(v.get("status", "")), _float(v.get("planning_s")),
-                              _float(v.get("trajectory_s")))
-                  for v in map(_dict, _list(data.get("views"))))
+def _autoscan(path: Path, report: AutoscanReport, reg_dir: Path) -> tuple[tuple[Move, ...], Evaluation | None]:
+    """The moves of an autoscan (one per completed view) and its evaluation against the
+    truth (when the run got that far)."""
     moves = tuple(Move(f"iteration {v.iteration}", "view selection" if v.iteration else None, v.planning_s,
-                       v.trajectory_s) for v in views if v.status == "completed" and v.trajectory_s is not None)
+                       v.trajectory_s) for v in report.views if v.status == "completed" and v.trajectory_s is not None)
     evaluation = None
-    coverage, mean, std = _float(data.get("coverage_1mm")), _float(accuracy.get("mean_mm")), \
-        _float(accuracy.get("std_mm"))
-    if coverage is not None and mean is not None:
+    accuracy = report.accuracy
+    if report.coverage_1mm is not None and accuracy is not None:
         hist = reg_dir / "cloud_distances.png"
+        mean, std = accuracy.mean_mm, accuracy.std_mm
         evaluation = Evaluation(
-            report=path, name="cloud", reference=f"true {data.get('object', 'object')} surface",
-            histogram=hist if hist.is_file() else None, points=_int(accuracy.get("points")), mean_mm=mean,
-            std_mm=std, rms_mm=None if std is None else (mean**2 + std**2) ** 0.5,
-            within={str(k): f for k, v in _dict(accuracy.get("within")).items() if (f := _float(v)) is not None},
-            coverage=coverage, coverage_visible=None, tolerance_mm=1.0)
-    return Autoscan(method=str(data.get("method", "")), object_name=_str(data.get("object")),
-                    cell=_str(data.get("cell")), n=_int(data.get("n")), d_c_m=_float(data.get("d_c")),
-                    seed=_int(data.get("seed")), scans=_int(data.get("scans")) or 0,
-                    interrupted=bool(data.get("interrupted", False)), error=_str(data.get("error")),
-                    infeasible_views=_int(data.get("infeasible_views")),
-                    planning_requests=_int(data.get("planning_requests")),
-                    trajectory_s=_float(data.get("trajectory_s")), coverage_1mm=_float(data.get("coverage_1mm")),
-                    accuracy_mean_mm=_float(accuracy.get("mean_mm")), accuracy_std_mm=_float(accuracy.get("std_mm")),
-                    seconds_total=_float(data.get("seconds_total")), views=views), moves, evaluation
-
-
-def _capture(data: dict) -> Capture:
-    failures = tuple(ViewFailure(_int(f.get("view")) or 0, str(f.get("message", "")))
-                     for f in map(_dict, _list(data.get("failures"))))
-    return Capture(status=str(data.get("status", "unknown")), views=_int(data.get("views")) or 0,
-                   scans=_int(data.get("scans")) or 0, seconds=_float(data.get("seconds")), failures=failures,
-                   error=_str(data.get("error")))
+            report=path, name="cloud", reference=f"true {report.object or 'object'} surface",
+            histogram=hist if hist.is_file() else None, points=accuracy.points, mean_mm=mean, std_mm=std,
+            rms_mm=(mean**2 + std**2) ** 0.5, within=dict(accuracy.within), coverage=report.coverage_1mm,
+            coverage_visible=None, tolerance_mm=1.0)
+    return moves, evaluation
 
 
 def _scan_store_of(report_dir: Path, text: str | None, names: set[str]) -> Path | None:
@@ -217,59 +152,44 @@ def _scan_store_of(report_dir: Path, text: str | None, names: set[str]) -> Path 
     return next((c for c in [*stated, *nearby] if folders(c)), None)
 
 
-def _registration(path: Path, data: dict) -> Registration:
-    poses, used = [], []
-    for s in map(_dict, _list(data.get("scans"))):
-        pose = _dict(s.get("pose"))
-        folder = _str(s.get("folder")) or f"scan_{_int(s.get('scan')) or 0:04d}"
-        skipped = _str(s.get("skipped"))
-        poses.append(ScanPose(folder=folder, source=_str(pose.get("source")), corners=_int(pose.get("corners")),
-                              reprojection_px=_float(pose.get("reprojection_px")), reason=str(pose.get("reason") or ""),
-                              points=_int(s.get("points")) or 0, skipped=skipped,
-                              charuco_error=_pose_error(s.get("charuco_error")),
-                              final_error=_pose_error(s.get("final_pose_error"))))
-        if not skipped:
-            used.append(folder)
-    graph = _dict(data.get("pose_graph"))
-    edges = []
-    for e in map(_dict, _list(graph.get("edges"))):
-        i, j = _int(e.get("source")), _int(e.get("target"))
-        if i is None or j is None or not (0 <= i < len(used) and 0 <= j < len(used)):
-            continue  # edges index the registered scans
-        rmse = _float(e.get("rmse_m"))
-        edges.append(Edge(used[i], used[j], str(e.get("kind", "")), _int(e.get("correspondences")),
-                          _float(e.get("fitness")), None if rmse is None else rmse * 1e3, bool(e.get("rejected"))))
-    mesh_name = _dict(data.get("outputs")).get("mesh")
-    mesh = path.parent / str(mesh_name) if mesh_name else None
+def _registration(path: Path, report: RegisterReport) -> Registration:
+    poses = tuple(ScanPose(folder=s.name, source=None if s.pose is None else s.pose.source,
+                           corners=None if s.pose is None else s.pose.corners,
+                           reprojection_px=None if s.pose is None else s.pose.reprojection_px,
+                           reason=("" if s.pose is None else s.pose.reason) or "", points=s.points,
+                           skipped=s.skipped or None, charuco_error=s.charuco_error, final_error=s.final_pose_error)
+                  for s in report.scans)
+    used = [s.name for s in report.registered]
+    graph = report.pose_graph
+    edges = tuple(Edge(used[e.source], used[e.target], e.kind, e.correspondences, e.fitness,
+                       None if e.rmse_m is None else e.rmse_m * 1e3, e.rejected)
+                  for e in (graph.edges if graph else ()) if e.source < len(used) and e.target < len(used))
+    mesh_name = report.outputs.mesh if report.outputs else None
+    mesh = path.parent / mesh_name if mesh_name else None
     return Registration(
-        report=path, scan_store=_scan_store_of(path.parent, _str(data.get("scan_store")), {p.folder for p in poses}),
-        frame=str(data.get("frame", "")), registered=_int(data.get("scans_registered")) or len(used),
-        skipped=_int(data.get("scans_skipped")) or 0,
-        pose_sources={str(k): _int(v) or 0 for k, v in _dict(data.get("pose_sources")).items()},
-        poses=tuple(poses), edges=tuple(edges), pruned_loop_closures=_int(graph.get("pruned_loop_closures")),
-        timings_s={str(k).removesuffix("_s"): f for k, v in _dict(data.get("timings")).items()
-                   if (f := _float(v)) is not None},
-        fused_points=_int(_dict(data.get("points")).get("fused")),
-        charuco_error_mean=_pose_error(data.get("charuco_error_mean")),
-        final_error_mean=_pose_error(_dict(data.get("pose_error_mean")).get("final")),
+        report=path, scan_store=_scan_store_of(path.parent, report.scan_store, {p.folder for p in poses}),
+        frame=report.frame, registered=report.scans_registered or len(used), skipped=report.scans_skipped or 0,
+        pose_sources=dict(report.pose_sources), poses=poses, edges=edges,
+        pruned_loop_closures=None if graph is None else graph.pruned_loop_closures,
+        timings_s={k.removesuffix("_s"): v for k, v in report.timings.items()},
+        fused_points=None if report.points is None else report.points.fused,
+        charuco_error_mean=report.charuco_error_mean,
+        final_error_mean=None if report.pose_error_mean is None else report.pose_error_mean.final,
         mesh=mesh if mesh is not None and mesh.is_file() else None)
 
 
 def _evaluations(folder: Path, notes: _Notes) -> tuple[Evaluation, ...]:
     out = []
-    for path in sorted(folder.glob("*_evaluation.json")):
-        data = notes.load(path, path.name)
-        if data is None:
+    for path in evaluation_file.reports(folder):
+        e = notes.read(path, evaluation_file.read)
+        if e is None:
             continue
-        name = path.name.removesuffix("_evaluation.json")
+        name = path.name.removesuffix(evaluation_file.SUFFIX)
         hist = folder / f"{name}_distances.png"
         out.append(Evaluation(
-            report=path, name=name, reference=Path(str(data.get("reference", ""))).name,
-            histogram=hist if hist.is_file() else None, points=_int(data.get("points")),
-            mean_mm=_float(data.get("mean_mm")), std_mm=_float(data.get("std_mm")), rms_mm=_float(data.get("rms_mm")),
-            within={str(k): f for k, v in _dict(data.get("within")).items() if (f := _float(v)) is not None},
-            coverage=_float(data.get("coverage")), coverage_visible=_float(data.get("coverage_visible")),
-            tolerance_mm=_float(data.get("coverage_tolerance_mm"))))
+            report=path, name=name, reference=Path(e.reference).name, histogram=hist if hist.is_file() else None,
+            points=e.points, mean_mm=e.mean_mm, std_mm=e.std_mm, rms_mm=e.rms_mm, within=dict(e.within),
+            coverage=e.coverage, coverage_visible=e.coverage_visible, tolerance_mm=e.coverage_tolerance_mm))
     return tuple(out)
 
 
@@ -338,8 +258,8 @@ def _plys(folder: Path, exports: set[str]) -> tuple[OutputFile, ...]:
 def _reports(folder: Path) -> tuple[OutputFile, ...]:
     out = []
     for path in _walk(folder, (".json", ".yaml", ".xml", ".rrd")):
-        if path.name.endswith("_evaluation.json"):
-            what = f"evaluation of {path.name.removesuffix('_evaluation.json')} against the reference"
+        if path.name.endswith(evaluation_file.SUFFIX):
+            what = f"evaluation of {path.name.removesuffix(evaluation_file.SUFFIX)} against the reference"
         else:
             what = _REPORTS.get(path.name, "")
         out.append(OutputFile(path, what, path.stat().st_size))
@@ -360,32 +280,31 @@ def read_run_folder(folder: Path) -> RunFolder:
     reg_dir = folder / "reconstruction"
     if kind is RunKind.RUN:
         store = folder / "scans"
-        data = notes.load(folder / RUN_REPORT, RUN_REPORT)
-        if data is not None:
-            script_run, moves = _script_run(data)
-            exports = {Path(str(v)).name for k, v in _dict(data.get("outputs")).items() if k.startswith("export_")}
+        script_run = notes.read(folder / RUN_REPORT, run_file.read)
+        if script_run is not None:
+            moves = _script_moves(script_run)
+            exports = {Path(v).name for k, v in script_run.outputs.items() if k.startswith("export_")}
     elif kind is RunKind.AUTOSCAN:
-        data = notes.load(folder / AUTOSCAN_REPORT, AUTOSCAN_REPORT)
-        if data is not None:
-            autoscan, moves, evaluation = _autoscan(folder / AUTOSCAN_REPORT, data, reg_dir)
+        autoscan = notes.read(folder / AUTOSCAN_REPORT, autoscan_file.read)
+        if autoscan is not None:
+            moves, evaluation = _autoscan(folder / AUTOSCAN_REPORT, autoscan, reg_dir)
             extra = () if evaluation is None else (evaluation,)
     elif kind is RunKind.SCANS:
-        data = notes.load(folder / CAPTURE_REPORT, CAPTURE_REPORT)
-        capture = None if data is None else _capture(data)
+        capture = notes.read(folder / CAPTURE_REPORT, capture_file.read)
     else:
         reg_dir = folder
-    data = notes.load(reg_dir / REGISTER_REPORT, REGISTER_REPORT)
-    registration = None if data is None else _registration(reg_dir / REGISTER_REPORT, data)
+    report = notes.read(reg_dir / REGISTER_REPORT, register_file.read)
+    registration = None if report is None else _registration(reg_dir / REGISTER_REPORT, report)
     if kind is RunKind.REGISTER:
         store = None if registration is None else registration.scan_store
         if store is None:
             notes.items.append("the scan store of this registration was not found (its scans are not shown)")
     elif registration is not None:  # the scans beside it, wherever the folder was moved
         registration = replace(registration, scan_store=store)
-    session = None
+    session: SessionInfo | None = None
     scans: tuple[Scan, ...] = ()
     if store is not None and store.is_dir():
-        session = _session(notes.load(store / "session.json", "session.json"))
+        session = notes.read(store / "session.json", lambda path: read_session(path.parent))
         scans = _scans(store, notes)
     if not moves:
         moves = tuple(s.move for s in scans if s.move is not None)

@@ -24,7 +24,8 @@ from recon_cli.report.markup import (
     tag,
 )
 from recon_cli.report.mesh_view import MeshView
-from recon_cli.report.model import Edge, PoseError, RunFolder, RunKind, Scan
+from recon_cli.report.model import Edge, RunFolder, RunKind, Scan
+from recon_cli.runs.register import PoseError
 
 
 @dataclass(frozen=True)
@@ -63,7 +64,7 @@ def summary(run: RunFolder) -> Html:
                  ("commands", str(len(r.commands))), ("scans", num(r.scans)), ("wall time", num(r.seconds, ".1f", "s"))]
     if a is not None:
         rows += [("method", a.method), ("scans", f"{a.scans} of N = {a.n}" if a.n else str(a.scans)),
-                 ("camera distance d_c", num(a.d_c_m, ".3g", "m")),
+                 ("camera distance d_c", num(a.d_c, ".3g", "m")),
                  ("stopped", "interrupted" if a.interrupted else None),
                  ("error", a.error), ("infeasible views sampled", num(a.infeasible_views)),
                  ("planning requests", num(a.planning_requests)),
@@ -74,10 +75,11 @@ def summary(run: RunFolder) -> Html:
                  ("views skipped", num(len(c.failures)) if c.failures else None),
                  ("error", c.error), ("wall time", num(c.seconds, ".1f", "s"))]
     if s is not None:
-        rows += [("object", s.object_name), ("cell", s.cell), ("backend", s.backend),
+        rows += [("object", s.object_name), ("cell", s.cell_kind), ("backend", s.backend),
                  ("sensor", None if s.sensor is None else s.sensor + ("" if s.noise is None else
                                                                      f" (noise {'on' if s.noise else 'off'})")),
-                 ("realism", s.realism), ("seed", num(s.seed)), ("session started", _when(s.created))]
+                 ("realism", (s.realism or {}).get("name")), ("seed", num(s.seed)),
+                 ("session started", _when(s.created))]
     g = run.registration
     if g is not None:
         sources = ", ".join(f"{k} {v}" for k, v in g.pose_sources.items() if v)

@@ -25,6 +25,7 @@ import numpy as np
 from recon_cli.config import DEFAULTS, Config
 from recon_cli.errors import ReconError
 from recon_cli.geometry.view import View
+from recon_cli.runs.autoscan import Accuracy
 from recon_cli.session import Backend, Mode, SessionSpec, open_session
 from recon_cli.viewplan.policy import Feasibility, Method, Status, baseline_views, lifted
 
@@ -53,19 +54,6 @@ class ViewRecord:
     iteration: int
     planning_s: float | None = None  # completed views: planning of the move to it (view selection) [s]
     trajectory_s: float | None = None  # completed views: duration of that move [s]
-
-
-@dataclass(frozen=True)
-class Accuracy:
-    """Signed distances of the fused cloud to the ground truth (simulation)."""
-
-    mean_mm: float
-    std_mm: float
-    points: int
-    within: dict[str, float] = field(default_factory=dict)  # "±0.5 mm" -> share of the points
-
-    def to_dict(self) -> dict:
-        return {"mean_mm": self.mean_mm, "std_mm": self.std_mm, "points": self.points, "within": self.within}
 
 
 @dataclass
@@ -297,8 +285,6 @@ class Autoscan:
                 ) -> tuple[AutoscanResult, ReconError | None]:
         """Register and evaluate what was scanned (unless the run ended early) and write the
         report; the result and the error that ended the run (None when it did not)."""
-        from recon_cli.console import write_json
-
         opt, cfg, vp = self.opt, self.opt.config, self.vp
         scanning = time.perf_counter() - t0
         cloud = mesh = None
@@ -330,20 +316,20 @@ class Autoscan:
                               f"{cloud.name} vs the true {self.obj.name}")
         seconds_total = time.perf_counter() - t0
         infeasible = sum(v.status is Status.INFEASIBLE for v in views)
-        report = opt.out / "autoscan_report.json"
-        write_json(report, {
-            "method": self.method.value, "object": self.obj.name, "cell": cfg.cell.kind.value, "n": vp.n,
-            "d_c": vp.d_c, "m": vp.m, "sigma": vp.sigma, "seed": cfg.seed, "scans": len(self.store),
-            "interrupted": interrupted, "error": None if error is None else error.one_line(),
-            "infeasible_views": infeasible,
-            "planning_requests": self.requests, "trajectory_s": self.trajectory_s,
-            "coverage_1mm": coverage, "accuracy": accuracy, "seconds_scanning": scanning,
-            "seconds_total": seconds_total,
-            "views": [{"status": v.status.value, "iteration": v.iteration, "world_T_camera": v.world_T_camera,
-                       "planning_s": v.planning_s, "trajectory_s": v.trajectory_s} for v in views],
-            "outputs": {"cloud": None if cloud is None else str(cloud), "mesh": None if mesh is None else str(mesh),
-                        "pictures": [str(p) for p in pictures]},
-        })
+        from recon_cli.runs import autoscan as autoscan_file
+        from recon_cli.runs.codec import matrix
+
+        report = autoscan_file.write(opt.out, autoscan_file.AutoscanReport(
+            method=self.method.value, object=self.obj.name, cell=cfg.cell.kind.value, n=vp.n, d_c=vp.d_c, m=vp.m,
+            sigma=vp.sigma, seed=cfg.seed, scans=len(self.store), interrupted=interrupted,
+            error=None if error is None else error.one_line(), infeasible_views=infeasible,
+            planning_requests=self.requests, trajectory_s=float(self.trajectory_s), coverage_1mm=coverage,
+            accuracy=accuracy, seconds_scanning=scanning, seconds_total=seconds_total,
+            views=tuple(autoscan_file.ViewOutcome(v.status.value, v.iteration, matrix(v.world_T_camera), v.planning_s,
+                                                  v.trajectory_s) for v in views),
+            outputs=autoscan_file.AutoscanOutputs(None if cloud is None else str(cloud),
+                                                  None if mesh is None else str(mesh),
+                                                  tuple(str(p) for p in pictures))))
         return AutoscanResult(opt.out, len(self.store), views, infeasible, self.requests, self.trajectory_s,
                               seconds_total, coverage, accuracy, cloud, mesh, report, pictures, interrupted), error
 

@@ -26,6 +26,7 @@ from recon_cli.geometry.view import View
 from recon_cli.objects import SceneObject
 from recon_cli.reconstruction.scan_store import Scan
 from recon_cli.recording import closing, open_recorder
+from recon_cli.runs.capture import CAPTURE_REPORT, ViewFailure
 from recon_cli.session import Backend, Mode, SessionSpec, open_session
 
 
@@ -48,12 +49,6 @@ class CaptureStatus(StrEnum):
     INCOMPLETE = "incomplete"  # some views skipped (unreachable, no path)
     FAILED = "failed"  # no scan, or an error ended the capture
     INTERRUPTED = "interrupted"  # Ctrl-C or SIGTERM
-
-
-@dataclass(frozen=True)
-class ViewFailure:
-    view: int  # 1-based
-    message: str
 
 
 @dataclass(frozen=True)
@@ -83,7 +78,7 @@ def run_capture(opt: CaptureOptions, progress: Callable[[str, int, int], None] |
         from recon_cli.outputs import keep_earlier, refuse_links
 
         refuse_links(opt.out)
-        keep_earlier(opt.out, "capture_report.json", "config.yaml", "recording.rrd")
+        keep_earlier(opt.out, CAPTURE_REPORT, "config.yaml", "recording.rrd")
     recorder = open_recorder(opt.out, "recon capture") if opt.record else None
     spec = SessionSpec(opt.out, opt.config, Mode.CAPTURE, opt.backend, run=opt.run, station=opt.station,
                        recorder=recorder, append=opt.append)
@@ -127,12 +122,11 @@ def run_capture(opt: CaptureOptions, progress: Callable[[str, int, int], None] |
 def _write_report(opt: CaptureOptions, status: CaptureStatus, scans: int, failures: list[ViewFailure],
                   seconds: float, error: str | None) -> tuple[Path, Path | None]:
     """capture_report.json and (when asked) the report page."""
-    from recon_cli.console import write_json
+    from recon_cli.runs import capture as capture_file
 
-    report = opt.out / "capture_report.json"
-    write_json(report, {"command": "capture", "status": status.value, "views": len(opt.views), "scans": scans,
-                        "seconds": seconds, "error": error,
-                        "failures": [{"view": f.view, "message": f.message} for f in failures]})
+    report = capture_file.write(opt.out, capture_file.CaptureReport(
+        status=status.value, views=len(opt.views), scans=scans, seconds=seconds, error=error,
+        failures=tuple(failures)))
     page = None
     if opt.page:
         from recon_cli.report import write_page_after_run

@@ -22,6 +22,8 @@ import numpy as np
 from recon_cli.config import DEFAULTS, SceneConfig
 from recon_cli.errors import ReconError, RobotFault, RunInterrupted, ScriptAborted
 from recon_cli.interrupts import exit_code, signal_name
+from recon_cli.runs.codec import from_json, plain
+from recon_cli.runs.script_run import RUN_REPORT, Interruption
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.checks import ACTIONS, check_script
 from recon_cli.scripts.handlers import handler_for
@@ -66,17 +68,6 @@ class RunResult:
         return EXIT_FAILED if self.failed else EXIT_DONE
 
 
-@dataclass(frozen=True)
-class Interruption:
-    signal: str
-    reason: str
-    command: str | None
-    scans_kept: int
-
-    def to_dict(self) -> dict:
-        return {"signal": self.signal, "reason": self.reason, "command": self.command, "scans_kept": self.scans_kept}
-
-
 class ScriptRunner:
     def __init__(self, script: C.Script, options: RunOptions, progress: Progress | None = None) -> None:
         check_script(script, object_override=options.object_name)
@@ -107,7 +98,7 @@ class ScriptRunner:
         self.out.mkdir(parents=True, exist_ok=True)
         if self.options.append:
             refuse_links(self.out)
-            self._keep_earlier("run_report.json", "script.expanded.xml", "config.yaml", "recording.rrd")
+            self._keep_earlier(RUN_REPORT, "script.expanded.xml", "config.yaml", "recording.rrd")
         atomic_write_text(self.out / "script.expanded.xml", self.script.expanded_xml)
         if self.options.record and not self.options.dry_run:
             from recon_cli.recording import open_recorder
@@ -224,7 +215,7 @@ class ScriptRunner:
             self.page = None if page is None else page.path
 
     def _write_report(self, seconds: float, aborted: str, interrupted: Interruption | None) -> None:
-        from recon_cli.console import write_json
+        from recon_cli.runs import script_run as run_file
 
         failed = any(r.status is CommandStatus.FAILED for r in self.reports)
         if interrupted is not None:
@@ -233,13 +224,12 @@ class ScriptRunner:
             status, code = RunStatus.ABORTED, EXIT_ABORTED
         else:
             status, code = (RunStatus.FAILED, EXIT_FAILED) if failed else (RunStatus.DONE, EXIT_DONE)
-        write_json(self.out / "run_report.json", {
-            "script": self.script.path, "name": self.script.name, "dialect": self.script.dialect,
-            "on_failure": self.on_failure.value, "dry_run": self.options.dry_run,
-            "backend": self.state.backend.value, "seed": self.options.seed, "seconds": seconds,
-            "scans": self.state.scan_count(), "status": status.value, "exit_code": code,
-            "aborted": aborted or None, "interrupted": None if interrupted is None else interrupted.to_dict(),
-            "append": self.options.append, "outputs": self.state.outputs,
-            "sequence_optimization": [s.to_dict() for s in self.state.sequences],
-            "commands": [r.to_dict() for r in self.reports],
-        })
+        run_file.write(self.out, run_file.ScriptRunReport(
+            script=self.script.path, name=self.script.name, dialect=self.script.dialect,
+            on_failure=self.on_failure.value, dry_run=self.options.dry_run, backend=self.state.backend.value,
+            seed=self.options.seed, seconds=seconds, scans=self.state.scan_count(), status=status.value,
+            exit_code=code, aborted=aborted or None, interrupted=interrupted, append=self.options.append,
+            outputs=dict(self.state.outputs),
+            sequence_optimization=tuple(from_json(run_file.SequenceOptimization, plain(s.to_dict()))
+                                        for s in self.state.sequences),
+            commands=tuple(from_json(run_file.Command, plain(r.to_dict())) for r in self.reports)))

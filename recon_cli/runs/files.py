@@ -1,0 +1,42 @@
+"""Writing and reading one report file of a run folder: written atomically by
+:func:`recon_cli.outputs.atomic_write_text`, read by the guarded JSON reader
+(:func:`recon_cli.inputs.jsonfile.load_json`: a regular file within its size limit, no NaN,
+bounded nesting and integers, no duplicate keys) and checked against its schema in
+``schemas/`` before a model is built, so that a broken or hostile file is one
+:class:`~recon_cli.errors.MetadataError` line naming the file and the key."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from recon_cli.inputs.jsonfile import MAX_JSON_BYTES, load_json
+from recon_cli.runs.codec import dumps, from_json
+
+
+def target(folder_or_path: Path, name: str) -> Path:
+    """``folder/name`` for a folder, else the path itself."""
+    p = Path(folder_or_path)
+    return p / name if p.is_dir() else p
+
+
+def write_model(path: Path, model) -> Path:
+    """``model`` as the JSON file ``path`` (atomically)."""
+    from recon_cli.outputs import atomic_write_text
+
+    return atomic_write_text(Path(path), dumps(model))
+
+
+def read_document(path: Path, schema: str, what: str) -> dict:
+    """The checked JSON object of ``path`` (a MetadataError when it cannot be read or does
+    not match ``schemas/<schema>``)."""
+    from recon_cli.reconstruction.metadata import check
+
+    path = Path(path)
+    data = load_json(path, what, MAX_JSON_BYTES)
+    check(data, schema, path, what)
+    return data
+
+
+def read_model(path: Path, cls, schema: str, what: str):
+    """The model ``cls`` of the report file ``path`` (see :func:`read_document`)."""
+    return from_json(cls, read_document(path, schema, what))

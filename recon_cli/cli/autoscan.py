@@ -40,9 +40,10 @@ _V = D.viewplan
 def autoscan(
     dc: DcOpt = _V.d_c,
     n: ScansOpt = _V.n,
-    object_name: Annotated[str, typer.Option("--object", metavar=object_metavar(False),
-                                             callback=object_option(False),
-                                             help="Object to scan (built-in, YCB or mesh file).")] = "bottle",
+    object_name: Annotated[str, typer.Option("--object", metavar=object_metavar(True), callback=object_option(True),
+                                             help="Object to scan (built-in, YCB or mesh file; 'auto': the drill "
+                                                  "if the YCB data is here, else the built-in bottle).")]
+    = "bottle",
     scale: ScaleOpt = D.scene.object_scale,
     m: Annotated[int, typer.Option("--candidates", "-m", "--m", min=VIEWPLAN_M[0], max=VIEWPLAN_M[1],
                                    help="Preliminary samples (candidate views) per view (the thesis' m, "
@@ -70,9 +71,11 @@ def autoscan(
     from recon_cli.config import SceneConfig
     from recon_cli.console import console, progress_bar
     from recon_cli.robot.description import CellConfig, CellKind
+    from recon_cli.session import resolve_object_name
     from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions
 
     check_record(record)
+    object_name = resolve_object_name(object_name)
     config = D.replace(
         cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
         scene=SceneConfig(object_name, scale), sensor=replace(D.sensor, resolution=resolution), seed=seed,

@@ -20,7 +20,7 @@ def test_help_lists_both_commands(capsys):
     assert code == 0 and "calibrateRobotWorldHandEye" in out and "--station" in out
 
 
-@pytest.mark.parametrize(("argv", "message"), [
+@pytest.mark.parametrize(("argv", "code", "message"), [
     (("handeye", "--scan-store", "{tmp}"), 1, "holds no scan_NNNN folders"),
     (("handeye", "--method", "kabsch", "--scan-store", "{tmp}"), 2,
      "Invalid value for '--method': 'kabsch' is not one of 'tsai', 'park'"),

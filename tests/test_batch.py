@@ -95,7 +95,8 @@ jobs:
 
 
 @pytest.mark.parametrize("text, needle", [
-    ("jobs:\n  - autoscan: {scans: 4, resoluton: 0.2}\n", ":2 jobs[0].autoscan.resoluton: recon autoscan has no option"),
+    ("jobs:\n  - autoscan: {scans: 4, resoluton: 0.2}\n",
+     ":2 jobs[0].autoscan.resoluton: recon autoscan has no option"),
     ("jobs:\n  - autoscan: {resolution: 5}\n", ":2 jobs[0].autoscan.resolution: Invalid value for '--resolution'"),
     ("jobs:\n  - capture: {}\n    expect:\n      min_coverage_pct: 5\n",
      ":4 jobs[0].expect.min_coverage_pct: a capture job does not measure this"),

@@ -73,5 +73,6 @@ def test_capture_cli_errors(capsys, tmp_path):
         code = main(argv)
         _, err = capsys.readouterr()
         lines = [x for x in err.splitlines() if x.strip() and "leak" not in x]
-        assert code == (2 if "--scale" in argv or "spaceship" in argv else 1), argv  # not a value the option takes: usage error
+        usage = "--scale" in argv or "spaceship" in argv  # not a value the option takes: a usage error
+        assert code == (2 if usage else 1), argv
         assert len(lines) == 1 and lines[0].startswith("error: ") and needle in lines[0], err

@@ -20,8 +20,9 @@ def batch(
         metavar="SOURCES", help="Batch files (.yaml), scripts (.xml) or quoted globs of them ('scripts/*.xml'), "
                                 "run in this order.",
         show_default=False)],
-    out: Annotated[Path | None, typer.Option("--out", "-o", help="Batch folder (default runs/batch-<time>): a folder per job, "
-                                                  "junit.xml, summary.json, summary.md, index.html.")] = None,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="Batch folder (default runs/batch-<time>): a folder "
+                                                                 "per job, junit.xml, summary.json, summary.md, "
+                                                                 "index.html.")] = None,
     workers: Annotated[int, typer.Option(min=1, max=1024, help="Jobs at once on this machine (or worker "
                                                                "processes of --cluster local).")] = 1,
     scheduler: Annotated[str | None, typer.Option(envvar="DASK_SCHEDULER_ADDRESS", help="Run the jobs on the Dask "

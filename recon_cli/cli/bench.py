@@ -134,7 +134,8 @@ def bench_registration(
 def bench_sequence(
     runs: Annotated[int, typer.Option("--runs", min=1, max=10_000, help="Runs per case.")] = 500,
     quick: Annotated[bool, typer.Option("--quick", help="CI mode: 3 runs per case.")] = False,
-    cases: Annotated[str, typer.Option(metavar="<" + "|".join(SEQUENCE_CASES) + ">,...", callback=name_list(_sequence_cases),
+    cases: Annotated[str, typer.Option(metavar="<" + "|".join(SEQUENCE_CASES) + ">,...",
+                                       callback=name_list(_sequence_cases),
                                        help="Comma-separated cases: A, B, C, D (ours), A0 (recon run's default "
                                             "order).")] = "A,B,C,D,A0",
     seed: SeedOpt = D.seed,

@@ -8,9 +8,9 @@ from typing import Annotated
 
 import typer
 
-from recon_cli.cli.app import app
 from recon_cli.calibration.handeye import HandEyeMethod
 from recon_cli.calibration.intrinsics import DistortionModel
+from recon_cli.cli.app import app
 from recon_cli.cli.options import (
     CellOpt,
     D,

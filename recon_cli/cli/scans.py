@@ -138,6 +138,7 @@ def capture(
 
 
 _R = D.registration
+_CROP_FRAME = Frame(_R.box_frame)
 
 
 @app.command()
@@ -147,7 +148,7 @@ def register(
                                                                  "<folder>/reconstruction).")] = None,
     crop_box: Annotated[str | None, typer.Option(help="Crop box cx,cy,cz,sx,sy,sz [m] (default: the session's "
                                                       "object box).")] = None,
-    crop_frame: Annotated[Frame, typer.Option(help="Frame of --crop-box.")] = Frame(_R.box_frame),
+    crop_frame: Annotated[Frame, typer.Option(help="Frame of --crop-box.")] = _CROP_FRAME,
     board: Annotated[bool, typer.Option("--board/--no-board", help="Use the ChArUco board (else kinematics "
                                                                    "for every scan).")] = _R.use_board,
     local: Annotated[bool, typer.Option("--local/--global-only", help="Pose-graph local registration.")]

@@ -80,7 +80,7 @@ defaults:
   options: {resolution: 0.2}
 jobs:
   - name: scan-{object}-s{seed}
-    autoscan: {n: 4, pictures: false}
+    autoscan: {scans: 4, pictures: false}
     matrix: {object: [bottle, mug], seed: [0, 1]}
     exclude: [{object: mug, seed: 1}]
   - capture: {views: eq-4.1}
@@ -92,7 +92,7 @@ jobs:
     assert names == ["scan-bottle-s0", "scan-bottle-s1", "scan-mug-s0", "capture-seed=3", "smoke"]
     first = spec.jobs[0]
     assert first.kind is JobKind.AUTOSCAN
-    assert first.args == ("--resolution", "0.2", "--n", "4", "--no-pictures", "--object", "bottle", "--seed", "0")
+    assert first.args == ("--resolution", "0.2", "--scans", "4", "--no-pictures", "--object", "bottle", "--seed", "0")
     assert first.expect == Expectations(min_coverage_pct=50, max_wall_time_s=100)
     capture = spec.jobs[3]
     assert capture.views == 24 and "--resolution" in capture.args
@@ -105,7 +105,8 @@ jobs:
 
 
 @pytest.mark.parametrize("text, needle", [
-    ("jobs:\n  - autoscan: {n: 4, resoluton: 0.2}\n", ":2 jobs[0].autoscan.resoluton: recon autoscan has no option"),
+    ("jobs:\n  - autoscan: {scans: 4, resoluton: 0.2}\n",
+     ":2 jobs[0].autoscan.resoluton: recon autoscan has no option"),
     ("jobs:\n  - autoscan: {resolution: 5}\n", ":2 jobs[0].autoscan.resolution: Invalid value for '--resolution'"),
     ("jobs:\n  - capture: {}\n    expect:\n      min_coverage_pct: 5\n",
      ":4 jobs[0].expect.min_coverage_pct: a capture job does not measure this"),
@@ -336,7 +337,7 @@ def test_a_killed_batch_resumes_without_redoing_finished_jobs(tmp_path):
     path = write(tmp_path, """\
 jobs:
   - {name: first, validate: smoke.xml}
-  - {name: second, autoscan: {n: 2, resolution: 0.1, pictures: false}}
+  - {name: second, autoscan: {scans: 2, resolution: 0.1, pictures: false}}
   - {name: third, validate: smoke.xml}
 """)
     out = tmp_path / "out"
@@ -379,7 +380,7 @@ def test_sigterm_stops_the_batch_and_its_jobs(tmp_path):
     path = write(tmp_path, """\
 jobs:
   - {name: first, validate: smoke.xml}
-  - {name: second, autoscan: {n: 2, resolution: 0.1, pictures: false}}
+  - {name: second, autoscan: {scans: 2, resolution: 0.1, pictures: false}}
   - {name: third, validate: smoke.xml}
 """)
     out = tmp_path / "out"

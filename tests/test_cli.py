@@ -29,7 +29,7 @@ def test_help_shows_units(capsys):
     code, out, _ = run(capsys, "ik", "--help")
     assert code == 0 and "Camera distance r from f [m]" in out and "Polar angle from the vertical [deg]" in out
     code, out, _ = run(capsys, "bench", "planners", "--help")
-    assert code == 0 and "Time limit per request [s]" in out
+    assert code == 0 and "Planning time limit per request [s]" in out
 
 
 def test_help_is_fast_and_light():
@@ -71,15 +71,15 @@ def test_ik_marker_frame(capsys):
     (["ik", "--focus", "0.7,1.2,-0.2", "-r", "0.3", "--theta", "90"], 1, "out of reach"),
     (["ik", "--theta", "170", "-r", "0.2"], 1, "under the table top"),
     (["ik", "--focus", "0,0,0.9", "--theta", "0", "-r", "0.05"], 1, "inside object"),
-    (["ik", "--cell", "scara"], 1, "unknown cell 'scara'; choose one of: gantry, ceiling"),
-    (["cell", "--cell", "12dof"], 1, "unknown cell"),
+    (["ik", "--cell", "scara"], 2, "Invalid value for '--cell': 'scara' is not one of 'gantry', 'ceiling'"),
+    (["cell", "--cell", "12dof"], 2, "Invalid value for '--cell'"),
     (["ik", "--radius", "abc"], 2, "Invalid value for '--radius'"),
     (["ik", "--focus", "1,2,x"], 2, "Invalid value for '--focus': '1,2,x' is not 3 numbers"),
     (["ik", "--focus", "1,2"], 2, "is not 3 numbers"),
     (["ik", "--radius", "-0.5"], 2, "Invalid value for '--radius' / '-r'"),
     (["ik", "--theta", "nan"], 2, "Invalid value for '--theta': nan is not a finite number"),
     (["ik", "--radius", "inf"], 2, "inf is not a finite number"),
-    (["ik", "--frame", "tool"], 1, "unknown frame 'tool'"),
+    (["ik", "--frame", "tool"], 2, "Invalid value for '--frame': 'tool' is not one of 'world', 'marker'"),
     (["ik", "--object-box", "0.3,-1,0.3"], 1, "non-positive edge"),
     (["cell", "--safety", "-1"], 2, "Invalid value for '--safety'"),
     (["ik", "--nonsense"], 2, "No such option"),
@@ -98,13 +98,13 @@ def test_console_script_exit_code():
     """The installed entry point exits non-zero without a traceback."""
     proc = subprocess.run([sys.executable, "-m", "recon_cli", "ik", "--cell", "nope"],
                           capture_output=True, text=True)
-    assert proc.returncode == 1
-    assert proc.stderr.strip().startswith("error: unknown cell")
+    assert proc.returncode == 2
+    assert proc.stderr.strip().startswith("error: Invalid value for '--cell'")
     assert "Traceback" not in proc.stderr
 
 
 def test_bench_ik_quick(capsys, tmp_path):
-    code, out, _ = run(capsys, "bench", "ik", "--n", "10", "--out", str(tmp_path))
+    code, out, _ = run(capsys, "bench", "ik", "--poses", "10", "--out", str(tmp_path))
     assert code == 0
     data = json.loads((tmp_path / "bench_ik.json").read_text())
     res = data["result"]
@@ -115,12 +115,12 @@ def test_bench_ik_quick(capsys, tmp_path):
 def test_bench_output_folder_not_writable(capsys, tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("x")
-    code, _, err = run(capsys, "bench", "ik", "--n", "1", "--out", str(blocker / "sub"))
+    code, _, err = run(capsys, "bench", "ik", "--poses", "1", "--out", str(blocker / "sub"))
     assert code == 1 and "not writable" in err
 
 
 def test_bench_planners_small(capsys, tmp_path):
-    code, out, _ = run(capsys, "bench", "planners", "--planners", "RRTConnect", "--n", "3",
+    code, out, _ = run(capsys, "bench", "planners", "--planners", "RRTConnect", "--requests", "3",
                        "--out", str(tmp_path))
     assert code == 0
     data = json.loads((tmp_path / "bench_planners.json").read_text())
@@ -130,10 +130,10 @@ def test_bench_planners_small(capsys, tmp_path):
 
 
 def test_bench_planners_bad_names(capsys):
-    code, _, err = run(capsys, "bench", "planners", "--planners", "EST", "--n", "1")
-    assert code == 1 and "unknown planner 'EST'" in err
-    code, _, err = run(capsys, "bench", "planners", "--peer", "moveit", "--n", "1")
-    assert code == 1 and "unknown peer 'moveit'" in err and "mplib" in err
+    code, _, err = run(capsys, "bench", "planners", "--planners", "RRT,EST", "--requests", "1")
+    assert code == 2 and "Invalid value for '--planners': 'EST' is not one of RRTConnect, RRT," in err
+    code, _, err = run(capsys, "bench", "planners", "--peer", "moveit", "--requests", "1")
+    assert code == 2 and "Invalid value for '--peer': 'moveit' is not one of 'none', 'mplib'" in err
 
 
 def test_version_short_help_and_completion(capsys):

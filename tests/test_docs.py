@@ -164,7 +164,7 @@ def test_command_lines_name_real_commands_and_options(doc: Path):
 
 def test_command_line_check_catches_mistakes():
     assert _check_command_line("recon register /tmp/scans --voxel 0.002") == []
-    assert _check_command_line("$ MUJOCO_GL=egl recon bench ik --n 50  # --nonsense") == []
+    assert _check_command_line("$ MUJOCO_GL=egl recon bench ik --poses 50  # --nonsense") == []
     assert _check_command_line("recon bench ik|sim|planners") == []
     assert _check_command_line("recon run SCRIPT [--out DIR] [--backend sim|hardware]") == []
     assert _check_command_line("recon bench ...") == []
@@ -172,6 +172,7 @@ def test_command_line_check_catches_mistakes():
     assert _check_command_line("recon bench imaginary")
     assert _check_command_line("recon register DIR --voxels 0.002")
     assert _check_command_line("recon ik --n 4")
+    assert _check_command_line("recon bench ik --n 50")
 
 
 def test_the_readme_shows_the_main_commands():

@@ -100,9 +100,10 @@ def _one_usage_error(capsys, argv: list[str], needle: str) -> str:
 
 
 @pytest.mark.parametrize(("argv", "needle"), [
-    (["autoscan", "--m", "999999999999"], "Invalid value for '--m'"),
-    (["autoscan", "--m", "100000000", "--n", "2"], "less than or equal to 1000"),
-    (["autoscan", "--n", "201"], "Invalid value for '--n'"),
+    (["autoscan", "--m", "999999999999"], "Invalid value for '--candidates' / '-m' / '--m'"),
+    (["autoscan", "-m", "100000000", "--n", "2"], "less than or equal to 1000"),
+    (["autoscan", "--n", "201"], "Invalid value for '--scans' / '-n' / '--n'"),
+    (["autoscan", "--scans", "1"], "Invalid value for '--scans' / '-n' / '--n'"),
     (["autoscan", "--sigma", "1e300"], "Invalid value for '--sigma'"),
     (["autoscan", "--scale", "1e300"], "Invalid value for '--scale'"),
     (["ik", "-r", "1e300"], "Invalid value for '--radius' / '-r'"),
@@ -124,13 +125,13 @@ def _one_usage_error(capsys, argv: list[str], needle: str) -> str:
     (["replay", "x", "--depth-scale", "1e300"], "Invalid value for '--depth-scale'"),
     (["batch", "x.yaml", "--timeout", "1e300"], "Invalid value for '--timeout'"),
     (["calibrate", "intrinsics", "x", "--min-corners", "99999999"], "Invalid value for '--min-corners'"),
-    (["bench", "ik", "--n", "1000000000"], "Invalid value for '--n'"),
+    (["bench", "ik", "--poses", "1000000000"], "Invalid value for '--poses'"),
     (["bench", "sequence", "--runs", "1000000000"], "Invalid value for '--runs'"),
-    (["bench", "viewplan", "--n", "100000"], "Invalid value for '--n'"),
+    (["bench", "viewplan", "-n", "100000"], "Invalid value for '--scans' / '-n' / '--n'"),
     (["bench", "viewplan", "--dc", "1e300"], "Invalid value for '--dc'"),
-    (["bench", "planners", "--n", "1000000000"], "Invalid value for '--n'"),
-    (["bench", "planners", "--time-limit", "1e300"], "Invalid value for '--time-limit'"),
-    (["bench", "planners", "--peer-n", "1000000000"], "Invalid value for '--peer-n'"),
+    (["bench", "planners", "--requests", "1000000000"], "Invalid value for '--requests'"),
+    (["bench", "planners", "--planning-time", "1e300"], "Invalid value for '--planning-time'"),
+    (["bench", "planners", "--peer-requests", "1000000000"], "Invalid value for '--peer-requests'"),
     (["bench", "planners", "--shortcut-rounds", "1000000000"], "Invalid value for '--shortcut-rounds'"),
 ])
 def test_values_beyond_the_range_are_usage_errors(capsys, tmp_path, argv, needle):
@@ -151,11 +152,11 @@ def test_every_command_taking_a_view_bounds_it(capsys, command):
 
 def test_a_batch_file_checks_the_same_ranges(tmp_path, capsys):
     batch = tmp_path / "b.yaml"
-    batch.write_text("name: t\njobs:\n  - name: a\n    autoscan: {n: 2, m: 999999999999}\n"
+    batch.write_text("name: t\njobs:\n  - name: a\n    autoscan: {scans: 2, candidates: 999999999999}\n"
                      "  - name: b\n    capture: {alpha: 1e300}\n")
     assert main(["batch", str(batch), "--list"]) == 1
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "autoscan.m: Invalid value for '--m'" in err, err
+    assert err.count("\n") == 1 and "autoscan.candidates: Invalid value for '--candidates' / '-m' / '--m'" in err, err
 
 
 def test_the_view_planner_refuses_more_samples_than_its_bound():
@@ -198,8 +199,8 @@ def test_a_view_and_ik_refuse_absurd_values_without_numpy_warnings():
 @pytest.mark.parametrize(("argv", "needle"), [
     (["ik", "--object-box", "1e300,0.3,0.3"], "--object-box '1e300,0.3,0.3' has an edge beyond 10 m"),
     (["autoscan", "--initial", "1e300,0"], "--initial '1e300,0' is outside theta ±180°, phi ±720°"),
-    (["register", "x", "--box", "0,0,1e300,0.3,0.3,0.3"], "the centre must lie within ±100 m"),
-    (["register", "x", "--box", "0,0,0.8,11,0.3,0.3"], "sizes be at most 10 m"),
+    (["register", "x", "--crop-box", "0,0,1e300,0.3,0.3,0.3"], "the centre must lie within ±100 m"),
+    (["register", "x", "--crop-box", "0,0,0.8,11,0.3,0.3"], "sizes be at most 10 m"),
 ])
 def test_numbers_in_text_options_are_bounded_too(capsys, tmp_path, argv, needle):
     code = main(argv + (["--out", str(tmp_path / "out")] if argv[0] == "autoscan" else []))

@@ -124,10 +124,10 @@ COMMANDS = {
     "autoscan": (lambda t: ["autoscan", "--object", "bottle"], None, "--force"),
     "replay": (lambda t: ["replay", str(_store(t))], None, "--force"),
     "register": (lambda t: ["register", str(_store(t))], None, "--force"),
-    "calibrate handeye": (lambda t: ["calibrate", "handeye"], None, "--overwrite"),
+    "calibrate handeye": (lambda t: ["calibrate", "handeye"], None, "--force"),
     "calibrate intrinsics": (lambda t: ["calibrate", "intrinsics", str(_store(t))], None, "--force"),
     "batch": (lambda t: ["batch", str(_batch_file(t))], "--resume", "--force"),
-    "bench ik": (lambda t: ["bench", "ik", "--n", "1"], None, "--force"),
+    "bench ik": (lambda t: ["bench", "ik", "--poses", "1"], None, "--force"),
     "bench sim": (lambda t: ["bench", "sim"], None, "--force"),
     "bench registration": (lambda t: ["bench", "registration"], None, "--force"),
     "bench sequence": (lambda t: ["bench", "sequence", "--quick"], None, "--force"),
@@ -208,8 +208,8 @@ def test_force_never_removes_an_input(tmp_path):
     out = tmp_path / "cal"
     (out / "scans" / "scan_0000").mkdir(parents=True)
     (out / "handeye.json").write_text("{}")
-    with pytest.raises(FileError, match=r"--overwrite would remove .*scans, which this command reads"):
-        claim_output(out, OutputMode.FORCE, command="calibrate handeye", force="--overwrite",
+    with pytest.raises(FileError, match=r"--force would remove .*scans, which this command reads"):
+        claim_output(out, OutputMode.FORCE, command="calibrate handeye", force="--force",
                      inputs=(out / "scans",))
     with pytest.raises(FileError, match="which this command reads"):  # the folder itself is the input
         claim_output(out / "scans", OutputMode.FORCE, command="register", inputs=(out / "scans",))
@@ -415,7 +415,7 @@ def test_register_force_removes_nothing_when_no_scan_is_usable(capture_store, tm
     shutil.copytree(capture_store, store)
     (store / "reconstruction").mkdir()
     (store / "reconstruction" / "cloud.ply").write_text("earlier")
-    assert main(["register", str(store), "--no-board", "--box", "5,5,5,0.1,0.1,0.1", "--force"]) == 1
+    assert main(["register", str(store), "--no-board", "--crop-box", "5,5,5,0.1,0.1,0.1", "--force"]) == 1
     assert "points inside the crop box" in one_error_line(capsys)
     assert (store / "reconstruction" / "cloud.ply").read_text() == "earlier"
 

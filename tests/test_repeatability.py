@@ -151,7 +151,7 @@ def test_planner_bench_twice_with_one_seed(tmp_path):
     runs = []
     for k in (1, 2):
         out = tmp_path / f"bench{k}"
-        _invoke("bench", "planners", "--planners", "RRTConnect,BITstar", "--n", "20", "--seed", "3",
+        _invoke("bench", "planners", "--planners", "RRTConnect,BITstar", "--requests", "20", "--seed", "3",
                 "--out", str(out))
         runs.append(_files(out, "bench_planners.json"))
     _assert_same(*runs)

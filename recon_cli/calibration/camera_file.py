@@ -1,7 +1,7 @@
 """A calibrated camera (pinhole intrinsics and lens distortion) and its YAML file.
 
 The file is what ``recon calibrate intrinsics`` writes and what ``recon calibrate handeye
---intrinsics`` (and a realism profile's ``camera.assumed``) reads::
+--camera-file`` (and a realism profile's ``camera.assumed``) reads::
 
     format: 1
     camera:              # exactly the keys of a realism profile's camera.assumed

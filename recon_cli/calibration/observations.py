@@ -64,7 +64,7 @@ def scan_observations(folder: Path, board: BoardSpec, kin, camera: CameraCalibra
     folder = Path(folder)
     if not folder.is_dir():
         raise FileError(f"scan store {folder} does not exist", hint="record board views first "
-                                                                    "(recon calibrate handeye without --scans)")
+                                                                    "(recon calibrate handeye without --scan-store)")
     store = ScanStore(folder)
     folders = store.scan_folders()
     if not folders:

@@ -134,6 +134,7 @@ def _main(command, argv: list[str] | None) -> int:
             return 0
         where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
         message = exc.format_message() if hasattr(exc, "format_message") else str(exc)
+        message = message.replace(": Value error, ", ": ")  # a bad choice, as the type check words it
         err_console.print(f"error: {message}{where}", markup=False, soft_wrap=True)
         return int(getattr(exc, "exit_code", 2))
     return result if isinstance(result, int) else 0

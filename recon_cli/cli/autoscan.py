@@ -20,14 +20,17 @@ from recon_cli.cli.options import (
     ResolutionOpt,
     SafetyOpt,
     ScaleOpt,
+    ScansOpt,
     SeedOpt,
     check_record,
     make_view,
+    object_metavar,
+    object_option,
     output_folder,
     parse_vector,
     realism_profile,
 )
-from recon_cli.config import VIEWPLAN_M, VIEWPLAN_N, VIEWPLAN_SIGMA
+from recon_cli.config import VIEWPLAN_M, VIEWPLAN_SIGMA
 from recon_cli.errors import InputError
 
 _V = D.viewplan
@@ -36,22 +39,25 @@ _V = D.viewplan
 @app.command()
 def autoscan(
     dc: DcOpt = _V.d_c,
-    n: Annotated[int, typer.Option("--n", min=VIEWPLAN_N[0], max=VIEWPLAN_N[1],
-                                   help="Scans in total (the initial one included).")] = _V.n,
-    object_name: Annotated[str, typer.Option("--object", help="Object to scan (built-in, YCB or mesh file).")]
+    n: ScansOpt = _V.n,
+    object_name: Annotated[str, typer.Option("--object", metavar=object_metavar(True), callback=object_option(True),
+                                             help="Object to scan (built-in, YCB or mesh file; 'auto': the drill "
+                                                  "if the YCB data is here, else the built-in bottle).")]
     = "bottle",
     scale: ScaleOpt = D.scene.object_scale,
-    m: Annotated[int, typer.Option("--m", min=VIEWPLAN_M[0], max=VIEWPLAN_M[1],
-                                   help="Preliminary samples per view (eq. 2.7).")] = _V.m,
+    m: Annotated[int, typer.Option("--candidates", "-m", "--m", min=VIEWPLAN_M[0], max=VIEWPLAN_M[1],
+                                   help="Preliminary samples (candidate views) per view (the thesis' m, "
+                                        "eq. 2.7).")] = _V.m,
     sigma: Annotated[float, typer.Option(min=VIEWPLAN_SIGMA[0], max=VIEWPLAN_SIGMA[1],
                                          help="Potential-field regularization (eq. 2.6).")] = _V.sigma,
     initial: Annotated[str | None, typer.Option(help="Initial view 'theta,phi' in degrees around the object's box "
                                                      "centre at r = dc + 0.1 (default 45,0).")] = None,
-    cell: CellOpt = D.cell.kind.value,
+    cell: CellOpt = D.cell.kind,
     safety: SafetyOpt = D.cell.safety_distance,
     resolution: ResolutionOpt = D.sensor.resolution,
     pictures: Annotated[bool, typer.Option("--pictures/--no-pictures", help="A PNG per iteration.")] = True,
-    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/autoscan-<time>).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default runs/autoscan-<time>).")]
+    = None,
     seed: SeedOpt = D.seed,
     station: Annotated[Path | None, typer.Option(help="Station file: run on the robot and camera adapters it names "
                                                       "(docs/hardware.md); default: the simulation.")] = None,
@@ -65,9 +71,11 @@ def autoscan(
     from recon_cli.config import SceneConfig
     from recon_cli.console import console, progress_bar
     from recon_cli.robot.description import CellConfig, CellKind
+    from recon_cli.session import resolve_object_name
     from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions
 
     check_record(record)
+    object_name = resolve_object_name(object_name)
     config = D.replace(
         cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
         scene=SceneConfig(object_name, scale), sensor=replace(D.sensor, resolution=resolution), seed=seed,

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import typer
 
@@ -20,15 +20,16 @@ def batch(
         metavar="SOURCES", help="Batch files (.yaml), scripts (.xml) or quoted globs of them ('scripts/*.xml'), "
                                 "run in this order.",
         show_default=False)],
-    out: Annotated[Path | None, typer.Option(help="Batch folder (default runs/batch-<time>): a folder per job, "
-                                                  "junit.xml, summary.json, summary.md, index.html.")] = None,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="Batch folder (default runs/batch-<time>): a folder "
+                                                                 "per job, junit.xml, summary.json, summary.md, "
+                                                                 "index.html.")] = None,
     workers: Annotated[int, typer.Option(min=1, max=1024, help="Jobs at once on this machine (or worker "
                                                                "processes of --cluster local).")] = 1,
     scheduler: Annotated[str | None, typer.Option(envvar="DASK_SCHEDULER_ADDRESS", help="Run the jobs on the Dask "
                                                   "cluster of this scheduler, e.g. tcp://host:8786 (env "
                                                   "DASK_SCHEDULER_ADDRESS).")] = None,
-    cluster: Annotated[str | None, typer.Option(help="'local': start a Dask LocalCluster of --workers "
-                                                     "processes for the batch.")] = None,
+    cluster: Annotated[Literal["local"] | None, typer.Option(help="'local': start a Dask LocalCluster of --workers "
+                                                                  "processes for the batch.")] = None,
     timeout: Annotated[float | None, typer.Option(min=1.0, max=604_800.0, help="Timeout per job attempt [s] for "
                                                   "jobs that set none (replaces the batch file's default; default "
                                                   "3600; at most a week).")] = None,

@@ -6,38 +6,55 @@ The tables are drawn by :mod:`recon_cli.bench.render`; this module parses and ca
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import typer
 
 from recon_cli.cli.app import bench_app
 from recon_cli.cli.options import (
-    PLANNING_TIME_RANGE,
     CellOpt,
     D,
     DcOpt,
     ForceOpt,
+    PlanningTimeOpt,
     RealismOpt,
     ResolutionOpt,
     SafetyOpt,
+    ScansOpt,
     SeedOpt,
-    choices,
     make_cell,
-    one_of,
+    name_list,
+    object_metavar,
+    object_names,
+    object_option,
     output_folder,
     realism_profile,
+    split_names,
 )
-from recon_cli.config import VIEWPLAN_N
+from recon_cli.planning.options import PLANNERS, SIMPLIFICATIONS
+from recon_cli.viewplan.policy import Method
 
-OutOpt = Annotated[Path | None, typer.Option(help="Output folder (default runs/bench-<name>-<time>).")]
+OutOpt = Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default "
+                                                                 "runs/bench-<name>-<time>).")]
+#: the cases of ``recon bench sequence`` for its help (the parser checks recon_cli.bench.sequence.CASES,
+#: which loads the planner, when a command line is parsed)
+SEQUENCE_CASES = ("A", "B", "C", "D", "A0")
+#: the peers ``recon bench planners`` can compare with
+PEERS = ("none", "mplib")
+
+
+def _sequence_cases() -> tuple[str, ...]:
+    from recon_cli.bench.sequence import CASES
+
+    return CASES
 
 
 @bench_app.command("ik")
 def bench_ik(
-    n: Annotated[int, typer.Option("--n", min=1, max=100_000, help="Number of camera poses.")] = 500,
+    n: Annotated[int, typer.Option("--poses", min=1, max=100_000, help="Number of camera poses.")] = 500,
     solutions: Annotated[int, typer.Option(min=1, max=32, help="Solutions asked per pose in the second run.")]
     = D.planner.ik_solutions,
-    cell: CellOpt = D.cell.kind.value,
+    cell: CellOpt = D.cell.kind,
     safety: SafetyOpt = D.cell.safety_distance,
     seed: SeedOpt = D.seed,
     out: OutOpt = None,
@@ -62,7 +79,8 @@ def bench_ik(
 
 @bench_app.command("sim")
 def bench_sim(
-    object_name: Annotated[str, typer.Option("--object", help="Object on the board.")] = "drill",
+    object_name: Annotated[str, typer.Option("--object", metavar=object_metavar(True), callback=object_option(True),
+                                             help="Object on the board.")] = "drill",
     seed: SeedOpt = D.seed,
     out: OutOpt = None,
     force: ForceOpt = False,
@@ -86,8 +104,9 @@ def bench_sim(
 
 @bench_app.command("registration")
 def bench_registration(
-    object_name: Annotated[str, typer.Option("--object", help="Object ('auto': the drill if the YCB data is "
-                                                              "here, else the bottle).")] = D.scene.object_name,
+    object_name: Annotated[str, typer.Option("--object", metavar=object_metavar(True), callback=object_option(True),
+                                             help="Object ('auto': the drill if the YCB data is here, else the "
+                                                  "bottle).")] = D.scene.object_name,
     resolution: Annotated[float, typer.Option(min=0.1, max=1.0, help="Image size relative to 1600 x 1200.")]
     = D.sensor.resolution,
     seed: SeedOpt = D.seed,
@@ -115,8 +134,10 @@ def bench_registration(
 def bench_sequence(
     runs: Annotated[int, typer.Option("--runs", min=1, max=10_000, help="Runs per case.")] = 500,
     quick: Annotated[bool, typer.Option("--quick", help="CI mode: 3 runs per case.")] = False,
-    cases: Annotated[str, typer.Option(help="Comma-separated cases: A, B, C, D (ours), A0 (recon run's "
-                                            "default order).")] = "A,B,C,D,A0",
+    cases: Annotated[str, typer.Option(metavar="<" + "|".join(SEQUENCE_CASES) + ">,...",
+                                       callback=name_list(_sequence_cases),
+                                       help="Comma-separated cases: A, B, C, D (ours), A0 (recon run's default "
+                                            "order).")] = "A,B,C,D,A0",
     seed: SeedOpt = D.seed,
     out: OutOpt = None,
     force: ForceOpt = False,
@@ -125,10 +146,10 @@ def bench_sequence(
     from dataclasses import asdict
 
     from recon_cli.bench import render
-    from recon_cli.bench.sequence import CASES, ecdf_png, run_sequence_bench, summarize
+    from recon_cli.bench.sequence import ecdf_png, run_sequence_bench, summarize
     from recon_cli.console import console, progress_bar, write_json
 
-    chosen = choices(cases, CASES, "case")
+    chosen = split_names(cases)
     folder = output_folder(out, "bench sequence", force=force).path
     n = 3 if quick else runs
     plan = D.planner
@@ -147,14 +168,17 @@ def bench_sequence(
 
 @bench_app.command("viewplan")
 def bench_viewplan(
-    objects: Annotated[str, typer.Option(help="Comma-separated objects (default: the built-ins).")]
+    objects: Annotated[str, typer.Option(metavar=object_metavar(False)[:-1] + ">,...",
+                                         callback=name_list(lambda: object_names(False), files=True),
+                                         help="Comma-separated objects: names or mesh files (default: the "
+                                              "built-ins).")]
     = "wood_block,toy_blocks,bottle,mug",
-    methods: Annotated[str, typer.Option(help="Comma-separated: ellipsoid, sphere, random.")] \
-        = "ellipsoid,sphere,random",
-    n: Annotated[int, typer.Option("--n", min=VIEWPLAN_N[0], max=VIEWPLAN_N[1], help="Scans per run.")]
-    = D.viewplan.n,
+    methods: Annotated[str, typer.Option(metavar="<" + "|".join(m.value for m in Method) + ">,...",
+                                         callback=name_list(lambda: [m.value for m in Method]),
+                                         help="Comma-separated view planning methods.")] = "ellipsoid,sphere,random",
+    n: ScansOpt = D.viewplan.n,
     dc: DcOpt = D.viewplan.d_c,
-    cell: CellOpt = D.cell.kind.value,
+    cell: CellOpt = D.cell.kind,
     resolution: ResolutionOpt = D.sensor.resolution,
     seed: SeedOpt = D.seed,
     realism: RealismOpt = D.realism.name,
@@ -168,13 +192,12 @@ def bench_viewplan(
     from recon_cli.bench.viewplan import coverage_png, run_viewplan_bench
     from recon_cli.console import console, progress_bar, write_json
     from recon_cli.robot.description import CellConfig, CellKind
-    from recon_cli.workflows.autoscan import METHODS
 
-    chosen = choices(methods, METHODS, "method")
+    chosen = split_names(methods)
     profile = realism_profile(realism)
     folder = output_folder(out, "bench viewplan", force=force, inputs=(Path(realism),)).path
     with progress_bar() as update:
-        rows = run_viewplan_bench(folder, [o.strip() for o in objects.split(",") if o.strip()], chosen, n, dc, seed,
+        rows = run_viewplan_bench(folder, split_names(objects), chosen, n, dc, seed,
                                   resolution, CellConfig(kind=CellKind.parse(cell)), update, profile)
     write_json(folder / "bench_viewplan.json", {"n": n, "d_c": dc, "cell": cell, "realism": profile.summary(),
                                                 "resolution": resolution, "rows": [asdict(r) for r in rows]})
@@ -186,16 +209,18 @@ def bench_viewplan(
 
 @bench_app.command("planners")
 def bench_planners(
-    n: Annotated[int, typer.Option("--n", min=1, max=100_000, help="Requests per planner.")] = 1000,
-    planners: Annotated[str, typer.Option(help="Comma-separated OMPL planners, or 'default'.")] = "default",
-    time_limit: Annotated[float, typer.Option(min=PLANNING_TIME_RANGE[0], max=PLANNING_TIME_RANGE[1],
-                                              help="Time limit per request [s].")] = D.planner.time_limit,
-    quick: Annotated[bool, typer.Option(help="CI mode: 10 requests of RRTConnect and RRT.")] = False,
-    peer: Annotated[str, typer.Option(help="Also run a peer on the same problem: 'mplib' or 'none'.")] = "none",
-    peer_n: Annotated[int, typer.Option(min=1, max=10_000, help="Requests for the peer (per RRT range tried).")]
-    = 200,
-    simplify: Annotated[str, typer.Option(help="Path simplification: shortcut, reduce, full or none.")]
-    = D.planner.simplify,
+    n: Annotated[int, typer.Option("--requests", min=1, max=100_000, help="Requests per planner.")] = 1000,
+    planners: Annotated[str, typer.Option(metavar="<" + "|".join(PLANNERS) + ">,...|default",
+                                          callback=name_list(lambda: PLANNERS, keyword="default"),
+                                          help="Comma-separated OMPL planners, or 'default' (those of the "
+                                               "table in docs/benchmarks.md).")] = "default",
+    time_limit: PlanningTimeOpt = D.planner.time_limit,
+    quick: Annotated[bool, typer.Option("--quick", help="CI mode: 10 requests of RRTConnect and RRT.")] = False,
+    peer: Annotated[Literal[PEERS], typer.Option(help="Also run a peer on the same problem: 'mplib' or 'none'.")]
+    = "none",
+    peer_n: Annotated[int, typer.Option("--peer-requests", min=1, max=10_000,
+                                        help="Requests for the peer (per RRT range tried).")] = 200,
+    simplify: Annotated[Literal[SIMPLIFICATIONS], typer.Option(help="Path simplification.")] = D.planner.simplify,
     shortcut_rounds: Annotated[int, typer.Option(min=1, max=100, help="Rounds of per-joint shortcuts (shortcut).")]
     = D.planner.shortcut_rounds,
     seed: SeedOpt = D.seed,
@@ -208,11 +233,8 @@ def bench_planners(
     from recon_cli.bench import render
     from recon_cli.bench.planners import DEFAULT_PLANNERS, run_planner_bench, thesis_times, write_results
     from recon_cli.console import console, progress_bar
-    from recon_cli.planning.options import PLANNERS
-
-    one_of(peer, ("none", "mplib"), "peer")
     options = replace(D.planner, simplify=simplify, shortcut_rounds=shortcut_rounds)
-    names = list(DEFAULT_PLANNERS) if planners == "default" else choices(planners, PLANNERS, "planner")
+    names = list(DEFAULT_PLANNERS) if planners.strip() == "default" else split_names(planners)
     if quick:
         names, n = ["RRTConnect", "RRT"], min(n, 10)
     folder = output_folder(out, "bench planners", force=force).path

@@ -8,6 +8,8 @@ from typing import Annotated
 
 import typer
 
+from recon_cli.calibration.handeye import HandEyeMethod
+from recon_cli.calibration.intrinsics import DistortionModel
 from recon_cli.cli.app import app
 from recon_cli.cli.options import (
     CellOpt,
@@ -17,8 +19,8 @@ from recon_cli.cli.options import (
     ResolutionOpt,
     SafetyOpt,
     SeedOpt,
-    one_of,
     output_folder,
+    realism_option,
 )
 from recon_cli.errors import InputError, UnknownNameError
 
@@ -26,23 +28,18 @@ calibrate_app = typer.Typer(help="Calibration from views of the ChArUco board: c
                                  "the hand-eye transform.", no_args_is_help=True, rich_markup_mode=None)
 app.add_typer(calibrate_app, name="calibrate")
 
-BoardOpt = Annotated[str | None, typer.Option(help="Another board than the cell's (robot/board.yaml): "
-                                                   "squares_x,squares_y,square,marker,DICTIONARY, e.g. "
-                                                   "5,7,0.04,0.02,DICT_6X6_250 (lengths in metres): 2 ... 100 "
-                                                   "squares per side, no more markers (squares_x * squares_y "
-                                                   "// 2) than the dictionary holds, lengths in (0, 1] m, the "
-                                                   "marker smaller than the square.")]
-METHODS = ("tsai", "park", "horaud", "andreff", "daniilidis", "shah", "li")
-MODELS = ("k1k2p1p2k3", "k1k2p1p2", "k1k2", "none")
-
-
-#: squares per side of a --board, and the range of its square and marker lengths [m]
+BoardOpt = Annotated[str | None, typer.Option(
+    "--board-spec", help="Another board than the cell's (robot/board.yaml): squares_x,squares_y,square,marker,"
+                         "DICTIONARY, e.g. 5,7,0.04,0.02,DICT_6X6_250 (lengths in metres): 2 ... 100 squares per "
+                         "side, no more markers (squares_x * squares_y // 2) than the dictionary holds, lengths in "
+                         "(0, 1] m, the marker smaller than the square.")]
+#: squares per side of a --board-spec, and the range of its square and marker lengths [m]
 BOARD_SQUARES = (2, 100)
 BOARD_LENGTH = 1.0
 
 
 def parse_board(text: str | None):
-    """The BoardSpec of ``--board`` (None: the cell's board): 2 ... 100 squares per side, at
+    """The BoardSpec of ``--board-spec`` (None: the cell's board): 2 ... 100 squares per side, at
     most as many markers (squares_x * squares_y // 2) as the dictionary holds, lengths in
     (0, 1] m and the marker smaller than the square; anything else is a one-line error."""
     if text is None:
@@ -58,70 +55,70 @@ def parse_board(text: str | None):
         sx, sy, square, marker = int(parts[0]), int(parts[1]), float(parts[2]), float(parts[3])
         name = parts[4].upper()
     except ValueError:
-        raise InputError(f"--board '{text}' is not squares_x,squares_y,square,marker,DICTIONARY",
+        raise InputError(f"--board-spec '{text}' is not squares_x,squares_y,square,marker,DICTIONARY",
                          hint="e.g. 5,7,0.04,0.02,DICT_6X6_250 (lengths in metres)") from None
     dictionaries = sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_") and not n.endswith("_SIZE"))
     if name not in dictionaries:
         raise UnknownNameError("ArUco dictionary", name, dictionaries)
     lo, hi = BOARD_SQUARES
     if not (lo <= sx <= hi and lo <= sy <= hi):
-        raise InputError(f"--board '{text}': {sx} x {sy} squares is outside {lo} ... {hi} per side",
+        raise InputError(f"--board-spec '{text}': {sx} x {sy} squares is outside {lo} ... {hi} per side",
                          hint="e.g. 5,7,0.04,0.02,DICT_6X6_250")
     if not (0 < square <= BOARD_LENGTH and 0 < marker <= BOARD_LENGTH):  # NaN too
-        raise InputError(f"--board '{text}': square and marker lengths must lie in (0, {BOARD_LENGTH:g}] m",
+        raise InputError(f"--board-spec '{text}': square and marker lengths must lie in (0, {BOARD_LENGTH:g}] m",
                          hint="give them in metres, e.g. 5,7,0.04,0.02,DICT_6X6_250")
     if marker >= square:
-        raise InputError(f"--board '{text}': the marker ({marker:g} m) must be smaller than the square "
+        raise InputError(f"--board-spec '{text}': the marker ({marker:g} m) must be smaller than the square "
                          f"({square:g} m)", hint="e.g. 5,7,0.04,0.02,DICT_6X6_250")
     markers = sx * sy // 2
     size = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name)).bytesList.shape[0]
     if markers > size:
-        raise InputError(f"--board '{text}': {sx} x {sy} squares hold {markers} markers, more than the "
+        raise InputError(f"--board-spec '{text}': {sx} x {sy} squares hold {markers} markers, more than the "
                          f"{size} of {name}", hint="use fewer squares or a larger dictionary, e.g. DICT_6X6_1000")
     return BoardSpec(sx, sy, square, marker, name)
 
 
 @calibrate_app.command("handeye")
 def handeye(
-    scans: Annotated[Path | None, typer.Option(help="Scan store of board views to calibrate from (any workflow's, "
-                                                    "e.g. a script run's <out>/scans); default: record the "
-                                                    "generated views first.")] = None,
-    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/handeye-<time>).")] = None,
-    views: Annotated[int, typer.Option(min=3, max=200, help="Generated board views to record (tilted up to 48 deg, "
-                                                            "rolled up to 35 deg, around the board).")] = 20,
-    method: Annotated[str, typer.Option(help="OpenCV solver: tsai, park, horaud, andreff, daniilidis "
-                                             "(calibrateHandEye) or shah, li (calibrateRobotWorldHandEye); all are "
-                                             "computed and compared, this one is written.")] = "tsai",
+    scans: Annotated[Path | None, typer.Option("--scan-store", help="Scan store of board views to calibrate from "
+                                                                    "(any workflow's, e.g. a script run's "
+                                                                    "<out>/scans); default: record the generated "
+                                                                    "views first.")] = None,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default runs/handeye-<time>).")]
+    = None,
+    views: Annotated[int, typer.Option("--board-views", min=3, max=200, help="Generated board views to record "
+                                                                             "(tilted up to 48 deg, rolled up to "
+                                                                             "35 deg, around the board).")] = 20,
+    method: Annotated[HandEyeMethod, typer.Option(help="OpenCV solver: tsai, park, horaud, andreff, daniilidis "
+                                                       "(calibrateHandEye) or shah, li (calibrateRobotWorldHandEye); "
+                                                       "all are computed and compared, this one is written.")]
+    = HandEyeMethod.TSAI,
     refine: Annotated[bool, typer.Option("--refine/--no-refine", help="Refine the solution together with the "
                                                                       "robot base's error (docs/calibration.md).")]
     = True,
-    intrinsics: Annotated[Path | None, typer.Option(help="Calibrated camera (intrinsics.yaml of recon calibrate "
-                                                         "intrinsics); default: the scans' own intrinsics.")] = None,
+    intrinsics: Annotated[Path | None, typer.Option("--camera-file", help="Calibrated camera (intrinsics.yaml of "
+                                                                           "recon calibrate intrinsics); default: "
+                                                                           "the scans' own intrinsics.")] = None,
     station: Annotated[Path | None, typer.Option(help="Station file: record with its adapters and cell, and write "
                                                       "the result into its hand_eye (old file kept as .bak).")]
     = None,
     write: Annotated[bool, typer.Option("--write/--no-write", help="Write the result into the station file.")]
     = True,
-    force: Annotated[bool, typer.Option("--force", help="Write even when the views are poorly posed (warnings).")]
-    = False,
+    force_write: Annotated[bool, typer.Option("--force-write", help="Write into the station file even when the "
+                                                                    "views are poorly posed (warnings).")] = False,
     board: BoardOpt = None,
     resolution: ResolutionOpt = D.sensor.resolution,
     noise: Annotated[bool, typer.Option("--noise/--no-noise", help="Sensor noise of the simulation.")]
     = D.sensor.noise,
-    cell: CellOpt = D.cell.kind.value,
+    cell: CellOpt = D.cell.kind,
     safety: SafetyOpt = D.cell.safety_distance,
     seed: SeedOpt = D.seed,
     realism: RealismOpt = D.realism.name,
-    overwrite: Annotated[bool, typer.Option("--overwrite", help="Use a non-empty --out: first remove what recon "
-                                                                "wrote there (links only as links; the rest stays; "
-                                                                "docs/architecture.md); without it --out must be "
-                                                                "new or empty (--force is about the station file).")]
-    = False,
+    force: ForceOpt = False,
 ) -> None:
     """Hand-eye calibration: flange_T_camera (and the board in the world) from board views."""
     import numpy as np
 
-    from recon_cli.calibration.handeye import HandEyeMethod
     from recon_cli.calibration.views import BoardViewOptions
     from recon_cli.cli.options import realism_profile
     from recon_cli.config import SensorConfig
@@ -129,14 +126,13 @@ def handeye(
     from recon_cli.robot.description import CellConfig, CellKind
     from recon_cli.workflows.calibrate import HandEyeOptions, run_handeye
 
-    one_of(method, METHODS, "hand-eye method")
     config = D.replace(cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
                        sensor=SensorConfig(noise, resolution), seed=seed, realism=realism_profile(realism))
     spec = parse_board(board)
-    folder = output_folder(out, "calibrate handeye", default="handeye", force=overwrite, force_option="--overwrite",
+    folder = output_folder(out, "calibrate handeye", default="handeye", force=force,
                            inputs=(scans, intrinsics, station, Path(realism))).path
-    options = HandEyeOptions(folder, config, scans, BoardViewOptions(n=views), HandEyeMethod(method), refine,
-                             intrinsics, station, write, force, spec)
+    options = HandEyeOptions(folder, config, scans, BoardViewOptions(n=views), method, refine,
+                             intrinsics, station, write, force_write, spec)
     with progress_bar() as update:
         r = run_handeye(options, update)
     if r.recorded is not None:
@@ -148,7 +144,7 @@ def handeye(
         console.print(styled(f"{s.name} not used:", "yellow", f" {s.reason}"))
     if intrinsics is None:
         console.print("board poses seen with the scans' own intrinsics (uncalibrated: calibrate the camera with "
-                      "recon calibrate intrinsics and pass --intrinsics)")
+                      "recon calibrate intrinsics and pass --camera-file)")
     t = np.array([x.translation for x in r.residuals]) * 1e3
     a = np.degrees([x.rotation for x in r.residuals])
     console.print(f"{r.views} views; closed-chain residual per view: RMS {np.sqrt(np.mean(t**2)):.3f} mm "
@@ -174,7 +170,7 @@ def handeye(
         console.print(f"written into {r.station_written} (hand_eye; the old file is {r.station_backup})")
     elif station is not None and write:
         console.print(styled("not written", "yellow", f" into {station}: the views are poorly posed (see the "
-                                                      "warnings); record more views or pass --force"))
+                                                      "warnings); record more views or pass --force-write"))
     console.print(f"report: {r.folder / 'handeye.json'}\nhand_eye block: {r.folder / 'hand_eye.yaml'}\n"
                   f"figure: {r.folder / 'handeye_residuals.png'}")
 
@@ -182,33 +178,31 @@ def handeye(
 @calibrate_app.command("intrinsics")
 def intrinsics(
     source: Annotated[Path, typer.Argument(help="Folder of board images, or a scan store (its colour images).")],
-    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/intrinsics-<time>).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default runs/intrinsics-<time>).")]
+    = None,
     pattern: Annotated[str, typer.Option(help="Which files of an image folder (a glob inside it: relative, no "
                                               "'..'), e.g. 'img_*.jpg'.")] = "*",
-    model: Annotated[str, typer.Option(help="Distortion coefficients to fit: k1k2p1p2k3 (OpenCV's default), "
-                                            "k1k2p1p2, k1k2 or none.")] = "k1k2p1p2k3",
+    model: Annotated[DistortionModel, typer.Option(help="Distortion coefficients to fit: k1k2p1p2k3 (OpenCV's "
+                                                        "default), k1k2p1p2, k1k2 or none.")] = DistortionModel.FULL,
     board: BoardOpt = None,
     min_corners: Annotated[int, typer.Option(min=4, max=10_000, help="Board corners an image needs to take "
                                                                       "part.")] = 8,
-    profile: Annotated[str | None, typer.Option(help="Realism profile (ideal, thesis or FILE.yaml) to copy into "
-                                                     "<out>/realism.yaml with the calibration as its assumed camera "
-                                                     "(simulated sessions then use it: --realism that file).")]
-    = None,
+    profile: Annotated[str | None, realism_option("Realism profile (ideal, thesis or FILE.yaml) to copy into "
+                                                  "<out>/realism.yaml with the calibration as its assumed camera "
+                                                  "(simulated sessions then use it: --realism that file).")] = None,
     force: ForceOpt = False,
 ) -> None:
     """Camera calibration (intrinsics and lens distortion) from images of the ChArUco board."""
     import numpy as np
 
-    from recon_cli.calibration.intrinsics import DistortionModel
     from recon_cli.console import console, styled
     from recon_cli.workflows.calibrate import IntrinsicsOptions, check_pattern, run_intrinsics
 
-    one_of(model, MODELS, "distortion model")
     check_pattern(pattern)
     spec = parse_board(board)
     folder = output_folder(out, "calibrate intrinsics", default="intrinsics", force=force,
                            inputs=(source, None if profile is None else Path(profile))).path
-    run = run_intrinsics(IntrinsicsOptions(Path(source), folder, spec, pattern, DistortionModel(model), min_corners,
+    run = run_intrinsics(IntrinsicsOptions(Path(source), folder, spec, pattern, model, min_corners,
                                            profile))
     r = run.result
     K = r.camera.intrinsics

@@ -26,11 +26,12 @@ from recon_cli.cli.options import (
     make_view,
 )
 from recon_cli.errors import ReconError
+from recon_cli.geometry.view import Frame
 
 
 @app.command()
 def cell(
-    cell: CellOpt = D.cell.kind.value,
+    cell: CellOpt = D.cell.kind,
     safety: SafetyOpt = D.cell.safety_distance,
     urdf: Annotated[Path | None, typer.Option(help="Also write the expanded URDF to this file.")] = None,
 ) -> None:
@@ -62,13 +63,13 @@ def ik(
     theta: ThetaOpt = THETA,
     phi: PhiOpt = 0.0,
     alpha: AlphaOpt = 0.0,
-    frame: FrameOpt = "world",
+    frame: FrameOpt = Frame.WORLD,
     object_box: Annotated[
         str | None, typer.Option(help="Object bounding box on the table centre, sx,sy,sz [m]; 'none' for no box.")
     ] = "0.3,0.3,0.3",
     solutions: Annotated[int, typer.Option(min=1, max=32, help="How many distinct solutions to look for.")]
     = D.planner.ik_solutions,
-    cell: CellOpt = D.cell.kind.value,
+    cell: CellOpt = D.cell.kind,
     safety: SafetyOpt = D.cell.safety_distance,
     seed: SeedOpt = D.seed,
 ) -> None:

@@ -7,15 +7,16 @@ Open3D), so ``recon --help`` shows the same numbers a run uses.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from recon_cli.config import DEFAULTS, VIEWPLAN_DC
+from recon_cli.config import DEFAULTS, VIEWPLAN_DC, VIEWPLAN_N
 from recon_cli.errors import InputError, UnknownNameError
-from recon_cli.geometry.view import MAX_COORDINATE, MAX_RADIUS
+from recon_cli.geometry.view import MAX_COORDINATE, MAX_RADIUS, Frame
+from recon_cli.robot.description import CellKind
 
 D = DEFAULTS
 
@@ -51,7 +52,90 @@ def _focus(value: str | None) -> str | None:
     return value
 
 
-CellOpt = Annotated[str, typer.Option("--cell", help="gantry (9 DoF, linear axes) or ceiling (7 DoF).")]
+def names_of(values: Iterable) -> tuple[str, ...]:
+    """The names of enum members (their values) or of plain names."""
+    return tuple(str(getattr(v, "value", v)) for v in values)
+
+
+def names_text(names: Iterable[str], last: str = "or") -> str:
+    """'a, b or c'."""
+    names = tuple(names)
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} {last} {names[-1]}"
+
+
+def name_list(allowed: Callable[[], Iterable[str]], *, keyword: str | None = None,
+              files: bool = False) -> Callable[[str | None], str | None]:
+    """The callback of an option that takes comma-separated names, each one of ``allowed()``
+    (called when a command line is parsed, not for --help), ``keyword`` alone, or (``files``)
+    a file path: anything else is a usage error (exit 2) naming the choices."""
+
+    def check(value: str | None) -> str | None:
+        if value is None or (keyword is not None and value.strip() == keyword):
+            return value
+        names = tuple(allowed())
+        chosen = split_names(value)
+        if not chosen:
+            raise typer.BadParameter(f"{value!r} names nothing; give one or more of {', '.join(names)}")
+        for name in chosen:
+            if name not in names and not (files and looks_like_file(name)):
+                alternatives = [*names, *([keyword] if keyword else []), *(["a mesh FILE"] if files else [])]
+                raise typer.BadParameter(f"{name!r} is not one of {names_text(alternatives)}")
+        return value
+
+    return check
+
+
+def split_names(text: str) -> list[str]:
+    """'a, b' -> ['a', 'b']."""
+    return [x.strip() for x in text.split(",") if x.strip()]
+
+
+def looks_like_file(name: str) -> bool:
+    """A name that can only be a file path (a separator, a dot or a suffix in it)."""
+    return any(ch in name for ch in "/\\.") or bool(Path(name).suffix)
+
+
+def object_names(auto: bool) -> tuple[str, ...]:
+    """The objects recon knows by name (built-in and YCB, present here or not), and 'auto'."""
+    from recon_cli.objects import BUILTIN, ycb_names
+
+    return (*BUILTIN, *ycb_names(), *(("auto",) if auto else ()))
+
+
+def object_option(auto: bool) -> Callable[[str | None], str | None]:
+    """The callback of --object: a known object (built-in or YCB, present or not), 'auto'
+    where the command takes it, or a mesh file; anything else is a usage error."""
+    check = name_list(lambda: object_names(auto), files=True)
+
+    def one(value: str | None) -> str | None:
+        if value is not None and "," in value:
+            raise typer.BadParameter(f"{value!r} is more than one object; give one name or mesh FILE")
+        return check(value)
+
+    return one
+
+
+def object_metavar(auto: bool) -> str:
+    return "<" + "|".join((*object_names(auto), "FILE")) + ">"
+
+
+def _realism(value: str | None) -> str | None:
+    """--realism: a built-in profile or a YAML file (load_profile reads it when the command runs)."""
+    from recon_cli.realism import BUILT_IN
+
+    if value is None or value in BUILT_IN or Path(value).suffix.lower() in (".yaml", ".yml") or Path(value).exists():
+        return value
+    raise typer.BadParameter(f"{value!r} is not one of {', '.join(BUILT_IN)} or a profile FILE.yaml")
+
+
+def _realism_metavar() -> str:
+    from recon_cli.realism import BUILT_IN
+
+    return "<" + "|".join((*BUILT_IN, "FILE.yaml")) + ">"
+
+
+CellOpt = Annotated[CellKind, typer.Option("--cell", help="The cell: gantry (9 DoF, linear axes) or ceiling "
+                                                          "(7 DoF).")]
 SafetyOpt = Annotated[float, typer.Option("--safety", min=SAFETY_RANGE[0], max=SAFETY_RANGE[1],
                                           help="Safety distance [m] that inflates every collision shape.")]
 SeedOpt = Annotated[int, typer.Option("--seed", min=0, max=2**32 - 1,
@@ -65,17 +149,28 @@ ThetaOpt = Annotated[float, typer.Option("--theta", min=-MAX_THETA, max=MAX_THET
 PhiOpt = Annotated[float, typer.Option("--phi", min=-MAX_TURN, max=MAX_TURN, help="Azimuth [deg].")]
 AlphaOpt = Annotated[float, typer.Option("--alpha", min=-MAX_TURN, max=MAX_TURN,
                                          help="Camera roll about its viewing axis [deg].")]
-FrameOpt = Annotated[str, typer.Option("--frame", help="Frame of f and the angles: world or marker.")]
+FrameOpt = Annotated[Frame, typer.Option("--frame", help="Frame of f and the angles.")]
 ResolutionOpt = Annotated[float, typer.Option(min=0.05, max=1.0, help="Image size relative to 1600 x 1200.")]
 ScaleOpt = Annotated[float, typer.Option("--scale", min=SCALE_RANGE[0], max=SCALE_RANGE[1],
                                          help="Scale of a mesh file (0.001 for millimetres).")]
 PlanningTimeOpt = Annotated[float, typer.Option("--planning-time", min=PLANNING_TIME_RANGE[0],
-                                                max=PLANNING_TIME_RANGE[1], help="Planning time limit [s].")]
+                                                max=PLANNING_TIME_RANGE[1],
+                                                help="Planning time limit per request [s].")]
 DcOpt = Annotated[float, typer.Option("--dc", min=VIEWPLAN_DC[0], max=VIEWPLAN_DC[1],
                                       help="Camera distance to the ellipsoid [m].")]
-RealismOpt = Annotated[str, typer.Option("--realism", help="How real the simulated cell is: 'ideal' (the model "
-                                                           "itself), 'thesis' (errors of the thesis' cell) or a "
-                                                           "profile FILE.yaml (docs/simulation.md).")]
+REALISM_HELP = ("How real the simulated cell is: 'ideal' (the model itself), 'thesis' (errors of the thesis' cell) "
+                "or a profile FILE.yaml (docs/simulation.md).")
+
+
+def realism_option(help_text: str = REALISM_HELP):
+    """--realism: a built-in realism profile or a profile file."""
+    return typer.Option("--realism", metavar=_realism_metavar(), callback=_realism, help=help_text)
+
+
+RealismOpt = Annotated[str, realism_option()]
+#: -n: the number of scans of a view-planning run (the thesis' n; ``--n`` as the thesis writes it)
+ScansOpt = Annotated[int, typer.Option("--scans", "-n", "--n", min=VIEWPLAN_N[0], max=VIEWPLAN_N[1],
+                                       help="Scans in total (the initial one included; the thesis' n).")]
 ForceOpt = Annotated[bool, typer.Option("--force", help="Use a non-empty --out: first remove what recon wrote there "
                                                       "(links only as links; the rest stays; "
                                                       "docs/architecture.md); without it --out must be new or "
@@ -157,24 +252,6 @@ def make_view(focus: str, radius: float, theta: float, phi: float, alpha: float,
     except ValueError:
         raise UnknownNameError("frame", frame, [f.value for f in Frame]) from None
     return View.from_degrees(parse_vector(focus, 3, "--focus", "metres"), radius, theta, phi, alpha, ref)
-
-
-def choices(text: str, allowed: Iterable[str], what: str) -> list[str]:
-    """Parse 'a,b' into names, each one of ``allowed`` (else a one-line error)."""
-    allowed = tuple(allowed)
-    chosen = [x.strip() for x in text.split(",") if x.strip()]
-    for x in chosen:
-        if x not in allowed:
-            raise UnknownNameError(what, x, allowed)
-    return chosen
-
-
-def one_of(value: str, allowed: Iterable[str], what: str) -> str:
-    """``value`` if it is one of ``allowed``, else a one-line error naming the choices."""
-    allowed = tuple(allowed)
-    if value not in allowed:
-        raise UnknownNameError(what, value, allowed)
-    return value
 
 
 def index_list(text: str, option: str, n: int) -> list[int]:

@@ -17,7 +17,8 @@ from recon_cli.cli.options import ForceOpt, output_folder, parse_vector
 def replay(
     source: Annotated[Path, typer.Argument(help="Recording: a scan store or a folder of colour/depth images with "
                                                 "intrinsics.json and a poses file.")],
-    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/replay-<time>).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default runs/replay-<time>).")]
+    = None,
     voxel: Annotated[float, typer.Option(min=0.0005, max=0.5, help="Registration voxel and finest ICP "
                                                                    "correspondence distance [m].")] = 0.02,
     depth_scale: Annotated[float, typer.Option(min=1e-6, max=1e6, help="Depth image units per metre (image folders).")]

@@ -4,7 +4,7 @@ the assessment of what came out."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import typer
 
@@ -34,39 +34,46 @@ from recon_cli.cli.options import (
     check_record,
     index_list,
     make_view,
-    one_of,
+    object_metavar,
+    object_option,
     output_folder,
     parse_vector,
     positive,
     realism_profile,
 )
 from recon_cli.errors import FileError, InputError
+from recon_cli.geometry.view import Frame
+from recon_cli.planning.options import PLANNERS
 
+#: the view sets of ``recon capture --views``
 VIEW_SETS = ("single", "eq-4.1")
 
 
 @app.command()
 def capture(
     object_name: Annotated[
-        str, typer.Option("--object", help="Built-in object, YCB object or mesh file; 'auto': the drill if the "
-                                           "YCB data is here, else the built-in bottle.")] = D.scene.object_name,
+        str, typer.Option("--object", metavar=object_metavar(True), callback=object_option(True),
+                          help="Built-in object, YCB object or mesh file; 'auto': the drill if the YCB data is here, "
+                               "else the built-in bottle.")] = D.scene.object_name,
     scale: ScaleOpt = D.scene.object_scale,
     focus: FocusOpt = FOCUS,
     radius: RadiusOpt = RADIUS,
     theta: ThetaOpt = THETA,
     phi: PhiOpt = 0.0,
     alpha: AlphaOpt = 0.0,
-    frame: FrameOpt = "world",
-    out: Annotated[Path | None, typer.Option(help="Session folder (default runs/capture-<time>).")] = None,
+    frame: FrameOpt = Frame.WORLD,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="Session folder (default runs/capture-<time>).")]
+    = None,
     noise: Annotated[bool, typer.Option("--noise/--no-noise", help="Depth noise model on or off.")] = D.sensor.noise,
     resolution: ResolutionOpt = D.sensor.resolution,
-    planner: Annotated[str, typer.Option(help="OMPL planner.")] = D.planner.planner,
+    planner: Annotated[Literal[PLANNERS], typer.Option(help="OMPL planner.")] = D.planner.planner,
     planning_time: PlanningTimeOpt = D.planner.time_limit,
-    cell: CellOpt = D.cell.kind.value,
+    cell: CellOpt = D.cell.kind,
     safety: SafetyOpt = D.cell.safety_distance,
     seed: SeedOpt = D.seed,
-    views: Annotated[str, typer.Option(help="'single' (the view given by --focus ... --alpha) or 'eq-4.1' "
-                                            "(the thesis' 24 views around f = (0, 0, 0.78) m, r = 0.6 m).")] = "single",
+    views: Annotated[Literal[VIEW_SETS], typer.Option(help="'single' (the view given by --focus ... --alpha) or "
+                                                           "'eq-4.1' (the thesis' 24 views around f = (0, 0, 0.78) "
+                                                           "m, r = 0.6 m).")] = "single",
     cover_board: Annotated[str, typer.Option(help="Views (1-based, comma-separated) with a sheet over the "
                                                   "ChArUco board, e.g. '3,7'.")] = "",
     station: Annotated[Path | None, typer.Option(help="Station file: run on the robot and camera adapters it names "
@@ -91,7 +98,7 @@ def capture(
 
     check_record(record)
     object_name = resolve_object_name(object_name)
-    if one_of(views, VIEW_SETS, "view set") == "single":
+    if views == "single":
         view_list = (make_view(focus, radius, theta, phi, alpha, frame),)
     else:
         from recon_cli.thesis import eq_4_1_views
@@ -131,21 +138,25 @@ def capture(
 
 
 _R = D.registration
+_CROP_FRAME = Frame(_R.box_frame)
 
 
 @app.command()
 def register(
     folder: Annotated[Path, typer.Argument(help="Scan store folder (simulated or recorded).")],
-    out: Annotated[Path | None, typer.Option(help="Output folder (default <folder>/reconstruction).")] = None,
-    box: Annotated[str | None, typer.Option(help="Crop box cx,cy,cz,sx,sy,sz [m] (default: the session's "
-                                                 "object box).")] = None,
-    box_frame: Annotated[str, typer.Option(help="Frame of --box: world or marker.")] = _R.box_frame,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default "
+                                                                 "<folder>/reconstruction).")] = None,
+    crop_box: Annotated[str | None, typer.Option(help="Crop box cx,cy,cz,sx,sy,sz [m] (default: the session's "
+                                                      "object box).")] = None,
+    crop_frame: Annotated[Frame, typer.Option(help="Frame of --crop-box.")] = _CROP_FRAME,
     board: Annotated[bool, typer.Option("--board/--no-board", help="Use the ChArUco board (else kinematics "
                                                                    "for every scan).")] = _R.use_board,
     local: Annotated[bool, typer.Option("--local/--global-only", help="Pose-graph local registration.")]
     = _R.local,
-    loop_closures: Annotated[str, typer.Option(help="Initialize loop closures by 'icp' or with the 'global' "
-                                                    "alignment (the thesis).")] = _R.multiway.loop_closure_init,
+    loop_closures: Annotated[Literal["icp", "global"], typer.Option(help="Initialize loop closures by 'icp' or "
+                                                                         "with the 'global' alignment (the "
+                                                                         "thesis).")]
+    = _R.multiway.loop_closure_init,
     voxel: Annotated[float, typer.Option(min=0.0001, max=0.1, help="Voxel of the fused cloud [m].")] = _R.surface.voxel,
     depth: Annotated[int, typer.Option(min=5, max=12, help="Poisson octree depth.")] = _R.surface.poisson_depth,
     trim: Annotated[float, typer.Option(min=0.0, max=0.5, help="Poisson density quantile trimmed.")]
@@ -167,20 +178,18 @@ def register(
     from recon_cli.workflows.register import register_folder
 
     check_record(record)
-    one_of(box_frame, ("world", "marker"), "box frame")
-    one_of(loop_closures, ("icp", "global"), "loop closure initialization")
     crop = None
-    if box is not None:
-        v = parse_vector(box, 6, "--box", "metres")
+    if crop_box is not None:
+        v = parse_vector(crop_box, 6, "--crop-box", "metres")
         if min(v[3:]) <= 0:
-            raise InputError(f"--box {box}: sizes must be positive", hint="cx,cy,cz,sx,sy,sz in metres")
+            raise InputError(f"--crop-box {crop_box}: sizes must be positive", hint="cx,cy,cz,sx,sy,sz in metres")
         if max(v[3:]) > MAX_BOX_EDGE or max(map(abs, v[:3])) > MAX_COORDINATE:
-            raise InputError(f"--box {box}: the centre must lie within ±{MAX_COORDINATE:g} m and the sizes be at "
-                             f"most {MAX_BOX_EDGE:g} m", hint="cx,cy,cz,sx,sy,sz in metres")
+            raise InputError(f"--crop-box {crop_box}: the centre must lie within ±{MAX_COORDINATE:g} m and the sizes "
+                             f"be at most {MAX_BOX_EDGE:g} m", hint="cx,cy,cz,sx,sy,sz in metres")
         T = np.eye(4)
         T[:3, 3] = v[:3]
         crop = CropBox(T, tuple(v[3:]))
-    options = replace(_R, box=crop, box_frame=box_frame, use_board=board, local=local,
+    options = replace(_R, box=crop, box_frame=crop_frame.value, use_board=board, local=local,
                       multiway=replace(_R.multiway, loop_closure_init=loop_closures),
                       surface=replace(_R.surface, voxel=voxel, poisson_depth=depth, density_quantile=trim))
     if not Path(folder).is_dir():
@@ -217,6 +226,7 @@ def register(
         console.print(f"page: {page.path}")
 
 
+#: how ``recon evaluate`` aligns the reconstruction to the reference
 ALIGNMENTS = ("none", "icp")
 
 
@@ -225,12 +235,14 @@ def evaluate(
     reconstruction: Annotated[Path, typer.Argument(help="Reconstructed cloud or mesh (PLY, ...).")],
     reference: Annotated[Path, typer.Option(help="Reference mesh (ground truth).")],
     tolerance: Annotated[float, typer.Option(min=1e-5, max=0.1, help="Coverage tolerance [m].")] = 0.001,
-    views: Annotated[Path | None, typer.Option(help="Scan store whose camera poses define the visible "
-                                                    "surface (coverage of what could be seen).")] = None,
-    align: Annotated[str, typer.Option(help="'none' (frames agree) or 'icp' (register the reconstruction "
-                                            "to the reference first, reported).")] = "none",
+    scan_store: Annotated[Path | None, typer.Option(help="Scan store whose camera poses define the visible "
+                                                         "surface (coverage of what could be seen).")] = None,
+    align: Annotated[Literal[ALIGNMENTS], typer.Option(help="'none' (frames agree) or 'icp' (register the "
+                                                            "reconstruction to the reference first, reported).")]
+    = "none",
     samples: Annotated[int, typer.Option(min=1000, max=5_000_000, help="Reference surface samples.")] = 200_000,
-    out: Annotated[Path | None, typer.Option(help="Output folder (default: beside the reconstruction).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default: beside the "
+                                                                 "reconstruction).")] = None,
 ) -> None:
     """Signed distances to a reference mesh, their statistics and histogram, and coverage."""
     import numpy as np
@@ -238,7 +250,6 @@ def evaluate(
     from recon_cli.console import console
     from recon_cli.reconstruction.assessment import run_evaluate
 
-    one_of(align, ALIGNMENTS, "alignment")
     target = out or reconstruction.parent
     if target.is_dir():  # beside another command's results: only its two files, never through a link
         from recon_cli.outputs import OutputMode, claim_output
@@ -246,7 +257,7 @@ def evaluate(
         stem = reconstruction.stem
         claim_output(target, OutputMode.APPEND, command="evaluate",
                      names=(f"{stem}_evaluation.json", f"{stem}_distances.png"))
-    result = run_evaluate(reconstruction, reference, tolerance, views, align, samples, target)
+    result = run_evaluate(reconstruction, reference, tolerance, scan_store, align, samples, target)
     e = result.evaluation
     console.print(f"{e.points} points: signed distance mean {e.mean * 1e3:+.4f} mm, std {e.std * 1e3:.4f} mm, "
                   f"RMS {e.rms * 1e3:.4f} mm; " + ", ".join(f"{k}: {v * 100:.1f} %" for k, v in e.within.items()))

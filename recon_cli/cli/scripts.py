@@ -9,18 +9,20 @@ import typer
 
 from recon_cli.cli.app import app
 from recon_cli.cli.options import (
+    REALISM_HELP,
     D,
     ForceOpt,
     RecordOpt,
     SeedOpt,
     check_record,
-    one_of,
+    object_metavar,
+    object_option,
     output_folder,
+    realism_option,
     realism_profile,
 )
-
-BACKENDS = ("sim", "hardware")
-SEQUENCE_METHODS = ("ours", "thesis")
+from recon_cli.scripts.state import SequenceMethod
+from recon_cli.session import Backend
 
 
 @app.command()
@@ -51,15 +53,17 @@ RUN_EPILOG = ("Exit codes: 0 every command done; 1 error before or outside the c
 @app.command("run", epilog=RUN_EPILOG)
 def run_script(
     script: Annotated[Path, typer.Argument(help="Automation script (recon or thesis dialect).")],
-    out: Annotated[Path | None, typer.Option(help="Output folder (default runs/run-<time>).")] = None,
-    backend: Annotated[str | None, typer.Option(help="'sim' or 'hardware' (overrides the script).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default runs/run-<time>).")] = None,
+    backend: Annotated[Backend | None, typer.Option(help="The backend (overrides the script).")] = None,
     dry_run: Annotated[bool, typer.Option("--dry-run", help="Plan every move, move nothing, scan nothing.")] = False,
-    object_name: Annotated[str | None, typer.Option("--object", help="Simulated object (overrides the script; "
-                                                                     "default: the drill if present).")] = None,
+    object_name: Annotated[str | None, typer.Option("--object", metavar=object_metavar(True),
+                                                    callback=object_option(True),
+                                                    help="Simulated object (overrides the script; default: the "
+                                                         "drill if present).")] = None,
     optimize: Annotated[bool | None, typer.Option("--optimize/--no-optimize", help="Reorder independent moves "
                                                   "and scans (default: as the script says).")] = None,
-    sequence_method: Annotated[str, typer.Option(help="'ours' (local search) or 'thesis' (Tables 2.2/2.3).")]
-    = "ours",
+    sequence_method: Annotated[SequenceMethod, typer.Option(help="'ours' (local search) or 'thesis' (Tables "
+                                                                 "2.2/2.3).")] = SequenceMethod.OURS,
     seed: SeedOpt = D.seed,
     append: Annotated[bool, typer.Option("--append", help="Add this run's scans to the scan store already in "
                                                           "--out (same cell and object); without it --out must "
@@ -68,10 +72,8 @@ def run_script(
                                                                           "failed (default: exit 3).")] = False,
     station: Annotated[Path | None, typer.Option(help="Station file: run on the robot and camera adapters it names "
                                                       "(docs/hardware.md); default: the simulation.")] = None,
-    realism: Annotated[str | None, typer.Option("--realism", help="How real the simulated cell is: 'ideal', "
-                                                                  "'thesis' or a profile FILE.yaml (overrides the "
-                                                                  "script's <cell realism=...>; docs/simulation.md)."
-                                                )] = None,
+    realism: Annotated[str | None, realism_option(REALISM_HELP + " Overrides the script's <cell realism=...>.")]
+    = None,
     record: RecordOpt = False,
     force: ForceOpt = False,
 ) -> None:
@@ -80,14 +82,10 @@ def run_script(
     from recon_cli.interrupts import stop_signals
     from recon_cli.scripts.checks import check_backend, check_script
     from recon_cli.scripts.loader import load_script
-    from recon_cli.scripts.state import RunOptions, SequenceMethod
-    from recon_cli.session import Backend
+    from recon_cli.scripts.state import RunOptions
     from recon_cli.workflows.script_run import ScriptRunner
 
-    if backend is not None:
-        one_of(backend, BACKENDS, "backend")
     check_record(record)
-    one_of(sequence_method, SEQUENCE_METHODS, "sequence method")
     s = load_script(script)
     check_script(s, object_override=object_name)  # before the output folder is made
     check_backend(s, backend, station, dry_run)
@@ -95,8 +93,8 @@ def run_script(
     folder = output_folder(out, "run", append=append, force=force,
                            append_hint="--append to add this run's scans to the scan store in it",
                            inputs=(script, station, None if realism is None else Path(realism))).path
-    options = RunOptions(folder, None if backend is None else Backend(backend), seed, dry_run, object_name, optimize,
-                         SequenceMethod(sequence_method), append, station, profile, record)
+    options = RunOptions(folder, backend, seed, dry_run, object_name, optimize, sequence_method, append, station,
+                         profile, record)
     with stop_signals(), progress_bar() as update:
         result = ScriptRunner(s, options, update).run()
     counts: dict[str, int] = {}

@@ -57,7 +57,7 @@ def camera_views(folder: Path) -> list[CameraView]:
 
     store = ScanStore(folder)
     if not store.indices():
-        raise FileError(f"{folder} holds no scans", hint="--views takes a scan store folder")
+        raise FileError(f"{folder} holds no scans", hint="--scan-store takes a scan store folder")
     sensor = motioncam_3d_m()
     return [CameraView(s.world_T_camera_fk, s.intrinsics, sensor.z_min, sensor.z_max, sensor.max_incidence)
             for s in store]

@@ -176,7 +176,7 @@ def read_session(root: Path) -> SessionInfo:
         return SessionInfo(created=0.0)
     data = load_json(path, "session.json", MAX_METADATA_BYTES)
     check(data, "session.schema.json", path, "session.json",
-          hint="repair or remove session.json (without it, pass the crop box with --box)")
+          hint="repair or remove session.json (without it, pass the crop box with --crop-box)")
     for key, value in (("world_T_marker", data.get("world_T_marker")),
                        ("object.world_T_object", (data.get("object") or {}).get("world_T_object"))):
         if value is not None:

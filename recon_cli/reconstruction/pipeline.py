@@ -148,7 +148,7 @@ def _crop_box(options: RegisterOptions, session: SessionInfo, world_T_marker: np
     if box is None:
         spec = session.crop_box
         if spec is None:
-            raise InputError("the session has no crop box", hint="pass --box cx,cy,cz,sx,sy,sz")
+            raise InputError("the session has no crop box", hint="pass --crop-box cx,cy,cz,sx,sy,sz")
         T = np.eye(4)
         T[:3, 3] = spec.center
         box, frame = CropBox(T, tuple(spec.size)), spec.frame
@@ -156,7 +156,7 @@ def _crop_box(options: RegisterOptions, session: SessionInfo, world_T_marker: np
         return box
     if world_T_marker is None:
         raise InputError("the crop box is in the world frame but the session has no world_T_marker",
-                         hint="give the box in the marker frame (--box-frame marker)")
+                         hint="give the box in the marker frame (--crop-frame marker)")
     return box.moved(invert(world_T_marker))
 
 
@@ -279,7 +279,7 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
         reasons = sorted({r.skipped for r in records})
         shown = "; ".join(reasons[:3]) + (f"; and {len(reasons) - 3} more" if len(reasons) > 3 else "")
         raise InputError(f"none of the {len(records)} scans of {folder} can be used ({shown})",
-                         hint="check the crop box (--box), the scan files and that the board or joint data "
+                         hint="check the crop box (--crop-box), the scan files and that the board or joint data "
                               "is recorded")
     t_global = time.perf_counter()
 

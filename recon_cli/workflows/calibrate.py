@@ -11,7 +11,7 @@ A calibration run writes into its own folder::
     <out>/intrinsics.yaml         camera calibration (recon_cli.calibration.camera_file)
     <out>/intrinsics.json         its statistics, per view
     <out>/intrinsics_reprojection.png
-    <out>/realism.yaml            (--profile) a realism profile whose assumed camera is the calibration
+    <out>/realism.yaml            (--realism) a realism profile whose assumed camera is the calibration
 
 With a station file, the hand-eye result is written into it (``hand_eye``), so every later
 run with ``--station`` plans and computes forward kinematics with it.
@@ -97,7 +97,7 @@ def record_board_views(out: Path, config: Config = DEFAULTS, views: BoardViewOpt
 # --------------------------------------------------------------------- hand-eye
 class HandEyeStatus(StrEnum):
     OK = "ok"  #: written (when there is a station file to write into)
-    WARNINGS = "warnings"  #: poorly posed (too few or too similar views): not written without --force
+    WARNINGS = "warnings"  #: poorly posed (too few or too similar views): not written without --force-write
 
 
 @dataclass(frozen=True)
@@ -274,7 +274,7 @@ def run_handeye(opt: HandEyeOptions, progress: Progress | None = None) -> HandEy
         raise InputError(f"the board was found in {len(obs)} of the scans in {scans}; hand-eye calibration needs 3 "
                          f"or more" + (f" ({'; '.join(why)})" if why else ""),
                          hint="record views the robot reaches with the whole board in sight (your own script's "
-                              "scans with --scans; docs/calibration.md)")
+                              "scans with --scan-store; docs/calibration.md)")
     methods = {m: solve_hand_eye(obs, m) for m in HandEyeMethod}
     solution, base_rotation, chain = methods[opt.method], None, obs
     if opt.refine:
@@ -439,7 +439,7 @@ def run_intrinsics(opt: IntrinsicsOptions) -> IntrinsicsRun:
              "created": time.strftime("%Y-%m-%d %H:%M:%S")}
     camera_file = write_camera_file(out / "intrinsics.yaml", result.camera, stats,
                                     comment="recon calibrate intrinsics: the camera's intrinsics [px] and OpenCV "
-                                            "distortion;\nuse with recon calibrate handeye --intrinsics, or as a "
+                                            "distortion;\nuse with recon calibrate handeye --camera-file, or as a "
                                             "realism profile's camera.assumed")
     report = out / "intrinsics.json"
     write_json(report, {**result.to_dict(), "source": str(opt.source), "board": dataclasses.asdict(board),

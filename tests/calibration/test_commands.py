@@ -1,4 +1,4 @@
-"""The calibrate commands: a user's mistake is one line with exit code 1."""
+"""The calibrate commands: a user's mistake is one line, exit code 1 (2 for a value an option does not take)."""
 
 from __future__ import annotations
 
@@ -20,16 +20,17 @@ def test_help_lists_both_commands(capsys):
     assert code == 0 and "calibrateRobotWorldHandEye" in out and "--station" in out
 
 
-@pytest.mark.parametrize(("argv", "message"), [
-    (("handeye", "--scans", "{tmp}"), "holds no scan_NNNN folders"),
-    (("handeye", "--method", "kabsch", "--scans", "{tmp}"), "choose one of: tsai, park"),
-    (("handeye", "--scans", "{tmp}/none"), "does not exist"),
-    (("intrinsics", "{tmp}", "--board", "5,7,0.04,0.02,DICT_9X9"), "unknown ArUco dictionary 'DICT_9X9'"),
-    (("intrinsics", "{tmp}", "--board", "5,7,0.04"), "is not squares_x,squares_y,square,marker,DICTIONARY"),
-    (("intrinsics", "{tmp}"), "holds no images"),
-    (("intrinsics", "{tmp}", "--model", "fisheye"), "unknown distortion model 'fisheye'"),
+@pytest.mark.parametrize(("argv", "code", "message"), [
+    (("handeye", "--scan-store", "{tmp}"), 1, "holds no scan_NNNN folders"),
+    (("handeye", "--method", "kabsch", "--scan-store", "{tmp}"), 2,
+     "Invalid value for '--method': 'kabsch' is not one of 'tsai', 'park'"),
+    (("handeye", "--scan-store", "{tmp}/none"), 1, "does not exist"),
+    (("intrinsics", "{tmp}", "--board-spec", "5,7,0.04,0.02,DICT_9X9"), 1, "unknown ArUco dictionary 'DICT_9X9'"),
+    (("intrinsics", "{tmp}", "--board-spec", "5,7,0.04"), 1, "is not squares_x,squares_y,square,marker,DICTIONARY"),
+    (("intrinsics", "{tmp}"), 1, "holds no images"),
+    (("intrinsics", "{tmp}", "--model", "fisheye"), 2, "Invalid value for '--model': 'fisheye' is not one of "),
 ])
-def test_command_errors_are_one_line(tmp_path, capsys, argv, message):
-    code, out = _run(capsys, "calibrate", *[a.format(tmp=tmp_path) for a in argv], "--out", tmp_path / "o")
-    assert code == 1 and message in out, out
+def test_command_errors_are_one_line(tmp_path, capsys, argv, code, message):
+    got, out = _run(capsys, "calibrate", *[a.format(tmp=tmp_path) for a in argv], "--out", tmp_path / "o")
+    assert got == code and message in out, out
     assert len(out.strip().splitlines()) == 1

@@ -1,4 +1,4 @@
-"""What the calibrate commands read: a --board the dictionary can fill, within sane sizes;
+"""What the calibrate commands read: a --board-spec the dictionary can fill, within sane sizes;
 only files inside the image folder (no pattern out of it, no link leading out of it); and no
 message ever shows what a file holds."""
 
@@ -32,7 +32,7 @@ def _png(path, value: int = 128):
     return path
 
 
-# --------------------------------------------------------------------- --board
+# --------------------------------------------------------------------- --board-spec
 @pytest.mark.parametrize(("board", "message"), [
     ("99999,99999,0.04,0.02,DICT_6X6_250", "99999 x 99999 squares is outside 2 ... 100 per side"),
     ("2000,2000,0.04,0.02,DICT_6X6_250", "outside 2 ... 100 per side"),
@@ -48,9 +48,9 @@ def _png(path, value: int = 128):
 ])
 @pytest.mark.parametrize("command", ["intrinsics", "handeye"])
 def test_a_board_beyond_its_dictionary_or_sane_sizes_is_refused_at_once(tmp_path, capsys, board, message, command):
-    source = ("--scans", tmp_path) if command == "handeye" else (tmp_path,)
+    source = ("--scan-store", tmp_path) if command == "handeye" else (tmp_path,)
     t0 = time.perf_counter()
-    code, out = _run(capsys, "calibrate", command, *source, "--board", board, "--out", tmp_path / "o")
+    code, out = _run(capsys, "calibrate", command, *source, "--board-spec", board, "--out", tmp_path / "o")
     assert code == 1 and message in out and len(out.strip().splitlines()) == 1, out
     assert time.perf_counter() - t0 < 5.0
     assert not (tmp_path / "o").exists()

@@ -132,7 +132,7 @@ def _run(capsys, *argv) -> tuple[int, str]:
 
 
 def test_commands_write_into_the_station_file(board_views, intrinsics_run, tmp_path, capsys):
-    code, out = _run(capsys, "calibrate", "intrinsics", board_views, "--out", tmp_path / "i", "--profile", "thesis")
+    code, out = _run(capsys, "calibrate", "intrinsics", board_views, "--out", tmp_path / "i", "--realism", "thesis")
     assert code == 0, out
     assert "reprojection RMS" in out and (tmp_path / "i" / "intrinsics.yaml").exists()
     # the calibrated camera is what a simulated session with the written profile tells recon
@@ -151,7 +151,7 @@ def test_commands_write_into_the_station_file(board_views, intrinsics_run, tmp_p
     assert frame.intrinsics.fx == pytest.approx(small.intrinsics.fx) and frame.distortion == camera.distortion
     station = tmp_path / "cell.yaml"
     station.write_text("format: 1\nname: sim cell\nrobot: {adapter: sim}\ncamera: {adapter: sim}\n")
-    code, out = _run(capsys, "calibrate", "handeye", "--scans", board_views, "--intrinsics",
+    code, out = _run(capsys, "calibrate", "handeye", "--scan-store", board_views, "--camera-file",
                      tmp_path / "i" / "intrinsics.yaml", "--station", station, "--method", "park",
                      "--out", tmp_path / "h")
     assert code == 0, out

@@ -141,7 +141,7 @@ def test_errors(session, tmp_path, capsys):
     with pytest.raises(FileError, match="is not a folder"):
         run_register(tmp_path / "missing", tmp_path / "r")
     # a crop box beside the object: zero points after cropping, nothing written
-    assert main(["register", str(folder), "--box", "0.5,0.5,0.8,0.1,0.1,0.1", "--out", str(tmp_path / "r")]) == 1
+    assert main(["register", str(folder), "--crop-box", "0.5,0.5,0.8,0.1,0.1,0.1", "--out", str(tmp_path / "r")]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "points inside the crop box" in err
     assert not (tmp_path / "r").exists()

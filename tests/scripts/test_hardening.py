@@ -231,8 +231,8 @@ CASES = [
     ("negative seed", recon(MOVE), ["run", "{script}", "--seed", "-5", "--out", "{out}"], 2, ["--seed"]),
     ("seed too large", recon(MOVE), ["run", "{script}", "--seed", str(2**40), "--out", "{out}"], 2, ["--seed"]),
     ("missing script", None, ["validate", "@OUTSIDE@/../scripts/nope.xml"], 1, ["nope.xml", "does not exist"]),
-    ("unknown backend", recon(MOVE), ["run", "{script}", "--backend", "robotz", "--out", "{out}"], 1,
-     ["backend 'robotz'"]),
+    ("unknown backend", recon(MOVE), ["run", "{script}", "--backend", "robotz", "--out", "{out}"], 2,
+     ["--backend", "'robotz' is not one of 'sim', 'hardware'"]),
 ]
 
 

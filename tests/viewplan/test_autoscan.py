@@ -37,7 +37,7 @@ def test_autoscan_small(tmp_path, kind):
 
 def test_autoscan_cli_errors(tmp_path, capsys):
     assert main(["autoscan", "--n", "1", "--out", str(tmp_path / "a")]) != 0
-    assert main(["autoscan", "--object", "teapot", "--out", str(tmp_path / "b")]) == 1
+    assert main(["autoscan", "--object", "teapot", "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err
     assert "teapot" in err and "Traceback" not in err
 

@@ -435,7 +435,8 @@ def data_crop_box(frames: list[tuple[RGBDFrame, np.ndarray]], quantile: float = 
     pts = np.vstack([transform_points(T, backproject(f.depth[::stride, ::stride], _strided(f.intrinsics, stride)))
                      for f, T in frames])
     if len(pts) == 0:
-        raise InputError("the recording has no depth to derive a crop box from", hint="pass --box to recon register")
+        raise InputError("the recording has no depth to derive a crop box from",
+                         hint="pass --crop-box to recon register")
     lo, hi = np.quantile(pts, quantile, axis=0), np.quantile(pts, 1.0 - quantile, axis=0)
     pad = (hi - lo) * margin
     lo, hi = lo - pad, hi + pad
@@ -456,7 +457,7 @@ def import_recording(source: ReplayConfig | str | Path, store: Path, *, crop_box
     ``recon register STORE --no-board`` registers the frames from the recorded poses.
 
     crop_box: "auto" (around what the frames saw, ``data_crop_box``), (centre, size) [m] in
-    the recording's frame, or None (register needs --box then). Frames without a recorded
+    the recording's frame, or None (register needs --crop-box then). Frames without a recorded
     pose are refused (InputError). ``store`` must not hold scans yet.
     """
     from recon_cli.reconstruction.scan_store import Scan, ScanStore

@@ -24,9 +24,10 @@ def _options(name: str) -> dict[str, CommandOption]:
         longs = [o for o in getattr(p, "opts", ()) if o.startswith("--")]
         if not longs or type(p).__name__.endswith("Argument"):
             continue
-        key = longs[0][2:].replace("-", "_")
         off = next(iter(getattr(p, "secondary_opts", ()) or ()), None)
-        out[key] = CommandOption(key, longs[0], off, bool(getattr(p, "is_flag", False)))
+        for long in longs:  # every long name of an option is a key (autoscan's scans: and n:)
+            key = long[2:].replace("-", "_")
+            out[key] = CommandOption(key, long, off, bool(getattr(p, "is_flag", False)))
     return out
 
 
@@ -36,7 +37,8 @@ def _check(name: str, args: tuple[str, ...]) -> str | None:
         _command(name).make_context(f"recon {name}", list(args))
     except Exception as exc:  # the parser's BadParameter / UsageError
         fmt = getattr(exc, "format_message", None)
-        return fmt() if callable(fmt) else str(exc)
+        message = fmt() if callable(fmt) else str(exc)
+        return message.replace(": Value error, ", ": ")  # a bad choice, as the type check words it
     return None
 
 

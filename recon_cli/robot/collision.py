@@ -37,6 +37,7 @@ from recon_cli.robot.batch_fk import BatchFK
 from recon_cli.robot.kinematics import Kinematics
 from recon_cli.robot.motion_check import BatchChecker
 from recon_cli.robot.pair_field import PairField
+from recon_cli.robot.shapes import CollisionShape
 
 OBJECT_LINK = "object"
 _FIELD_CACHE: dict[tuple[str, str, str], PairField] = {}
@@ -64,22 +65,6 @@ class ObjectBox:
     @property
     def upper(self) -> np.ndarray:
         return np.asarray(self.center) + np.asarray(self.size) / 2.0
-
-
-@dataclass(frozen=True)
-class CollisionShape:
-    """One collision primitive. ``joint_T_shape`` places it in its pinocchio joint frame."""
-
-    name: str
-    link: str
-    joint: int  # pinocchio joint index the link moves with (0: fixed to the world)
-    kind: str  # box | capsule | cylinder | sphere
-    dims: tuple[float, ...]  # box (sx, sy, sz); capsule/cylinder (radius, length); sphere (r,)
-    joint_T_shape: np.ndarray
-
-    @property
-    def label(self) -> str:
-        return f"{self.link}/{self.name}"
 
 
 @dataclass(frozen=True)

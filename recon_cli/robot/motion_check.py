@@ -31,8 +31,8 @@ import numpy as np
 import pinocchio as pin
 
 if TYPE_CHECKING:
-    from recon_cli.robot.collision import CollisionShape
     from recon_cli.robot.pair_field import PairField
+    from recon_cli.robot.shapes import CollisionShape
 
 #: inflation of each level in units of max_step / 2 (coarse to fine, ratio 4)
 LEVELS = (16.0, 4.0, 1.0)

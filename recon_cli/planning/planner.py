@@ -32,6 +32,7 @@ from dataclasses import dataclass, replace
 from enum import StrEnum
 
 import numpy as np
+import numpy.typing as npt
 
 from recon_cli.planning.checks import TrajectoryCheck, check_trajectory
 from recon_cli.planning.options import PLANNERS, SIMPLIFICATIONS, PlanOptions  # noqa: F401 (re-exported)
@@ -58,7 +59,7 @@ class PlanResult:
     plan_time: float  # [s] search
     simplify_time: float  # [s]
     total_time: float  # [s] IK + search + simplification + timing + final check
-    path: np.ndarray | None = None  # (K, n) simplified waypoints
+    path: npt.NDArray[np.float64] | None = None  # (K, n) simplified waypoints
     trajectory: Trajectory | None = None
     check: TrajectoryCheck | None = None
     message: str = ""
@@ -166,7 +167,7 @@ class MotionPlanner:
         self._known_free: set[bytes] = set()  # configurations found free in this search
 
     # ------------------------------------------------------------------ validity
-    def _vec(self, state) -> np.ndarray:
+    def _vec(self, state) -> npt.NDArray[np.float64]:
         return np.array([state[i] for i in range(self.n)])
 
     def _state_valid(self, state) -> bool:
@@ -177,7 +178,7 @@ class MotionPlanner:
             self._known_free.add(q.tobytes())
         return valid
 
-    def _motion_valid(self, a: np.ndarray, b: np.ndarray) -> bool:
+    def _motion_valid(self, a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> bool:
         """States already found free (checked states, ends of free motions: the tree nodes)
         are not checked again as the end of a motion."""
         self.stats["motions"] += 1
@@ -195,13 +196,13 @@ class MotionPlanner:
         return obj
 
     # ------------------------------------------------------------------ requests
-    def _state(self, q: np.ndarray):
+    def _state(self, q: npt.NDArray[np.float64]):
         s = self.si.allocState()
         for i in range(self.n):
             s[i] = float(q[i])
         return s
 
-    def _config_problem(self, q: np.ndarray) -> str | None:
+    def _config_problem(self, q: npt.NDArray[np.float64]) -> str | None:
         lim = self.cell.limits
         if not lim.within_soft(q, tol=1e-9):
             return "outside the soft joint limits"
@@ -210,7 +211,7 @@ class MotionPlanner:
         a, b = self.cell.collision.check(q).pairs[0]
         return f"in collision ({a} with {b})"
 
-    def plan_to_joints(self, q_start: np.ndarray, q_goal: np.ndarray | list[np.ndarray],
+    def plan_to_joints(self, q_start: npt.NDArray[np.float64], q_goal: npt.NDArray[np.float64] | list[npt.NDArray[np.float64]],
                        seed: int = 0) -> PlanResult:
         """Plan from q_start to a joint goal (or to whichever of several goals is reached).
         ``seed`` (a non-negative integer) decides the random choices of the search and the
@@ -263,8 +264,8 @@ class MotionPlanner:
         return PlanResult(PlanStatus.TIMEOUT, opt.planner, plan_time, simplify_time, time.perf_counter() - t0,
                           message=f"{opt.planner} found no path within {opt.time_limit:g} s", attempts=attempts)
 
-    def _search(self, q_start: np.ndarray, goals: list[np.ndarray], time_limit: float, seed: int,
-                attempt: int) -> tuple[np.ndarray | None, float, float]:
+    def _search(self, q_start: npt.NDArray[np.float64], goals: list[npt.NDArray[np.float64]], time_limit: float, seed: int,
+                attempt: int) -> tuple[npt.NDArray[np.float64] | None, float, float]:
         """One OMPL search + simplification: (path (K, n) or None, search s, simplify s).
         The search's random generators are created after a restart of OMPL's seed sequence
         at (seed, attempt, 0), the simplifier's after one at (seed, attempt, 1)."""
@@ -322,7 +323,7 @@ class MotionPlanner:
                              for k in range(path_geo.getStateCount())])
         return path, search, simplify
 
-    def _time_and_check(self, path: np.ndarray) -> tuple[Trajectory, TrajectoryCheck]:
+    def _time_and_check(self, path: npt.NDArray[np.float64]) -> tuple[Trajectory, TrajectoryCheck]:
         """toppra along the path (a smooth spline through the waypoints); if that leaves the
         checked segments into a collision, stop-and-go along the segments themselves."""
         opt, lim = self.options, self.cell.limits
@@ -333,7 +334,7 @@ class MotionPlanner:
             check = check_trajectory(traj, self.cell, opt.velocity_scale, opt.acceleration_scale, opt.max_step)
         return traj, check
 
-    def plan_to_pose(self, q_start: np.ndarray, world_T_camera: np.ndarray,
+    def plan_to_pose(self, q_start: npt.NDArray[np.float64], world_T_camera: npt.NDArray[np.float64],
                      rng: np.random.Generator, what: str = "view") -> PlanResult:
         """Plan to a camera pose: IK (several solutions, raises when none), then plan to any."""
         ik = self.cell.solve_pose(world_T_camera, rng, seed=q_start,

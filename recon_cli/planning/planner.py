@@ -28,8 +28,10 @@ import contextlib
 import os
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from enum import StrEnum
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -42,6 +44,14 @@ from recon_cli.robot.ik import IKOptions
 
 #: [rad or m] a start this close outside the soft limits is clipped onto them
 START_TOLERANCE = 1e-3
+
+
+class _OmplState(Protocol):
+    """A state of OMPL's RealVectorStateSpace: joint i by index."""
+
+    def __getitem__(self, i: int) -> float: ...
+
+    def __setitem__(self, i: int, value: float) -> None: ...
 
 
 class PlanStatus(StrEnum):
@@ -117,7 +127,7 @@ def seed_ompl(seed: int) -> None:
 
 
 @contextlib.contextmanager
-def _quiet_ompl():
+def _quiet_ompl() -> Iterator[None]:
     from ompl import util as ou
 
     level = ou.getLogLevel()
@@ -151,8 +161,9 @@ class MotionPlanner:
         self.setup.setStateValidityChecker(self._state_valid)
         planner = self
 
-        class _SegmentValidator(ob.MotionValidator):
-            def checkMotion(self, s1, s2):  # noqa: N802 (OMPL's name)
+        # ompl ships no type information: its classes are Any to mypy
+        class _SegmentValidator(ob.MotionValidator):  # type: ignore[misc]
+            def checkMotion(self, s1: _OmplState, s2: _OmplState) -> bool:  # noqa: N802 (OMPL's name)
                 return planner._motion_valid(planner._vec(s1), planner._vec(s2))
 
         self._validator = _SegmentValidator(self.si)
@@ -167,10 +178,10 @@ class MotionPlanner:
         self._known_free: set[bytes] = set()  # configurations found free in this search
 
     # ------------------------------------------------------------------ validity
-    def _vec(self, state) -> npt.NDArray[np.float64]:
+    def _vec(self, state: _OmplState) -> npt.NDArray[np.float64]:
         return np.array([state[i] for i in range(self.n)])
 
-    def _state_valid(self, state) -> bool:
+    def _state_valid(self, state: _OmplState) -> bool:
         self.stats["states"] += 1
         q = self._vec(state)
         valid = not self.cell.collision.in_collision(q)
@@ -188,7 +199,7 @@ class MotionPlanner:
             self._known_free.update((a.tobytes(), b.tobytes()))
         return free
 
-    def _first_solution_objective(self):
+    def _first_solution_objective(self) -> Any:
         """Path length with an infinite cost threshold: optimizing planners stop at their
         first exact solution instead of using up the time limit."""
         obj = self._ob.PathLengthOptimizationObjective(self.si)
@@ -196,8 +207,8 @@ class MotionPlanner:
         return obj
 
     # ------------------------------------------------------------------ requests
-    def _state(self, q: npt.NDArray[np.float64]):
-        s = self.si.allocState()
+    def _state(self, q: npt.NDArray[np.float64]) -> _OmplState:
+        s: _OmplState = self.si.allocState()
         for i in range(self.n):
             s[i] = float(q[i])
         return s
@@ -211,8 +222,8 @@ class MotionPlanner:
         a, b = self.cell.collision.check(q).pairs[0]
         return f"in collision ({a} with {b})"
 
-    def plan_to_joints(self, q_start: npt.NDArray[np.float64], q_goal: npt.NDArray[np.float64] | list[npt.NDArray[np.float64]],
-                       seed: int = 0) -> PlanResult:
+    def plan_to_joints(self, q_start: npt.NDArray[np.float64],
+                       q_goal: npt.NDArray[np.float64] | list[npt.NDArray[np.float64]], seed: int = 0) -> PlanResult:
         """Plan from q_start to a joint goal (or to whichever of several goals is reached).
         ``seed`` (a non-negative integer) decides the random choices of the search and the
         simplification: the same request with the same seed gives the same path."""
@@ -264,8 +275,8 @@ class MotionPlanner:
         return PlanResult(PlanStatus.TIMEOUT, opt.planner, plan_time, simplify_time, time.perf_counter() - t0,
                           message=f"{opt.planner} found no path within {opt.time_limit:g} s", attempts=attempts)
 
-    def _search(self, q_start: npt.NDArray[np.float64], goals: list[npt.NDArray[np.float64]], time_limit: float, seed: int,
-                attempt: int) -> tuple[npt.NDArray[np.float64] | None, float, float]:
+    def _search(self, q_start: npt.NDArray[np.float64], goals: list[npt.NDArray[np.float64]], time_limit: float,
+                seed: int, attempt: int) -> tuple[npt.NDArray[np.float64] | None, float, float]:
         """One OMPL search + simplification: (path (K, n) or None, search s, simplify s).
         The search's random generators are created after a restart of OMPL's seed sequence
         at (seed, attempt, 0), the simplifier's after one at (seed, attempt, 1)."""

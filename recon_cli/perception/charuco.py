@@ -112,7 +112,8 @@ def estimate_pose(detection: CharucoDetection, spec: BoardSpec, K: Intrinsics,
     if detection.n_corners < min_corners:
         return None
     board = spec.board()
-    obj, img = board.matchImagePoints(detection.corners.reshape(-1, 1, 2).astype(np.float32),
+    # OpenCV's stubs declare a sequence of corner arrays; the function takes one (N, 1, 2) array
+    obj, img = board.matchImagePoints(detection.corners.reshape(-1, 1, 2).astype(np.float32),  # type: ignore[call-overload]
                                       detection.ids.reshape(-1, 1).astype(np.int32))
     if obj is None or len(obj) < min_corners:
         return None

@@ -37,7 +37,9 @@ import numpy as np
 import numpy.typing as npt
 
 from recon_cli.planning.checks import TrajectoryCheck, check_trajectory
-from recon_cli.planning.options import PLANNERS, SIMPLIFICATIONS, PlanOptions  # noqa: F401 (re-exported)
+from recon_cli.planning.options import PLANNERS as PLANNERS  # re-exported
+from recon_cli.planning.options import SIMPLIFICATIONS as SIMPLIFICATIONS  # re-exported
+from recon_cli.planning.options import PlanOptions as PlanOptions  # re-exported
 from recon_cli.planning.trajectory import Trajectory, parameterize, stop_and_go
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.ik import IKOptions

@@ -202,6 +202,8 @@ class RunState:
     def goal_pose(self, cmd: C.Move) -> np.ndarray:
         if isinstance(cmd, C.MoveView):
             return self.cell.view_pose(cmd.view)
+        if not isinstance(cmd, C.MovePose):
+            raise TypeError(f"{type(cmd).__name__} has no goal pose")
         from scipy.spatial.transform import Rotation
 
         T = np.eye(4)

@@ -11,7 +11,7 @@ from datetime import datetime
 from pathlib import Path
 
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn, TimeElapsedColumn
 
 from recon_cli.errors import FileError
 from recon_cli.serialization import to_jsonable
@@ -40,7 +40,7 @@ def progress_bar() -> Iterator[Callable[[str, int, int], None]]:
                   TimeElapsedColumn(), console=err_console, transient=False,
                   disable=not err_console.is_terminal and os.environ.get("RECON_PROGRESS") != "1",
                   ) as prog:
-        tasks: dict[str, int] = {}
+        tasks: dict[str, TaskID] = {}
 
         def update(what: str, done: int, total: int) -> None:
             if what not in tasks:

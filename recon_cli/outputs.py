@@ -401,7 +401,7 @@ def refuse_links(root: Path) -> None:
                                 "through links", hint="remove the link or choose an empty output folder")
 
 
-def atomic_write(path: Path, write: Callable[[Path], None], mode: int | None = None) -> Path:
+def atomic_write(path: Path, write: Callable[[Path], object], mode: int | None = None) -> Path:
     """Call ``write(tmp)`` for a fresh temporary file beside ``path``, then rename it to
     ``path`` (replacing a file, never following a link); ``mode``: its permission bits
     (default: those of a new file)."""

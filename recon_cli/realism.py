@@ -274,8 +274,10 @@ def _camera_spec(r: _Reader, value, path: str) -> CameraSpec | None:
     dist = d.get("distortion")
     if dist is not None and (not isinstance(dist, list) or len(dist) not in (4, 5)):
         r.fail(f"{path}.distortion", f"is {dist!r}, not [k1, k2, p1, p2] or [k1, k2, p1, p2, k3]")
-    coeffs = r.numbers({"distortion": dist}, "distortion", path, len(dist)) if dist is not None else ()
-    coeffs = tuple(coeffs) + (0.0,) * (5 - len(coeffs))
+    coeffs: tuple[float, ...] = ()
+    if dist is not None:
+        coeffs = r.numbers({"distortion": dist}, "distortion", path, len(dist)) or ()
+    coeffs = coeffs + (0.0,) * (5 - len(coeffs))
     return CameraSpec(r.number(d, "fx", path, 0.0, 1.0), r.number(d, "fy", path, 0.0, 1.0),
                       r.number(d, "cx", path, 0.0), r.number(d, "cy", path, 0.0), width, height, coeffs)
 

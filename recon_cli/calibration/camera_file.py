@@ -137,7 +137,9 @@ def write_calibrated_profile(profile: str | Path, camera: CameraCalibration, pat
     data = plain(read_yaml(source, "realism profile", hint="give ideal, thesis or a profile YAML file")) or {}
     if not isinstance(data, dict):
         raise InputError(f"{source}: the profile is not a mapping", hint="see docs/simulation.md")
-    camera_section = data.get("camera") if isinstance(data.get("camera"), dict) else {}
+    camera_section = data.get("camera")
+    if not isinstance(camera_section, dict):
+        camera_section = {}
     data["camera"] = {**camera_section, "assumed": camera.to_mapping()}
     data["name"] = f"{data.get('name', source.stem)}, calibrated camera"
     text = (f"# {source.name} with camera.assumed from recon calibrate intrinsics (the rest as in the source;\n"

@@ -120,10 +120,8 @@ def board_view_goals(cell, poses: list[np.ndarray], rng: np.random.Generator) ->
             continue
     if not candidates:
         return [ViewGoal(None, "no view is reachable at all") for _ in poses]
-    best = None
+    scored = []
     for reference, reference_T in candidates:
         goals = [posture_goal(cell, T, reference, reference_T) for T in poses]
-        score = (-sum(g.q is not None for g in goals), _posture_change(cell, goals, reference))
-        if best is None or score < best[0]:
-            best = (score, goals)
-    return best[1]
+        scored.append(((-sum(g.q is not None for g in goals), _posture_change(cell, goals, reference)), goals))
+    return min(scored, key=lambda entry: entry[0])[1]  # the first of equal scores

@@ -86,7 +86,8 @@ def find_board(name: str, image: np.ndarray, board: BoardSpec, min_corners: int 
     if det.n_corners < min_corners:
         return SkippedImage(name, f"{det.n_corners} board corners found ({det.marker_count} markers), "
                                   f"{min_corners} needed")
-    obj, img = board.board().matchImagePoints(det.corners.reshape(-1, 1, 2).astype(np.float32),
+    # OpenCV's stubs declare a sequence of corner arrays; the function takes one (N, 1, 2) array
+    obj, img = board.board().matchImagePoints(det.corners.reshape(-1, 1, 2).astype(np.float32),  # type: ignore[call-overload]
                                               det.ids.reshape(-1, 1).astype(np.int32))
     h, w = image.shape[:2]
     return BoardView(name, (w, h), det.ids.copy(), np.asarray(obj, np.float64).reshape(-1, 3),
@@ -95,10 +96,14 @@ def find_board(name: str, image: np.ndarray, board: BoardSpec, min_corners: int 
 
 def find_boards(images: Iterable[tuple[str, np.ndarray]], board: BoardSpec, min_corners: int = MIN_CORNERS
                 ) -> tuple[list[BoardView], list[SkippedImage]]:
-    views, skipped = [], []
+    views: list[BoardView] = []
+    skipped: list[SkippedImage] = []
     for name, image in images:
         found = find_board(name, image, board, min_corners)
-        (views if isinstance(found, BoardView) else skipped).append(found)
+        if isinstance(found, BoardView):
+            views.append(found)
+        else:
+            skipped.append(found)
     return views, skipped
 
 
@@ -178,8 +183,9 @@ def calibrate_intrinsics(views: list[BoardView], model: DistortionModel = Distor
         K0 = initial.matrix()
         flags |= cv2.CALIB_USE_INTRINSIC_GUESS
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+    # OpenCV takes None for "no initial camera matrix"; its stubs do not say so
     rms, K, dist, rvecs, tvecs, std_int, _, _ = cv2.calibrateCameraExtended(
-        obj, img, (w, h), K0, np.zeros(5), flags=flags, criteria=criteria)
+        obj, img, (w, h), K0, np.zeros(5), flags=flags, criteria=criteria)  # type: ignore[arg-type]
     dist = np.asarray(dist, dtype=np.float64).reshape(-1)[:5]
     dist = np.concatenate([dist, np.zeros(5 - len(dist))])
     camera = CameraCalibration(Intrinsics(w, h, float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])),

@@ -78,7 +78,7 @@ def refine_hand_eye(observations: list[BoardObservation], start: HandEyeSolution
         H = _exp(np.concatenate([np.zeros(3), x[12:15]])) if with_base else None
         for i, (Fi, Bi) in enumerate(zip(F, B, strict=True)):
             chain = Fi @ X @ Bi
-            if H is not None:
+            if H is not None and P is not None:  # both or neither (with_base)
                 G = H.copy()
                 G[:3, 3] = P[i] - H[:3, :3] @ P[i]
                 chain = G @ chain

@@ -10,10 +10,12 @@ y down. The axes are those of the thesis' script manager (../shared/CELL_FACTS.m
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
+import numpy.typing as npt
 
 from recon_cli.errors import InvalidViewError
 
@@ -65,19 +67,20 @@ class View:
                                    f"±{MAX_COORDINATE:g} m", hint="give the focus point in metres, e.g. 0,0,0.78")
 
     @classmethod
-    def from_degrees(cls, focus, radius: float, theta_deg: float, phi_deg: float,
+    def from_degrees(cls, focus: Iterable[float], radius: float, theta_deg: float, phi_deg: float,
                      alpha_deg: float = 0.0, frame: Frame = Frame.WORLD) -> View:
-        return cls(tuple(float(v) for v in focus), float(radius), math.radians(theta_deg),
+        fx, fy, fz = (float(v) for v in focus)
+        return cls((fx, fy, fz), float(radius), math.radians(theta_deg),
                    math.radians(phi_deg), math.radians(alpha_deg), Frame(frame))
 
-    def frame_T_camera(self) -> np.ndarray:
+    def frame_T_camera(self) -> npt.NDArray[np.float64]:
         """Camera pose in the view's own reference frame, shape (4, 4)."""
         return view_pose(np.asarray(self.focus, dtype=float), self.radius, self.theta,
                          self.phi, self.alpha)
 
 
-def view_pose(focus: np.ndarray, radius: float, theta: float, phi: float,
-              alpha: float) -> np.ndarray:
+def view_pose(focus: npt.NDArray[np.float64], radius: float, theta: float, phi: float,
+              alpha: float) -> npt.NDArray[np.float64]:
     """``frame_T_camera`` of a view (f, r, theta, phi, alpha); see the module docstring."""
     st, ct = math.sin(theta), math.cos(theta)
     sp, cp = math.sin(phi), math.cos(phi)
@@ -92,7 +95,7 @@ def view_pose(focus: np.ndarray, radius: float, theta: float, phi: float,
     return T
 
 
-def world_T_camera(view: View, world_T_marker: np.ndarray) -> np.ndarray:
+def world_T_camera(view: View, world_T_marker: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """Camera pose in the world for a view given in the world or the marker frame."""
     T = view.frame_T_camera()
     if view.frame is Frame.MARKER:
@@ -100,8 +103,8 @@ def world_T_camera(view: View, world_T_marker: np.ndarray) -> np.ndarray:
     return T
 
 
-def look_at_pose(position: np.ndarray, target: np.ndarray,
-                 up: np.ndarray = np.array([0.0, 0.0, 1.0])) -> np.ndarray:  # noqa: B008
+def look_at_pose(position: npt.NDArray[np.float64], target: npt.NDArray[np.float64],
+                 up: npt.NDArray[np.float64] = np.array([0.0, 0.0, 1.0])) -> npt.NDArray[np.float64]:  # noqa: B008
     """Camera pose at ``position`` looking at ``target`` with x perpendicular to ``up``."""
     z = np.asarray(target, float) - np.asarray(position, float)
     z /= np.linalg.norm(z)

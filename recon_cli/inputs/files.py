@@ -93,10 +93,10 @@ def file_errors(path: Path, what: str, hint: str, too_large: Callable[[int], tup
     gives the message tail and the hint for a file of the given size."""
     from recon_cli.errors import FileError
 
-    def refuse(r: Refusal):
+    def refuse(r: Refusal) -> FileError:
         if r.reason == MISSING:
             return FileError(f"{path}: {what} does not exist", hint="check the path")
-        if r.reason == UNREADABLE:
+        if r.reason == UNREADABLE and r.error is not None:
             return FileError(f"{path}: {what} cannot be read ({r.error.strerror})", hint=hint)
         if r.reason == NOT_REGULAR:
             return FileError(f"{path}: {what} is not a regular file", hint=hint)

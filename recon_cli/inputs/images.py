@@ -27,8 +27,10 @@ import struct
 import sys
 import tempfile
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 
@@ -335,7 +337,7 @@ _QUIET = threading.RLock()
 
 
 @contextlib.contextmanager
-def native_output_captured(fds: tuple[int, ...] = (2,), opencv: bool = True):
+def native_output_captured(fds: tuple[int, ...] = (2,), opencv: bool = True) -> Iterator[list[str]]:
     """Route the process's file descriptors ``fds`` (stderr: libpng, libjpeg and rply print
     their diagnostics there directly) into a temporary file while native code runs, and
     silence OpenCV's logging; yields a list that receives the captured text afterwards.
@@ -346,20 +348,22 @@ def native_output_captured(fds: tuple[int, ...] = (2,), opencv: bool = True):
             with contextlib.suppress(Exception):
                 stream.flush()
         saved = [os.dup(fd) for fd in fds]
-        cv2 = level = None
+        opencv_logging: ModuleType | None = None
+        level = 0
         if opencv:
             import cv2
 
-            level = cv2.utils.logging.getLogLevel()
+            opencv_logging = cv2.utils.logging
+            level = opencv_logging.getLogLevel()
         try:
             for fd in fds:
                 os.dup2(sink.fileno(), fd)
-            if cv2 is not None:
-                cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+            if opencv_logging is not None:
+                opencv_logging.setLogLevel(opencv_logging.LOG_LEVEL_SILENT)
             yield captured
         finally:
-            if cv2 is not None:
-                cv2.utils.logging.setLogLevel(level)
+            if opencv_logging is not None:
+                opencv_logging.setLogLevel(level)
             for fd, copy in zip(fds, saved, strict=True):
                 os.dup2(copy, fd)
                 os.close(copy)

@@ -68,7 +68,7 @@ def read_bytes(path: Path, what: str, max_bytes: int = MAX_METADATA_BYTES) -> by
     def refuse(r: files.Refusal) -> MetadataError:
         if r.reason == files.MISSING or isinstance(r.error, FileNotFoundError):
             return MetadataError(f"{path}: {what} is missing", path=str(path))
-        if r.reason == files.UNREADABLE:
+        if r.reason == files.UNREADABLE and r.error is not None:
             return MetadataError(f"{path}: {what} cannot be read ({r.error.strerror or r.error})", path=str(path))
         if r.reason == files.NOT_REGULAR:
             return MetadataError(f"{path}: {what} is not a regular file ({_kind(r.mode)})", path=str(path),
@@ -144,11 +144,14 @@ def _float(token: str) -> float:
     return x
 
 
-def _object(pairs: list) -> dict:
+def _object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     out = dict(pairs)
     if len(out) != len(pairs):
-        seen: set = set()
-        key = next(k for k, _ in pairs if k in seen or seen.add(k))
+        seen: set[str] = set()
+        for key, _ in pairs:
+            if key in seen:
+                break
+            seen.add(key)
         shown = key if len(key) <= 40 else key[:37] + "..."
         raise _Refused(f"has the key {shown!r} twice in one object", None,
                        "JSON readers would keep the last one silently; remove one")

@@ -202,10 +202,10 @@ def read_text(path: Path, what: str, *, hint: str | None = None, limits: YamlLim
     path = Path(path)
 
     def refuse(r: files.Refusal) -> FileError:
-        if r.reason == files.MISSING or (r.reason == files.UNREADABLE and not r.opened
+        if r.reason == files.MISSING or (r.reason == files.UNREADABLE and not r.opened and r.error is not None
                                          and r.error.errno in (errno.ENOENT, errno.ENOTDIR, errno.EBADF, errno.ELOOP)):
             return FileError(f"{what} {path} does not exist", hint=hint)
-        if r.reason == files.UNREADABLE:
+        if r.reason == files.UNREADABLE and r.error is not None:
             return FileError(f"cannot read the {what} {path} ({r.error.strerror or r.error})", hint=hint)
         if r.reason == files.NOT_REGULAR:
             return FileError(f"{what} {path} is not a file", hint=hint)

@@ -106,17 +106,18 @@ class BoardPose:
 
 
 def estimate_pose(detection: CharucoDetection, spec: BoardSpec, K: Intrinsics,
-                  dist: np.ndarray | None = None, min_corners: int = 6) -> BoardPose | None:
+                  dist: np.ndarray | tuple[float, ...] | None = None, min_corners: int = 6) -> BoardPose | None:
     """Board pose from the interpolated corners with solvePnP; None when too few corners or
     when they do not fix a pose."""
     if detection.n_corners < min_corners:
         return None
     board = spec.board()
-    obj, img = board.matchImagePoints(detection.corners.reshape(-1, 1, 2).astype(np.float32),
+    # OpenCV's stubs declare a sequence of corner arrays; the function takes one (N, 1, 2) array
+    obj, img = board.matchImagePoints(detection.corners.reshape(-1, 1, 2).astype(np.float32),  # type: ignore[call-overload]
                                       detection.ids.reshape(-1, 1).astype(np.int32))
     if obj is None or len(obj) < min_corners:
         return None
-    dist = np.zeros(5) if dist is None else dist
+    dist = np.zeros(5) if dist is None else np.asarray(dist, dtype=float)
     ok, rvec, tvec = cv2.solvePnP(obj, img, K.matrix(), dist, flags=cv2.SOLVEPNP_IPPE)
     if not ok:
         return None

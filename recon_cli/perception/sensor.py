@@ -207,5 +207,5 @@ def image_effects(color: np.ndarray, exposure: float, blur_sigma: float) -> np.n
 
     out = color.astype(np.float32) * np.float32(exposure)
     if blur_sigma > 0:
-        out = cv2.GaussianBlur(out, (0, 0), blur_sigma)
+        out = np.asarray(cv2.GaussianBlur(out, (0, 0), blur_sigma))
     return np.clip(np.rint(out), 0, 255).astype(np.uint8)

@@ -10,17 +10,20 @@ long; the sequence optimizer uses it for edges it has not planned yet.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 
-def joint_time_lower_bound(distance: np.ndarray, v_max: np.ndarray, a_max: np.ndarray) -> np.ndarray:
+def joint_time_lower_bound(distance: npt.ArrayLike, v_max: npt.ArrayLike,
+                           a_max: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Eq. 2.20 for every joint: minimum rest-to-rest time [s] for strokes ``distance``."""
     ds = np.abs(np.asarray(distance, dtype=float))
     v = np.asarray(v_max, dtype=float)
     a = np.asarray(a_max, dtype=float)
-    return np.where(ds < v * v / a, 2.0 * np.sqrt(ds / a), ds / v + v / a)
+    bound: npt.NDArray[np.float64] = np.where(ds < v * v / a, 2.0 * np.sqrt(ds / a), ds / v + v / a)
+    return bound
 
 
-def duration_lower_bound(q_a: np.ndarray, q_b: np.ndarray, v_max: np.ndarray, a_max: np.ndarray,
+def duration_lower_bound(q_a: npt.ArrayLike, q_b: npt.ArrayLike, v_max: npt.ArrayLike, a_max: npt.ArrayLike,
                          velocity_scale: float = 1.0, acceleration_scale: float = 1.0) -> float:
     """Eq. 2.21: the largest single-joint bound for the motion q_a -> q_b [s]."""
     t = joint_time_lower_bound(np.asarray(q_b) - np.asarray(q_a), np.asarray(v_max) * velocity_scale,

@@ -28,19 +28,32 @@ import contextlib
 import os
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from enum import StrEnum
+from typing import Any, Protocol
 
 import numpy as np
+import numpy.typing as npt
 
 from recon_cli.planning.checks import TrajectoryCheck, check_trajectory
-from recon_cli.planning.options import PLANNERS, SIMPLIFICATIONS, PlanOptions  # noqa: F401 (re-exported)
+from recon_cli.planning.options import PLANNERS as PLANNERS  # re-exported
+from recon_cli.planning.options import SIMPLIFICATIONS as SIMPLIFICATIONS  # re-exported
+from recon_cli.planning.options import PlanOptions as PlanOptions  # re-exported
 from recon_cli.planning.trajectory import Trajectory, parameterize, stop_and_go
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.ik import IKOptions
 
 #: [rad or m] a start this close outside the soft limits is clipped onto them
 START_TOLERANCE = 1e-3
+
+
+class _OmplState(Protocol):
+    """A state of OMPL's RealVectorStateSpace: joint i by index."""
+
+    def __getitem__(self, i: int) -> float: ...
+
+    def __setitem__(self, i: int, value: float) -> None: ...
 
 
 class PlanStatus(StrEnum):
@@ -58,7 +71,7 @@ class PlanResult:
     plan_time: float  # [s] search
     simplify_time: float  # [s]
     total_time: float  # [s] IK + search + simplification + timing + final check
-    path: np.ndarray | None = None  # (K, n) simplified waypoints
+    path: npt.NDArray[np.float64] | None = None  # (K, n) simplified waypoints
     trajectory: Trajectory | None = None
     check: TrajectoryCheck | None = None
     message: str = ""
@@ -116,7 +129,7 @@ def seed_ompl(seed: int) -> None:
 
 
 @contextlib.contextmanager
-def _quiet_ompl():
+def _quiet_ompl() -> Iterator[None]:
     from ompl import util as ou
 
     level = ou.getLogLevel()
@@ -150,8 +163,9 @@ class MotionPlanner:
         self.setup.setStateValidityChecker(self._state_valid)
         planner = self
 
-        class _SegmentValidator(ob.MotionValidator):
-            def checkMotion(self, s1, s2):  # noqa: N802 (OMPL's name)
+        # ompl ships no type information: its classes are Any to mypy
+        class _SegmentValidator(ob.MotionValidator):  # type: ignore[misc]
+            def checkMotion(self, s1: _OmplState, s2: _OmplState) -> bool:  # noqa: N802 (OMPL's name)
                 return planner._motion_valid(planner._vec(s1), planner._vec(s2))
 
         self._validator = _SegmentValidator(self.si)
@@ -166,10 +180,10 @@ class MotionPlanner:
         self._known_free: set[bytes] = set()  # configurations found free in this search
 
     # ------------------------------------------------------------------ validity
-    def _vec(self, state) -> np.ndarray:
+    def _vec(self, state: _OmplState) -> npt.NDArray[np.float64]:
         return np.array([state[i] for i in range(self.n)])
 
-    def _state_valid(self, state) -> bool:
+    def _state_valid(self, state: _OmplState) -> bool:
         self.stats["states"] += 1
         q = self._vec(state)
         valid = not self.cell.collision.in_collision(q)
@@ -177,7 +191,7 @@ class MotionPlanner:
             self._known_free.add(q.tobytes())
         return valid
 
-    def _motion_valid(self, a: np.ndarray, b: np.ndarray) -> bool:
+    def _motion_valid(self, a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> bool:
         """States already found free (checked states, ends of free motions: the tree nodes)
         are not checked again as the end of a motion."""
         self.stats["motions"] += 1
@@ -187,7 +201,7 @@ class MotionPlanner:
             self._known_free.update((a.tobytes(), b.tobytes()))
         return free
 
-    def _first_solution_objective(self):
+    def _first_solution_objective(self) -> Any:
         """Path length with an infinite cost threshold: optimizing planners stop at their
         first exact solution instead of using up the time limit."""
         obj = self._ob.PathLengthOptimizationObjective(self.si)
@@ -195,13 +209,13 @@ class MotionPlanner:
         return obj
 
     # ------------------------------------------------------------------ requests
-    def _state(self, q: np.ndarray):
-        s = self.si.allocState()
+    def _state(self, q: npt.NDArray[np.float64]) -> _OmplState:
+        s: _OmplState = self.si.allocState()
         for i in range(self.n):
             s[i] = float(q[i])
         return s
 
-    def _config_problem(self, q: np.ndarray) -> str | None:
+    def _config_problem(self, q: npt.NDArray[np.float64]) -> str | None:
         lim = self.cell.limits
         if not lim.within_soft(q, tol=1e-9):
             return "outside the soft joint limits"
@@ -210,8 +224,8 @@ class MotionPlanner:
         a, b = self.cell.collision.check(q).pairs[0]
         return f"in collision ({a} with {b})"
 
-    def plan_to_joints(self, q_start: np.ndarray, q_goal: np.ndarray | list[np.ndarray],
-                       seed: int = 0) -> PlanResult:
+    def plan_to_joints(self, q_start: npt.NDArray[np.float64],
+                       q_goal: npt.NDArray[np.float64] | list[npt.NDArray[np.float64]], seed: int = 0) -> PlanResult:
         """Plan from q_start to a joint goal (or to whichever of several goals is reached).
         ``seed`` (a non-negative integer) decides the random choices of the search and the
         simplification: the same request with the same seed gives the same path."""
@@ -263,8 +277,8 @@ class MotionPlanner:
         return PlanResult(PlanStatus.TIMEOUT, opt.planner, plan_time, simplify_time, time.perf_counter() - t0,
                           message=f"{opt.planner} found no path within {opt.time_limit:g} s", attempts=attempts)
 
-    def _search(self, q_start: np.ndarray, goals: list[np.ndarray], time_limit: float, seed: int,
-                attempt: int) -> tuple[np.ndarray | None, float, float]:
+    def _search(self, q_start: npt.NDArray[np.float64], goals: list[npt.NDArray[np.float64]], time_limit: float,
+                seed: int, attempt: int) -> tuple[npt.NDArray[np.float64] | None, float, float]:
         """One OMPL search + simplification: (path (K, n) or None, search s, simplify s).
         The search's random generators are created after a restart of OMPL's seed sequence
         at (seed, attempt, 0), the simplifier's after one at (seed, attempt, 1)."""
@@ -322,7 +336,7 @@ class MotionPlanner:
                              for k in range(path_geo.getStateCount())])
         return path, search, simplify
 
-    def _time_and_check(self, path: np.ndarray) -> tuple[Trajectory, TrajectoryCheck]:
+    def _time_and_check(self, path: npt.NDArray[np.float64]) -> tuple[Trajectory, TrajectoryCheck]:
         """toppra along the path (a smooth spline through the waypoints); if that leaves the
         checked segments into a collision, stop-and-go along the segments themselves."""
         opt, lim = self.options, self.cell.limits
@@ -333,7 +347,7 @@ class MotionPlanner:
             check = check_trajectory(traj, self.cell, opt.velocity_scale, opt.acceleration_scale, opt.max_step)
         return traj, check
 
-    def plan_to_pose(self, q_start: np.ndarray, world_T_camera: np.ndarray,
+    def plan_to_pose(self, q_start: npt.NDArray[np.float64], world_T_camera: npt.NDArray[np.float64],
                      rng: np.random.Generator, what: str = "view") -> PlanResult:
         """Plan to a camera pose: IK (several solutions, raises when none), then plan to any."""
         ik = self.cell.solve_pose(world_T_camera, rng, seed=q_start,

@@ -11,42 +11,49 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeAlias
 
 import numpy as np
+import numpy.typing as npt
 
 from recon_cli.errors import TrajectoryError
+
+#: q, qd, qdd at some instants, each (K, n)
+Samples: TypeAlias = tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]
 
 
 @dataclass(frozen=True)
 class Trajectory:
     """times: (K,) [s] from 0; q, qd, qdd: (K, n). ``sample(t)`` interpolates continuously."""
 
-    times: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    qdd: np.ndarray
-    evaluate: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
+    times: npt.NDArray[np.float64]
+    q: npt.NDArray[np.float64]
+    qd: npt.NDArray[np.float64]
+    qdd: npt.NDArray[np.float64]
+    evaluate: Callable[[npt.NDArray[np.float64]], Samples] | None = None
 
     @property
     def duration(self) -> float:
         return float(self.times[-1])
 
     @property
-    def start(self) -> np.ndarray:
-        return self.q[0]
+    def start(self) -> npt.NDArray[np.float64]:
+        q: npt.NDArray[np.float64] = self.q[0]
+        return q
 
     @property
-    def goal(self) -> np.ndarray:
-        return self.q[-1]
+    def goal(self) -> npt.NDArray[np.float64]:
+        q: npt.NDArray[np.float64] = self.q[-1]
+        return q
 
-    def sample(self, t: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def sample(self, t: npt.ArrayLike) -> Samples:
         """q, qd, qdd at times t (clamped to [0, duration]); shapes (len(t), n)."""
-        t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
+        ts = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
         if self.evaluate is not None:
-            return self.evaluate(t)
-        q = np.stack([np.interp(t, self.times, self.q[:, j]) for j in range(self.q.shape[1])], 1)
-        qd = np.stack([np.interp(t, self.times, self.qd[:, j]) for j in range(self.q.shape[1])], 1)
-        qdd = np.stack([np.interp(t, self.times, self.qdd[:, j]) for j in range(self.q.shape[1])], 1)
+            return self.evaluate(ts)
+        q = np.stack([np.interp(ts, self.times, self.q[:, j]) for j in range(self.q.shape[1])], 1)
+        qd = np.stack([np.interp(ts, self.times, self.qd[:, j]) for j in range(self.q.shape[1])], 1)
+        qdd = np.stack([np.interp(ts, self.times, self.qdd[:, j]) for j in range(self.q.shape[1])], 1)
         return q, qd, qdd
 
 
@@ -55,8 +62,8 @@ class Trajectory:
 LIMIT_MARGIN = 0.98
 
 
-def parameterize(path: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
-                 velocity_scale: float = 1.0, acceleration_scale: float = 1.0,
+def parameterize(path: npt.NDArray[np.float64], velocity: npt.NDArray[np.float64],
+                 acceleration: npt.NDArray[np.float64], velocity_scale: float = 1.0, acceleration_scale: float = 1.0,
                  grid_points: int = 400) -> Trajectory:
     """Time-optimal rest-to-rest trajectory along a piecewise-linear joint path (K, n).
 
@@ -97,7 +104,7 @@ def parameterize(path: np.ndarray, velocity: np.ndarray, acceleration: np.ndarra
                               f"{len(path)} waypoints", hint="re-plan the motion")
     times = np.linspace(0.0, jt.duration, max(2, int(np.ceil(jt.duration / 0.01)) + 1))
 
-    def evaluate(t: np.ndarray):
+    def evaluate(t: npt.NDArray[np.float64]) -> Samples:
         return jt(t), jt(t, 1), jt(t, 2)
 
     q, qd, qdd = evaluate(times)
@@ -116,14 +123,14 @@ def concatenate(parts: list[Trajectory]) -> Trajectory:
     qdd = np.concatenate([p.qdd[(1 if k else 0):] for k, p in enumerate(parts)])
     ends = offsets + np.array([p.duration for p in parts])
 
-    def evaluate(t: np.ndarray):
+    def evaluate(t: npt.NDArray[np.float64]) -> Samples:
         idx = np.clip(np.searchsorted(ends, t, side="left"), 0, len(parts) - 1)
         out = [np.empty((len(t), q.shape[1])) for _ in range(3)]
         for k in np.unique(idx):
             m = idx == k
             for o, v in zip(out, parts[k].sample(t[m] - offsets[k]), strict=True):
                 o[m] = v
-        return tuple(out)
+        return out[0], out[1], out[2]
 
     return Trajectory(times, q, qd, qdd, evaluate)
 
@@ -134,7 +141,7 @@ def reverse(traj: Trajectory) -> Trajectory:
     same, so a planned edge serves both directions."""
     T = traj.duration
 
-    def evaluate(t: np.ndarray):
+    def evaluate(t: npt.NDArray[np.float64]) -> Samples:
         q, qd, qdd = traj.sample(T - np.asarray(t, dtype=float))
         return q, -qd, qdd
 
@@ -142,16 +149,17 @@ def reverse(traj: Trajectory) -> Trajectory:
     return Trajectory(times, traj.q[::-1].copy(), -traj.qd[::-1], traj.qdd[::-1].copy(), evaluate)
 
 
-def stop_and_go(path: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
-                velocity_scale: float = 1.0, acceleration_scale: float = 1.0) -> Trajectory:
+def stop_and_go(path: npt.NDArray[np.float64], velocity: npt.NDArray[np.float64],
+                acceleration: npt.NDArray[np.float64], velocity_scale: float = 1.0,
+                acceleration_scale: float = 1.0) -> Trajectory:
     """Rest-to-rest motion along each straight segment of a path: the executed course is
     exactly the piecewise-linear path the planner checked (slower than a smooth one)."""
     return concatenate([straight_line(a, b, velocity, acceleration, velocity_scale, acceleration_scale)
                         for a, b in zip(path[:-1], path[1:], strict=True)])
 
 
-def straight_line(q0: np.ndarray, q1: np.ndarray, velocity: np.ndarray,
-                  acceleration: np.ndarray, velocity_scale: float = 1.0,
+def straight_line(q0: npt.NDArray[np.float64], q1: npt.NDArray[np.float64], velocity: npt.NDArray[np.float64],
+                  acceleration: npt.NDArray[np.float64], velocity_scale: float = 1.0,
                   acceleration_scale: float = 1.0) -> Trajectory:
     """Time-optimal rest-to-rest motion along the straight joint-space segment q0 -> q1."""
     return parameterize(np.stack([q0, q1]), velocity, acceleration, velocity_scale,

@@ -51,7 +51,7 @@ def pair_residual(source, target, max_distance: float, source_index: int = 0, ta
     if len(p) == 0 or len(q) == 0:
         return PairResidual(source_index, target_index, 0.0, 0, float("nan"), float("nan"))
     n = _normals(target, normal_radius or 3.0 * max_distance)
-    d, j = cKDTree(q).query(p, distance_upper_bound=max_distance)
+    d, j = map(np.asarray, cKDTree(q).query(p, distance_upper_bound=max_distance))  # (N,) each for points (N, 3)
     found = np.isfinite(d)
     if not found.any():
         return PairResidual(source_index, target_index, 0.0, 0, float("nan"), float("nan"))

@@ -67,7 +67,8 @@ def signed_distances(points: np.ndarray, reference) -> np.ndarray:
 
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(reference))
-    q = o3d.core.Tensor(np.asarray(points, dtype=np.float32))
+    # Open3D's stubs list Tensor(array) only with a dtype and a device; both default at run time
+    q = o3d.core.Tensor(np.asarray(points, dtype=np.float32))  # type: ignore[call-overload]
     ans = scene.compute_closest_points(q)
     closest = ans["points"].numpy().astype(float)
     normals = ans["primitive_normals"].numpy().astype(float)
@@ -116,7 +117,8 @@ def visible_from(samples: np.ndarray, normals: np.ndarray, reference, views: lis
             continue
         dirs = -to_cam[idx] / dist[idx, None]
         rays = np.hstack([np.repeat(c[None], len(idx), axis=0), dirs]).astype(np.float32)
-        hit = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+        # Open3D's stubs list Tensor(array) only with a dtype and a device; both default at run time
+        hit = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()  # type: ignore[call-overload]
         seen[idx[hit >= dist[idx] - 1e-4]] = True
     return seen
 
@@ -156,7 +158,7 @@ def histogram_png(path: Path, distances_by_label: dict[str, np.ndarray], title: 
     bins = np.linspace(-limit * 1e3, limit * 1e3, 81)
     for label, d in distances_by_label.items():
         d = np.asarray(d) * 1e3
-        ax.hist(np.clip(d, bins[0], bins[-1]), bins=bins, histtype="step", linewidth=1.5,
+        ax.hist(np.clip(d, bins[0], bins[-1]), bins=bins.tolist(), histtype="step", linewidth=1.5,
                 label=f"{label}: mean {d.mean():+.3f} mm, std {d.std():.3f} mm")
     ax.set_xlabel("signed distance to the reference [mm]")
     ax.set_ylabel("points")

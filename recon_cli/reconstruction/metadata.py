@@ -111,7 +111,9 @@ class BoxInfo:
     def from_dict(cls, d: dict | None) -> BoxInfo | None:
         if d is None:
             return None
-        return cls(tuple(map(float, d["center"])), tuple(map(float, d["size"])), d.get("frame", "world"))
+        cx, cy, cz = (float(v) for v in d["center"])
+        sx, sy, sz = (float(v) for v in d["size"])
+        return cls((cx, cy, cz), (sx, sy, sz), d.get("frame", "world"))
 
 
 def _pose(value) -> np.ndarray | None:

@@ -161,7 +161,7 @@ def regularized_icp(source: IcpCloud, target: IcpCloud, options: MultiwayOptions
         for it in range(options.icp_iterations):
             R = T[:3, :3]
             p = src_pts @ R.T + T[:3, 3]
-            d, j = target.tree.query(p, distance_upper_bound=distance)
+            d, j = map(np.asarray, target.tree.query(p, distance_upper_bound=distance))  # (N,) each for points (N, 3)
             found = d < np.inf
             fitness = float(found.sum()) / (n_src if final else len(p))
             if final and it == 0:  # later steps move by micrometres: the others stay without a partner
@@ -236,6 +236,8 @@ def register_multiway(clouds: list, options: MultiwayOptions = MultiwayOptions()
         moved = [o3d_transformed(d, T) for d, T in zip(down, poses, strict=True)]
         result = _one_round(moved, options, progress, r)
         poses = [T_new @ T for T_new, T in zip(result.poses, poses, strict=True)]
+    if result is None:
+        raise ValueError(f"multiway registration needs at least one round, not {options.rounds}")
     if options.anchor == "mean":
         G = mean_anchor(down, poses)
         poses = [G @ T for T in poses]
@@ -363,7 +365,7 @@ def plane_fit(source: IcpCloud, target: IcpCloud, T: np.ndarray, distance: float
     those distances [m] and point-to-plane information (sum of J^T J, see
     plane_information) of the clouds at T."""
     p = source.points @ T[:3, :3].T + T[:3, 3]
-    d, j = target.tree.query(p, distance_upper_bound=distance)
+    d, j = map(np.asarray, target.tree.query(p, distance_upper_bound=distance))  # (N,) each for points (N, 3)
     found = np.isfinite(d)
     if not found.any():
         return 0.0, 0.0, np.zeros((6, 6))

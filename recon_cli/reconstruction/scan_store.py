@@ -88,9 +88,10 @@ class Scan:
 
         color, depth = self.pinhole_images()
         color = color if color is not None else np.zeros((*depth.shape, 3), np.uint8)
+        # arrays are buffers: numpy's stubs say so for Python 3.12 and newer only, Open3D's take a Buffer
         return o3d.geometry.RGBDImage.create_from_color_and_depth(
-            o3d.geometry.Image(np.ascontiguousarray(color)),
-            o3d.geometry.Image(depth.astype(np.float32)),
+            o3d.geometry.Image(np.ascontiguousarray(color)),  # type: ignore[call-overload]
+            o3d.geometry.Image(depth.astype(np.float32)),  # type: ignore[call-overload]
             depth_scale=1.0, depth_trunc=depth_trunc, convert_rgb_to_intensity=False)
 
     def to_open3d_cloud(self, world_T_camera: np.ndarray | None = None):

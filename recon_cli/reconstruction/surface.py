@@ -76,13 +76,13 @@ def poisson_mesh(cloud, options: SurfaceOptions):
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
         mesh, densities = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(
             cloud, depth=options.poisson_depth)
-    densities = np.asarray(densities)
-    if len(densities) and options.density_quantile > 0:
-        drop = densities < np.quantile(densities, options.density_quantile)
+    density = np.asarray(densities)
+    if len(density) and options.density_quantile > 0:
+        drop = density < np.quantile(density, options.density_quantile)
         mesh.remove_vertices_by_mask(drop)
-        densities = densities[~drop]
+        density = density[~drop]
     mesh.compute_vertex_normals()
-    return mesh, densities
+    return mesh, density
 
 
 def write_cloud(path: Path, cloud, transform: np.ndarray | None = None) -> Path:
@@ -92,7 +92,8 @@ def write_cloud(path: Path, cloud, transform: np.ndarray | None = None) -> Path:
     c = o3d.geometry.PointCloud(cloud)
     if transform is not None:
         c.transform(transform)
-    return _atomic(path, lambda tmp: o3d.io.write_point_cloud(str(tmp), c))
+    # Open3D's stubs name a PathLike; its writers take the path as text
+    return _atomic(path, lambda tmp: o3d.io.write_point_cloud(str(tmp), c))  # type: ignore[arg-type]
 
 
 def write_mesh(path: Path, mesh, transform: np.ndarray | None = None) -> Path:
@@ -102,7 +103,8 @@ def write_mesh(path: Path, mesh, transform: np.ndarray | None = None) -> Path:
     m = o3d.geometry.TriangleMesh(mesh)
     if transform is not None:
         m.transform(transform)
-    return _atomic(path, lambda tmp: o3d.io.write_triangle_mesh(str(tmp), m))
+    # Open3D's stubs name a PathLike; its writers take the path as text
+    return _atomic(path, lambda tmp: o3d.io.write_triangle_mesh(str(tmp), m))  # type: ignore[arg-type]
 
 
 def _atomic(path: Path, write) -> Path:

@@ -12,6 +12,7 @@ tests/robot/test_batch_fk.py checks it against pinocchio to 1e-12.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}
@@ -30,7 +31,7 @@ class BatchFK:
                 raise NotImplementedError(f"joint {model.names[j]} of type {short} is not supported")
             self.kinds.append((kind[0], _AXES[kind[1]], int(model.joints[j].idx_q)))
 
-    def joint_poses(self, Q: np.ndarray) -> np.ndarray:
+    def joint_poses(self, Q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """World poses of every joint frame (oMi), shape (K, njoints, 4, 4)."""
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         K = Q.shape[0]

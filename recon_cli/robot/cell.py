@@ -8,6 +8,7 @@ ask it for camera poses, IK solutions and collision checks.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from recon_cli.errors import InvalidViewError, UnreachableViewError
 from recon_cli.geometry.view import View, world_T_camera
@@ -15,6 +16,7 @@ from recon_cli.robot.collision import CollisionModel, ObjectBox
 from recon_cli.robot.description import CellConfig, expand_urdf
 from recon_cli.robot.ik import IKOptions, IKResult, IKSolver, IKStatus
 from recon_cli.robot.kinematics import Kinematics
+from recon_cli.robot.limits import JointLimits
 
 
 class Cell:
@@ -30,7 +32,7 @@ class Cell:
         self.world_T_marker = self.kin.world_T_marker()
 
     @property
-    def limits(self):
+    def limits(self) -> JointLimits:
         return self.kin.limits
 
     @property
@@ -40,7 +42,7 @@ class Cell:
     def set_object_box(self, box: ObjectBox | None) -> None:
         self.collision.set_object_box(box)
 
-    def view_pose(self, view: View) -> np.ndarray:
+    def view_pose(self, view: View) -> npt.NDArray[np.float64]:
         """``world_T_camera`` of a view given in the world or the marker frame."""
         return world_T_camera(view, self.world_T_marker)
 
@@ -50,7 +52,7 @@ class Cell:
         top = next(s for s in self.collision.env_shapes if s.name == "table_top")
         return float(top.joint_T_shape[2, 3] + top.dims[2] / 2.0 - self.config.safety_distance)
 
-    def check_camera_position(self, world_T_cam: np.ndarray, what: str = "view") -> None:
+    def check_camera_position(self, world_T_cam: npt.NDArray[np.float64], what: str = "view") -> None:
         """Refuse a camera pose whose origin lies inside an obstacle (table, frame, object)."""
         p = world_T_cam[:3, 3]
         top = next(s for s in self.collision.env_shapes if s.name == "table_top")
@@ -70,8 +72,8 @@ class Cell:
                 hint="choose a larger radius or a smaller polar angle theta",
             )
 
-    def solve_pose(self, world_T_cam: np.ndarray, rng: np.random.Generator,
-                   seed: np.ndarray | None = None,
+    def solve_pose(self, world_T_cam: npt.NDArray[np.float64], rng: np.random.Generator,
+                   seed: npt.NDArray[np.float64] | None = None,
                    options: IKOptions = IKOptions(),  # noqa: B008 (frozen)
                    what: str = "view") -> IKResult:
         """IK for a camera pose; raises when the pose cannot be reached collision-free."""
@@ -95,6 +97,6 @@ class Cell:
         return result
 
     def solve_view(self, view: View, rng: np.random.Generator,
-                   seed: np.ndarray | None = None,
+                   seed: npt.NDArray[np.float64] | None = None,
                    options: IKOptions = IKOptions()) -> IKResult:  # noqa: B008 (frozen)
         return self.solve_pose(self.view_pose(view), rng, seed=seed, options=options)

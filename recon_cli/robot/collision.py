@@ -23,10 +23,12 @@ from __future__ import annotations
 
 import functools
 import itertools
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import fcl
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 from lxml import etree
 
@@ -37,6 +39,8 @@ from recon_cli.robot.batch_fk import BatchFK
 from recon_cli.robot.kinematics import Kinematics
 from recon_cli.robot.motion_check import BatchChecker
 from recon_cli.robot.pair_field import PairField
+from recon_cli.robot.shapes import CollisionShape
+from recon_cli.robot.urdf import attribute, child
 
 OBJECT_LINK = "object"
 _FIELD_CACHE: dict[tuple[str, str, str], PairField] = {}
@@ -53,33 +57,18 @@ class ObjectBox:
     size: tuple[float, float, float]
 
     @classmethod
-    def on_table(cls, size, xy=(0.0, 0.0), table_top_z: float = 0.68) -> ObjectBox:
+    def on_table(cls, size: Iterable[float], xy: Sequence[float] = (0.0, 0.0),
+                 table_top_z: float = 0.68) -> ObjectBox:
         sx, sy, sz = (float(v) for v in size)
         return cls((float(xy[0]), float(xy[1]), table_top_z + sz / 2.0), (sx, sy, sz))
 
     @property
-    def lower(self) -> np.ndarray:
+    def lower(self) -> npt.NDArray[np.float64]:
         return np.asarray(self.center) - np.asarray(self.size) / 2.0
 
     @property
-    def upper(self) -> np.ndarray:
+    def upper(self) -> npt.NDArray[np.float64]:
         return np.asarray(self.center) + np.asarray(self.size) / 2.0
-
-
-@dataclass(frozen=True)
-class CollisionShape:
-    """One collision primitive. ``joint_T_shape`` places it in its pinocchio joint frame."""
-
-    name: str
-    link: str
-    joint: int  # pinocchio joint index the link moves with (0: fixed to the world)
-    kind: str  # box | capsule | cylinder | sphere
-    dims: tuple[float, ...]  # box (sx, sy, sz); capsule/cylinder (radius, length); sphere (r,)
-    joint_T_shape: np.ndarray
-
-    @property
-    def label(self) -> str:
-        return f"{self.link}/{self.name}"
 
 
 @dataclass(frozen=True)
@@ -137,7 +126,7 @@ def shapes_from_urdf(urdf: str, kin: Kinematics) -> list[CollisionShape]:
     root = etree.fromstring(urdf.encode())
     shapes = []
     for link in root.iter("link"):
-        link_name = link.get("name")
+        link_name = attribute(link, "name")
         fid = kin.model.getFrameId(link_name, pin.BODY)
         frame = kin.model.frames[fid]
         joint_T_link = frame.placement.homogeneous
@@ -148,16 +137,17 @@ def shapes_from_urdf(urdf: str, kin: Kinematics) -> list[CollisionShape]:
             origin = col.find("origin")
             xyz = [float(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()]
             rpy = [float(v) for v in (origin.get("rpy", "0 0 0") if origin is not None else "0 0 0").split()]
-            geom = col.find("geometry")[0]
+            geom = child(col, "geometry")[0]
+            dims: tuple[float, ...]
             if geom.tag == "box":
-                kind, dims = "box", tuple(float(v) for v in geom.get("size").split())
+                kind, dims = "box", tuple(float(v) for v in attribute(geom, "size").split())
             elif geom.tag == "cylinder":
                 kind = "capsule" if name.endswith("_capsule") else "cylinder"
-                dims = (float(geom.get("radius")), float(geom.get("length")))
+                dims = (float(attribute(geom, "radius")), float(attribute(geom, "length")))
             elif geom.tag == "sphere":
-                kind, dims = "sphere", (float(geom.get("radius")),)
+                kind, dims = "sphere", (float(attribute(geom, "radius")),)
             else:
-                raise ValueError(f"unsupported collision geometry <{geom.tag}> in link {link_name}")
+                raise ValueError(f"unsupported collision geometry <{geom.tag!s}> in link {link_name}")
             shapes.append(CollisionShape(name, link_name, int(frame.parentJoint), kind, dims,
                                          joint_T_link @ pose_from_xyz_rpy(xyz, rpy)))
     return shapes
@@ -180,7 +170,7 @@ def allowed_link_pairs(urdf: str, kin: Kinematics) -> set[frozenset[str]]:
     """Link pairs that are never checked (same rigid body, URDF parent/child, declared)."""
     root = etree.fromstring(urdf.encode())
     allowed: set[frozenset[str]] = set(_declared_allowed())
-    links = [link.get("name") for link in root.iter("link")]
+    links = [attribute(link, "name") for link in root.iter("link")]
     body = {name: kin.model.frames[kin.model.getFrameId(name, pin.BODY)].parentJoint
             for name in links}
     allowed.update(frozenset((a,)) for a in links)  # shapes of one link
@@ -188,7 +178,7 @@ def allowed_link_pairs(urdf: str, kin: Kinematics) -> set[frozenset[str]]:
         if body[a] == body[b]:
             allowed.add(frozenset((a, b)))
     for joint in root.iter("joint"):
-        allowed.add(frozenset((joint.find("parent").get("link"), joint.find("child").get("link"))))
+        allowed.add(frozenset((attribute(child(joint, "parent"), "link"), attribute(child(joint, "child"), "link"))))
     return allowed
 
 
@@ -212,11 +202,11 @@ class CollisionModel:
         self._static_env_shapes = [s for s in shapes if s.joint == 0]
         self._robot_geoms = [_geometry(s.kind, s.dims) for s in self.robot_shapes]
         self._robot_objs = [fcl.CollisionObject(g, fcl.Transform()) for g in self._robot_geoms]
-        self._robot_joints = np.array([s.joint for s in self.robot_shapes])
+        self._robot_joints: npt.NDArray[np.intp] = np.array([s.joint for s in self.robot_shapes])
         self._robot_local = np.stack([s.joint_T_shape for s in self.robot_shapes])  # (R, 4, 4)
         # robot shape pairs to check against each other
         shape_allowed = allowed_shape_pairs()
-        self._self_pairs = np.array([
+        self._self_pairs: npt.NDArray[np.intp] = np.array([
             (i, j) for i, j in itertools.combinations(range(len(self.robot_shapes)), 2)
             if frozenset((self.robot_shapes[i].link, self.robot_shapes[j].link)) not in self._allowed
             and frozenset((self.robot_shapes[i].label, self.robot_shapes[j].label)) not in shape_allowed
@@ -230,7 +220,8 @@ class CollisionModel:
         self._static_separated: list[tuple[int, int, float]] | None = None
         self.set_object_box(object_box)
 
-    def _separation_bound(self, distance, levers: np.ndarray, budget: int = 10000) -> float | None:
+    def _separation_bound(self, distance: Callable[[npt.NDArray[np.float64]], float],
+                          levers: npt.NDArray[np.float64], budget: int = 10000) -> float | None:
         """Certify that a shape pair cannot touch anywhere in the joint range.
 
         ``distance(q)`` is the pair's exact distance at q; ``levers`` (n,) bound how far the
@@ -275,11 +266,11 @@ class CollisionModel:
             if np.count_nonzero(self._pair_lever[p]) > 2:
                 continue
 
-            def distance(q, i=i, j=j):
+            def distance(q: npt.NDArray[np.float64], i: int = i, j: int = j) -> float:
                 poses = self.shape_poses(q)
                 placed: set[int] = set()
-                return fcl.distance(self._place(i, poses, placed), self._place(j, poses, placed), req,
-                                    fcl.DistanceResult())
+                return float(fcl.distance(self._place(i, poses, placed), self._place(j, poses, placed), req,
+                                          fcl.DistanceResult()))
 
             bound = self._separation_bound(distance, self._pair_lever[p])
             if bound is not None:
@@ -303,11 +294,11 @@ class CollisionModel:
             out.append((p, _FIELD_CACHE[key]))
         return out
 
-    def _build_field(self, i: int, j: int, joints: tuple[int, ...], levers: np.ndarray) -> PairField:
+    def _build_field(self, i: int, j: int, joints: tuple[int, ...], levers: npt.NDArray[np.float64]) -> PairField:
         req = fcl.DistanceRequest()
         lim = self.kin.limits
 
-        def distances(x: np.ndarray) -> np.ndarray:
+        def distances(x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
             qs = np.tile(pin.neutral(self.kin.model), (len(x), 1))
             qs[:, list(joints)] = x
             poses = self.shape_poses_batch(qs)
@@ -320,7 +311,7 @@ class CollisionModel:
         return PairField.build(distances, joints, levers, lim.lower[list(joints)], lim.upper[list(joints)])
 
     def _separated_env_pairs(self, env: list[CollisionShape], objs: list[fcl.CollisionObject],
-                             skip: np.ndarray) -> list[tuple[int, int, float]]:
+                             skip: npt.NDArray[np.bool_]) -> list[tuple[int, int, float]]:
         """Robot-environment pairs that can never touch: robot shapes moved by at most two
         joints (the gantry axes and what rides on them) against every environment shape."""
         req = fcl.DistanceRequest()
@@ -333,16 +324,16 @@ class CollisionModel:
                 if skip[r, e]:
                     continue
 
-                def distance(q, r=r, obj=obj):
+                def distance(q: npt.NDArray[np.float64], r: int = r, obj: fcl.CollisionObject = obj) -> float:
                     poses = self.shape_poses(q)
-                    return fcl.distance(self._place(r, poses, set()), obj, req, fcl.DistanceResult())
+                    return float(fcl.distance(self._place(r, poses, set()), obj, req, fcl.DistanceResult()))
 
                 bound = self._separation_bound(distance, levers)
                 if bound is not None:
                     out.append((r, e, bound))
         return out
 
-    def _self_pair_levers(self) -> np.ndarray:
+    def _self_pair_levers(self) -> npt.NDArray[np.float64]:
         """Relative-motion levers of the checked self pairs, (P, n): joints that move both
         shapes alike (common ancestors) do not change their distance."""
         model = self.kin.model
@@ -364,7 +355,7 @@ class CollisionModel:
                 levers[p, k] += self.lever[k, j]
         return levers
 
-    def _shape_lever_arms(self) -> np.ndarray:
+    def _shape_lever_arms(self) -> npt.NDArray[np.float64]:
         """r[j, s]: bound on how far any point of robot shape s moves per unit motion of
         joint j [m/rad, or 1 for a prismatic joint; 0 when j does not move s]. Triangle
         inequality along the chain: joint-origin offsets from j to the shape's joint, plus the
@@ -398,7 +389,7 @@ class CollisionModel:
             for s in env
         ]
         shape_allowed = allowed_shape_pairs()
-        skip = np.array([
+        skip: npt.NDArray[np.bool_] = np.array([
             [frozenset((r.link, e.link)) in self._allowed or frozenset((r.label, e.label)) in shape_allowed
              for e in env] for r in self.robot_shapes
         ], dtype=bool)  # (R, E)
@@ -430,17 +421,17 @@ class CollisionModel:
                             env_pairs + self_pairs, swept, self.lever, [f for _, f in self._fields])
 
     # ------------------------------------------------------------------ placement
-    def shape_poses(self, q: np.ndarray) -> np.ndarray:
+    def shape_poses(self, q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """World poses of the robot shapes at q, shape (R, 4, 4)."""
         pin.forwardKinematics(self.kin.model, self._data, q)
-        oMi = np.stack([self._data.oMi[j].homogeneous for j in range(self.kin.model.njoints)])
+        oMi: npt.NDArray[np.float64] = np.stack([self._data.oMi[j].homogeneous for j in range(self.kin.model.njoints)])
         return oMi[self._robot_joints] @ self._robot_local
 
-    def _collide(self, i: int, obj: fcl.CollisionObject, poses: np.ndarray, placed: set[int]) -> bool:
+    def _collide(self, i: int, obj: fcl.CollisionObject, poses: npt.NDArray[np.float64], placed: set[int]) -> bool:
         return bool(fcl.collide(self._place(i, poses, placed), obj, self._request, fcl.CollisionResult()))
 
     # ------------------------------------------------------------------ queries
-    def check(self, q: np.ndarray) -> CollisionReport:
+    def check(self, q: npt.NDArray[np.float64]) -> CollisionReport:
         """All colliding shape pairs at q (robot-environment and self), every checked pair
         tested with python-fcl: the reference the batch checker is tested against, and the
         report behind every collision message."""
@@ -453,19 +444,20 @@ class CollisionModel:
                   if self._collide(int(i), self._place(int(j), poses, placed), poses, placed)]
         return CollisionReport(tuple(pairs))
 
-    def in_collision(self, q: np.ndarray) -> bool:
+    def in_collision(self, q: npt.NDArray[np.float64]) -> bool:
         return self._batch.in_collision(np.asarray(q, dtype=float))
 
-    def shape_poses_batch(self, qs: np.ndarray) -> np.ndarray:
+    def shape_poses_batch(self, qs: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """World poses of the robot shapes at many configurations, (K, R, 4, 4)."""
         oMi = self._batch_fk.joint_poses(qs)
         return oMi[:, self._robot_joints] @ self._robot_local
 
-    def point_step_bound(self, dq: np.ndarray) -> np.ndarray:
+    def point_step_bound(self, dq: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Bound on the displacement [m] of any robot point for joint steps dq (..., n)."""
-        return np.max(np.abs(dq) @ self.lever, axis=-1)
+        bound: npt.NDArray[np.float64] = np.max(np.abs(dq) @ self.lever, axis=-1)
+        return bound
 
-    def segment_free(self, a: np.ndarray, b: np.ndarray, max_step: float = 0.005,
+    def segment_free(self, a: npt.NDArray[np.float64], b: npt.NDArray[np.float64], max_step: float = 0.005,
                      end_known_free: bool = False) -> bool:
         """Is the straight joint-space motion a -> b collision-free? Every instant is proved
         free or lies within ``max_step`` / 2 of robot-point motion of an exactly checked
@@ -474,12 +466,12 @@ class CollisionModel:
         checked first, unless the caller knows it is free (``end_known_free``)."""
         return self._batch.segment_free(a, b, max_step, check_end=not end_known_free)
 
-    def first_collision(self, qs: np.ndarray) -> int:
+    def first_collision(self, qs: npt.NDArray[np.float64]) -> int:
         """Index of the first colliding configuration of qs (K, n), or -1 if all are free
         (batched: inflated copies clear runs of nearby samples, exact checks for the rest)."""
         return self._batch.first_collision(qs)
 
-    def _place(self, k: int, poses: np.ndarray, placed: set[int]) -> fcl.CollisionObject:
+    def _place(self, k: int, poses: npt.NDArray[np.float64], placed: set[int]) -> fcl.CollisionObject:
         obj = self._robot_objs[k]
         if k not in placed:
             T = poses[k]
@@ -487,7 +479,7 @@ class CollisionModel:
             placed.add(k)
         return obj
 
-    def distance(self, q: np.ndarray) -> DistanceReport:
+    def distance(self, q: npt.NDArray[np.float64]) -> DistanceReport:
         """Smallest robot-environment and robot-self distances at q [m] (exact, all pairs)."""
         poses = self.shape_poses(np.asarray(q, dtype=float))
         for obj, T in zip(self._robot_objs, poses, strict=True):
@@ -509,7 +501,7 @@ class CollisionModel:
                 self_pair = (self.robot_shapes[i].label, self.robot_shapes[j].label)
         return DistanceReport(float(best_env), env_pair, float(best_self), self_pair)
 
-    def point_inside_environment(self, point: np.ndarray) -> str | None:
+    def point_inside_environment(self, point: npt.NDArray[np.float64]) -> str | None:
         """Label of the environment shape (inflated) that contains a world point, if any."""
         probe = fcl.CollisionObject(fcl.Sphere(1e-6), fcl.Transform(np.asarray(point, float)))
         for shape, obj in zip(self.env_shapes, self._env_objs, strict=True):

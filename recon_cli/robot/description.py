@@ -12,6 +12,7 @@ import functools
 import hashlib
 import io
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -130,7 +131,7 @@ RIGID_TOLERANCE = 1e-4
 _EXACT = 1e-9
 
 
-def _rigid(values, what: str) -> tuple[float, ...]:
+def _rigid(values: Iterable[float], what: str) -> tuple[float, ...]:
     """16 numbers of a rigid 4 x 4 transform (row by row), or a one-line InputError. A
     rotation orthonormal within :data:`RIGID_TOLERANCE` is replaced by the nearest rotation
     (polar decomposition), so that a matrix written with 5 decimals is accepted."""
@@ -175,4 +176,5 @@ def _expand(args: tuple[tuple[str, str], ...], digest: str) -> str:
     # xacro reports harmless notes on stderr; keep library output quiet
     with contextlib.redirect_stderr(io.StringIO()):
         doc = xacro.process_file(str(CELL_XACRO), mappings=dict(args))
-    return doc.toprettyxml(indent="  ")
+    text: str = doc.toprettyxml(indent="  ")
+    return text

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 
 from recon_cli.robot.collision import CollisionModel
@@ -61,7 +62,7 @@ class IKSolution:
     """One goal configuration. q: (n,) joint vector; limit_margin: smallest distance to a
     soft limit [rad or m]; position_error [m], rotation_error [rad] of the camera."""
 
-    q: np.ndarray
+    q: npt.NDArray[np.float64]
     limit_margin: float
     position_error: float
     rotation_error: float
@@ -101,7 +102,7 @@ class IKSolver:
         self._base_offset_xy = base0[:2].copy()
 
     # ------------------------------------------------------------------ seeds
-    def random_seed(self, world_T_goal: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    def random_seed(self, world_T_goal: npt.NDArray[np.float64], rng: np.random.Generator) -> npt.NDArray[np.float64]:
         """A random configuration; with linear axes, the iiwa base is placed within 0.6 m
         (horizontally) of the goal camera position."""
         q = rng.uniform(self._lo, self._hi)
@@ -114,8 +115,8 @@ class IKSolver:
         return q
 
     # ------------------------------------------------------------------ one descent
-    def descend(self, world_T_goal: np.ndarray, q: np.ndarray, options: IKOptions
-                ) -> tuple[np.ndarray, bool, float, float]:
+    def descend(self, world_T_goal: npt.NDArray[np.float64], q: npt.NDArray[np.float64], options: IKOptions
+                ) -> tuple[npt.NDArray[np.float64], bool, float, float]:
         """LM from q; returns (q, converged, position error [m], rotation error [rad])."""
         model, data, fid = self.kin.model, self._data, self.kin.camera_frame_id
         oMgoal = pin.SE3(world_T_goal[:3, :3], world_T_goal[:3, 3])
@@ -128,9 +129,9 @@ class IKSolver:
             oMf = pin.updateFramePlacement(model, data, fid)
             cMg = oMf.actInv(oMgoal)
             err = pin.log6(cMg).vector  # in the camera frame: (v, w)
-            ep, er = np.linalg.norm(err[:3]), np.linalg.norm(err[3:])
+            ep, er = float(np.linalg.norm(err[:3])), float(np.linalg.norm(err[3:]))
             if ep < options.tol_position and er < options.tol_rotation:
-                return q, True, float(ep), float(er)
+                return q, True, ep, er
             cost = ep * ep + er * er
             lam = lam * 0.3 if cost < prev_cost else min(lam * 4.0, 1.0)
             prev_cost = cost
@@ -154,8 +155,8 @@ class IKSolver:
         return q, False, ep, er
 
     # ------------------------------------------------------------------ solve
-    def solve(self, world_T_goal: np.ndarray, rng: np.random.Generator,
-              seed: np.ndarray | None = None, options: IKOptions = IKOptions()  # noqa: B008
+    def solve(self, world_T_goal: npt.NDArray[np.float64], rng: np.random.Generator,
+              seed: npt.NDArray[np.float64] | None = None, options: IKOptions = IKOptions()  # noqa: B008
               ) -> IKResult:
         """Up to ``options.max_solutions`` distinct collision-free solutions for a camera pose."""
         t0 = time.perf_counter()

@@ -9,6 +9,7 @@ which is the thesis order: base_joint_1, base_joint_2, arm_joint_1 ... arm_joint
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 
 from recon_cli.robot.limits import JointLimits, limits_from_urdf
@@ -25,34 +26,35 @@ class Kinematics:
         self.data: pin.Data = self.model.createData()
         self.joint_names: tuple[str, ...] = tuple(self.model.names[1:])
         self.limits: JointLimits = limits_from_urdf(urdf, self.joint_names)
-        self.camera_frame_id = self.model.getFrameId(CAMERA_FRAME)
-        self._marker_frame_id = self.model.getFrameId(MARKER_FRAME)
+        self.camera_frame_id: int = self.model.getFrameId(CAMERA_FRAME)
+        self._marker_frame_id: int = self.model.getFrameId(MARKER_FRAME)
 
     @property
     def nq(self) -> int:
-        return self.model.nq
+        return int(self.model.nq)
 
     def frame_id(self, name: str) -> int:
         fid = self.model.getFrameId(name)
         if fid >= self.model.nframes:
             raise KeyError(name)
-        return fid
+        return int(fid)
 
-    def frame_pose(self, q: np.ndarray, frame: str | int) -> np.ndarray:
+    def frame_pose(self, q: npt.NDArray[np.float64], frame: str | int) -> npt.NDArray[np.float64]:
         """``world_T_frame`` at configuration q, shape (4, 4)."""
         fid = self.frame_id(frame) if isinstance(frame, str) else frame
         pin.forwardKinematics(self.model, self.data, q)
-        return pin.updateFramePlacement(self.model, self.data, fid).homogeneous
+        world_T_frame: npt.NDArray[np.float64] = pin.updateFramePlacement(self.model, self.data, fid).homogeneous
+        return world_T_frame
 
-    def world_T_camera(self, q: np.ndarray) -> np.ndarray:
+    def world_T_camera(self, q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Camera (optical frame) pose in the world at q, eq. 2.10, shape (4, 4)."""
         return self.frame_pose(q, self.camera_frame_id)
 
-    def world_T_marker(self) -> np.ndarray:
+    def world_T_marker(self) -> npt.NDArray[np.float64]:
         """Pose of the marker board frame in the world (fixed), shape (4, 4)."""
         return self.frame_pose(pin.neutral(self.model), self._marker_frame_id)
 
-    def camera_jacobian(self, q: np.ndarray, local: bool = False) -> np.ndarray:
+    def camera_jacobian(self, q: npt.NDArray[np.float64], local: bool = False) -> npt.NDArray[np.float64]:
         """Geometric Jacobian of the camera frame, shape (6, n), rows (v, omega).
 
         local=False: linear velocity of the camera origin and angular velocity, both in
@@ -61,7 +63,9 @@ class Kinematics:
         ref = pin.LOCAL if local else pin.LOCAL_WORLD_ALIGNED
         pin.computeJointJacobians(self.model, self.data, q)
         pin.updateFramePlacement(self.model, self.data, self.camera_frame_id)
-        return pin.getFrameJacobian(self.model, self.data, self.camera_frame_id, ref)
+        jacobian: npt.NDArray[np.float64] = pin.getFrameJacobian(self.model, self.data, self.camera_frame_id, ref)
+        return jacobian
 
-    def neutral(self) -> np.ndarray:
-        return pin.neutral(self.model)
+    def neutral(self) -> npt.NDArray[np.float64]:
+        q: npt.NDArray[np.float64] = pin.neutral(self.model)
+        return q

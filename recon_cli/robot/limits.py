@@ -10,12 +10,15 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from lxml import etree
 
 from recon_cli.inputs.yamlfile import read_yaml
 from recon_cli.paths import ROBOT_DIR
+from recon_cli.robot.urdf import attribute, child
 
 
 @dataclass(frozen=True)
@@ -29,36 +32,37 @@ class JointLimits:
     """
 
     names: tuple[str, ...]
-    lower: np.ndarray
-    upper: np.ndarray
-    soft_lower: np.ndarray
-    soft_upper: np.ndarray
-    velocity: np.ndarray
-    acceleration: np.ndarray
-    effort: np.ndarray
-    prismatic: np.ndarray
+    lower: npt.NDArray[np.float64]
+    upper: npt.NDArray[np.float64]
+    soft_lower: npt.NDArray[np.float64]
+    soft_upper: npt.NDArray[np.float64]
+    velocity: npt.NDArray[np.float64]
+    acceleration: npt.NDArray[np.float64]
+    effort: npt.NDArray[np.float64]
+    prismatic: npt.NDArray[np.bool_]
 
     @property
     def n(self) -> int:
         return len(self.names)
 
-    def within_soft(self, q: np.ndarray, tol: float = 1e-9) -> bool:
+    def within_soft(self, q: npt.NDArray[np.float64], tol: float = 1e-9) -> bool:
         return bool(np.all(q >= self.soft_lower - tol) and np.all(q <= self.soft_upper + tol))
 
-    def margin_to_soft(self, q: np.ndarray) -> np.ndarray:
+    def margin_to_soft(self, q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Distance of each joint to its nearer soft limit, shape (n,) (negative: outside)."""
         return np.minimum(q - self.soft_lower, self.soft_upper - q)
 
-    def clip_soft(self, q: np.ndarray) -> np.ndarray:
+    def clip_soft(self, q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         return np.clip(q, self.soft_lower, self.soft_upper)
 
-    def sample_soft(self, rng: np.random.Generator) -> np.ndarray:
+    def sample_soft(self, rng: np.random.Generator) -> npt.NDArray[np.float64]:
         return rng.uniform(self.soft_lower, self.soft_upper)
 
 
 @functools.lru_cache(maxsize=1)
-def _limits_yaml() -> dict:
-    return read_yaml(ROBOT_DIR / "limits.yaml", "limits file")
+def _limits_yaml() -> dict[str, Any]:
+    doc: dict[str, Any] = read_yaml(ROBOT_DIR / "limits.yaml", "limits file")
+    return doc
 
 
 def acceleration_limit(joint: str) -> float:
@@ -73,17 +77,17 @@ def limits_from_urdf(urdf: str, joint_names: tuple[str, ...] | list[str]) -> Joi
     root = etree.fromstring(urdf.encode())
     rows = []
     for name in joint_names:
-        joint = root.find(f"joint[@name='{name}']")
-        limit = joint.find("limit")
+        joint = child(root, f"joint[@name='{name}']")
+        limit = child(joint, "limit")
         safety = joint.find("safety_controller")
-        lo, hi = float(limit.get("lower")), float(limit.get("upper"))
+        lo, hi = float(attribute(limit, "lower")), float(attribute(limit, "upper"))
         if safety is not None:
-            slo = float(safety.get("soft_lower_limit"))
-            shi = float(safety.get("soft_upper_limit"))
+            slo = float(attribute(safety, "soft_lower_limit"))
+            shi = float(attribute(safety, "soft_upper_limit"))
         else:
             slo, shi = lo, hi
-        rows.append((lo, hi, slo, shi, float(limit.get("velocity")), acceleration_limit(name),
-                     float(limit.get("effort")), joint.get("type") == "prismatic"))
+        rows.append((lo, hi, slo, shi, float(attribute(limit, "velocity")), acceleration_limit(name),
+                     float(attribute(limit, "effort")), joint.get("type") == "prismatic"))
     cols = list(zip(*rows, strict=True))
     return JointLimits(
         names=tuple(joint_names),

@@ -28,11 +28,12 @@ from typing import TYPE_CHECKING
 
 import coal
 import numpy as np
+import numpy.typing as npt
 import pinocchio as pin
 
 if TYPE_CHECKING:
-    from recon_cli.robot.collision import CollisionShape
     from recon_cli.robot.pair_field import PairField
+    from recon_cli.robot.shapes import CollisionShape
 
 #: inflation of each level in units of max_step / 2 (coarse to fine, ratio 4)
 LEVELS = (16.0, 4.0, 1.0)
@@ -72,14 +73,14 @@ class _Level:
         self._geometry, self._geometry_data = gm, pin.GeometryData(gm)
         self.manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(model, gm, self._geometry_data)
 
-    def batch(self, qs: np.ndarray, stop_at_first: bool = False) -> np.ndarray:
+    def batch(self, qs: npt.NDArray[np.float64], stop_at_first: bool = False) -> npt.NDArray[np.bool_]:
         """Collision flag of every configuration of qs (K, n)."""
         if self.empty or not len(qs):
             return np.zeros(len(qs), dtype=bool)
         res = pin.computeCollisionsInParallel(1, self.pool, np.asfortranarray(qs.T), True, stop_at_first)
         return np.asarray(res, dtype=bool)
 
-    def one(self, q: np.ndarray) -> bool:
+    def one(self, q: npt.NDArray[np.float64]) -> bool:
         if self.empty:
             return False
         return bool(pin.computeCollisions(self.model, self.data, self.manager, q, True))
@@ -95,7 +96,7 @@ class BatchChecker:
     """
 
     def __init__(self, model: pin.Model, shapes: list[CollisionShape], n_robot: int,
-                 pairs: list[tuple[int, int]], swept_pairs: list[tuple[int, int]], lever: np.ndarray,
+                 pairs: list[tuple[int, int]], swept_pairs: list[tuple[int, int]], lever: npt.NDArray[np.float64],
                  fields: list[PairField]) -> None:
         self.lever = lever
         self.fields = fields
@@ -110,10 +111,10 @@ class BatchChecker:
                                              f * max_step / 2.0) for f in LEVELS]
         return self._levels[max_step]
 
-    def in_collision(self, q: np.ndarray) -> bool:
+    def in_collision(self, q: npt.NDArray[np.float64]) -> bool:
         return self.exact.one(np.asarray(q, dtype=float))
 
-    def first_collision(self, qs: np.ndarray, max_step: float = 0.005) -> int:
+    def first_collision(self, qs: npt.NDArray[np.float64], max_step: float = 0.005) -> int:
         """Index of the first colliding configuration of qs (K, n), -1 when all are free.
 
         A densely sampled course (a timed trajectory) is grouped like a motion: samples whose
@@ -142,7 +143,7 @@ class BatchChecker:
         hit = np.nonzero(self.exact.batch(qs[cand], stop_at_first=True))[0]
         return int(cand[hit[0]]) if len(hit) else -1
 
-    def segment_free(self, a: np.ndarray, b: np.ndarray, max_step: float = 0.005,
+    def segment_free(self, a: npt.NDArray[np.float64], b: npt.NDArray[np.float64], max_step: float = 0.005,
                      check_end: bool = True) -> bool:
         """Is the straight joint motion a -> b free (see the module text)?"""
         a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
@@ -177,13 +178,14 @@ class BatchChecker:
         ts = self._field_samples(a, b, longest, max_step)
         return not (len(ts) and self.exact.batch(a + ts[:, None] * d, stop_at_first=True).any())
 
-    def _field_samples(self, a: np.ndarray, b: np.ndarray, longest: float, max_step: float) -> np.ndarray:
+    def _field_samples(self, a: npt.NDArray[np.float64], b: npt.NDArray[np.float64], longest: float,
+                       max_step: float) -> npt.NDArray[np.float64]:
         """Instants (finest spacing) where a distance table does not clear its pair."""
         if all(field.along(a, b) > 0.0 for field in self.fields):
             return np.zeros(0)
         fine = max(1, int(np.ceil(longest / max_step)))
         t = (np.arange(fine) + 0.5) / fine
         qs = a + t[:, None] * (b - a)
-        low = np.min([field.at(qs) for field in self.fields], axis=0)
+        low: npt.NDArray[np.float64] = np.min([field.at(qs) for field in self.fields], axis=0)
         # within half a spacing the pair moves at most max_step (both shapes max_step / 2)
         return t[low <= max_step]

@@ -19,6 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 
 @dataclass(frozen=True)
@@ -26,14 +27,15 @@ class PairField:
     """Lower bounds [m] of one pair's distance on a grid over the joints ``joints``."""
 
     joints: tuple[int, ...]  # configuration indices (one or two)
-    levers: np.ndarray  # (J,) relative motion per unit of each joint [m/rad or m/m]
-    lower: np.ndarray  # (J,) grid origin (the joints' lower limits)
-    width: np.ndarray  # (J,) cell widths
-    bound: np.ndarray  # (n_0[, n_1]) lower bound of the distance in each cell [m]
+    levers: npt.NDArray[np.float64]  # (J,) relative motion per unit of each joint [m/rad or m/m]
+    lower: npt.NDArray[np.float64]  # (J,) grid origin (the joints' lower limits)
+    width: npt.NDArray[np.float64]  # (J,) cell widths
+    bound: npt.NDArray[np.float64]  # (n_0[, n_1]) lower bound of the distance in each cell [m]
 
     @classmethod
-    def build(cls, distances: Callable[[np.ndarray], np.ndarray], joints: tuple[int, ...],
-              levers: np.ndarray, lower: np.ndarray, upper: np.ndarray, reach: float = 0.02) -> PairField:
+    def build(cls, distances: Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]],
+              joints: tuple[int, ...], levers: npt.NDArray[np.float64], lower: npt.NDArray[np.float64],
+              upper: npt.NDArray[np.float64], reach: float = 0.02) -> PairField:
         """Tabulate ``distances`` (exact distances at joint values (N, J) of ``joints``) on
         cells small enough that the pair moves by at most ``reach`` [m] from a cell's centre."""
         levers, lower, upper = (np.asarray(v, dtype=float) for v in (levers, lower, upper))
@@ -46,16 +48,17 @@ class PairField:
         values = np.asarray(distances(grid), dtype=float).reshape(tuple(counts))
         return cls(tuple(int(j) for j in joints), levers, lower, width, values - half_reach)
 
-    def _cells(self, x: np.ndarray) -> tuple[np.ndarray, ...]:
+    def _cells(self, x: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.intp], ...]:
         idx = np.floor((x - self.lower) / self.width).astype(int)
         idx = np.clip(idx, 0, np.asarray(self.bound.shape) - 1)
         return tuple(idx[..., k] for k in range(len(self.joints)))
 
-    def at(self, qs: np.ndarray) -> np.ndarray:
+    def at(self, qs: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Lower bounds of the distance at configurations qs (..., n)."""
-        return self.bound[self._cells(np.asarray(qs)[..., list(self.joints)])]
+        bound: npt.NDArray[np.float64] = self.bound[self._cells(np.asarray(qs)[..., list(self.joints)])]
+        return bound
 
-    def along(self, a: np.ndarray, b: np.ndarray, slack: float = 0.004) -> float:
+    def along(self, a: npt.NDArray[np.float64], b: npt.NDArray[np.float64], slack: float = 0.004) -> float:
         """Lower bound of the distance along the straight motion a -> b: samples at most
         ``slack`` [m] of pair motion apart, every point within slack / 2 of one of them."""
         x0, x1 = np.asarray(a)[list(self.joints)], np.asarray(b)[list(self.joints)]

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from recon_cli.errors import UnknownNameError
 from recon_cli.inputs.yamlfile import read_yaml
@@ -14,11 +16,12 @@ from recon_cli.robot.description import CellKind
 
 
 @functools.lru_cache(maxsize=1)
-def _poses() -> dict:
-    return read_yaml(ROBOT_DIR / "poses.yaml", "poses file")
+def _poses() -> dict[str, Any]:
+    doc: dict[str, Any] = read_yaml(ROBOT_DIR / "poses.yaml", "poses file")
+    return doc
 
 
-def named_configuration(kind: CellKind, name: str, joint_names: tuple[str, ...]) -> np.ndarray:
+def named_configuration(kind: CellKind, name: str, joint_names: tuple[str, ...]) -> npt.NDArray[np.float64]:
     """A named configuration in SI units (prismatic in m, revolute converted from deg)."""
     table = _poses()[kind.value]
     if name not in table:

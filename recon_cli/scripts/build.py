@@ -24,8 +24,22 @@ def as_bool(text: str | None, default: bool = False) -> bool:
     return default if text is None else text.strip() in ("true", "1")
 
 
-def _vec(text: str | None) -> tuple[float, ...] | None:
-    return None if text is None else tuple(float(v) for v in text.split())
+def _numbers(text: str | None) -> tuple[float, ...]:
+    """The numbers of an attribute the schema requires."""
+    if text is None:
+        raise ValueError("a required attribute is missing: the schema admits no such script")
+    return tuple(float(v) for v in text.split())
+
+
+def _vec3(text: str | None) -> tuple[float, float, float]:
+    """A three-number attribute the schema requires (vec3, rgb)."""
+    x, y, z = _numbers(text)
+    return x, y, z
+
+
+def _vec(text: str | None) -> tuple[float, float, float] | None:
+    """An optional three-number attribute (vec3)."""
+    return None if text is None else _vec3(text)
 
 
 def _angle(value: str | None, unit: str, default: float = 0.0) -> float:
@@ -65,7 +79,7 @@ def check_angles(src: C.Source, tag: str, unit: str, values: dict[str, str | flo
 
 def _view(el, src: C.Source, theta: float, phi: float) -> View:
     unit = el.get("unit", "deg")
-    focus = _vec(el.get("focus"))
+    focus = _vec3(el.get("focus"))
     radius = float(el.get("radius"))
     check_angles(src, el.tag, unit, {"alpha": el.get("alpha")})
     alpha = _angle(el.get("alpha"), unit)
@@ -106,7 +120,7 @@ def build_recon(el, src: C.Source) -> list[C.Command]:
             raise ScriptError(f"{src}: <box> sizes must be positive", hint="give edge lengths in metres")
         return [C.SetBox(src, center, size, a.get("frame", "world"), float(a.get("margin", D.scene.box_margin)))]
     if tag == "planner":
-        from recon_cli.planning.planner import PLANNERS
+        from recon_cli.planning.options import PLANNERS
 
         name = a.get("name", D.planner.planner)
         if name not in PLANNERS:
@@ -121,13 +135,14 @@ def build_recon(el, src: C.Source) -> list[C.Command]:
         check_angles(src, tag, unit, {"theta": a["theta"], "phi": a["phi"]})
         return [C.MoveView(src, _view(el, src, _angle(a["theta"], unit), _angle(a["phi"], unit)))]
     if tag == "pose":
-        q = _vec(a["orientation"])
+        q = _numbers(a["orientation"])
         if np.linalg.norm(q) < 1e-9:
             raise ScriptError(f"{src}: <pose> orientation quaternion is zero", hint="give x y z w of a rotation")
-        return [C.MovePose(src, _vec(a["position"]), tuple(np.asarray(q) / np.linalg.norm(q)), a.get("frame", "world"))]
+        return [C.MovePose(src, _vec3(a["position"]), tuple(np.asarray(q) / np.linalg.norm(q)),
+                           a.get("frame", "world"))]
     if tag == "joints":
         unit = a.get("unit", "rad")
-        values = _vec(a["values"])
+        values = _numbers(a["values"])
         _finite(values, src, "<joints>")
         return [C.MoveJoints(src, tuple(values), unit)]
     if tag == "ring":
@@ -172,7 +187,7 @@ def build_recon(el, src: C.Source) -> list[C.Command]:
     raise ScriptError(f"{src}: unexpected element <{tag}>", hint="see schemas/recon_script.xsd")
 
 
-def _quat_matrix(xyzw) -> np.ndarray:
+def _quat_matrix(xyzw: tuple[float, ...]) -> np.ndarray:
     from scipy.spatial.transform import Rotation
 
     q = np.asarray(xyzw, dtype=float)
@@ -190,13 +205,13 @@ def build_thesis(el, src: C.Source) -> list[C.Command]:
                               hint="use reference=\"world\" or \"marker\"")
         children = {c.tag: c for c in el if isinstance(c.tag, str)}
         if "position" in children:
-            q = _vec(children["orientation"].get("xyzw"))
+            q = _numbers(children["orientation"].get("xyzw"))
             if np.linalg.norm(q) < 1e-9:
                 raise ScriptError(f"{src}: orientation quaternion is zero", hint="give x y z w of a rotation")
-            return [C.MovePose(src, _vec(children["position"].get("xyz")), tuple(np.asarray(q) / np.linalg.norm(q)),
+            return [C.MovePose(src, _vec3(children["position"].get("xyz")), tuple(np.asarray(q) / np.linalg.norm(q)),
                                ref)]
         sphere, co = children["sphere"], children["coordinates"]
-        focus, radius = _vec(sphere.get("xyz")), float(sphere.get("radius"))
+        focus, radius = _vec3(sphere.get("xyz")), float(sphere.get("radius"))
         check_angles(src, "coordinates", "rad", {k: co.get(k) for k in ("theta", "phi", "alpha")})
         theta, phi, alpha = float(co.get("theta")), float(co.get("phi")), float(co.get("alpha", 0.0))
         _finite((*focus, radius, theta, phi, alpha), src, "<move>")
@@ -220,12 +235,12 @@ def build_thesis(el, src: C.Source) -> list[C.Command]:
         return [C.Downsample(src, a["fragment"], float(a["voxel_size"]))]
     if tag == "transform":
         children = {c.tag: c for c in el if isinstance(c.tag, str)}
-        T = np.eye(4)
+        T: np.ndarray = np.eye(4)
         try:
-            T[:3, :3] = _quat_matrix(_vec(children["rotation"].get("xyzw")))
+            T[:3, :3] = _quat_matrix(_numbers(children["rotation"].get("xyzw")))
         except ValueError:
             raise ScriptError(f"{src}: rotation quaternion is zero", hint="give x y z w of a rotation") from None
-        T[:3, 3] = _vec(children["translation"].get("xyz"))
+        T[:3, 3] = _vec3(children["translation"].get("xyz"))
         if not as_bool(a.get("forward"), True):
             T = np.linalg.inv(T)
         return [C.TransformFragment(src, a["fragment"], tuple(map(tuple, T)))]
@@ -241,5 +256,5 @@ def build_thesis(el, src: C.Source) -> list[C.Command]:
     if tag in ("show", "hide"):
         return [C.Display(src, tag, a["fragment"])]
     if tag == "color":
-        return [C.Display(src, "color", a["fragment"], _vec(a["rgb"]))]
+        return [C.Display(src, "color", a["fragment"], _vec3(a["rgb"]))]
     raise ScriptError(f"{src}: unexpected element <{tag}>", hint="see schemas/thesis_script.xsd")

@@ -18,12 +18,16 @@ from __future__ import annotations
 import functools
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from recon_cli.errors import JointLimitError, ReconError, ScriptError
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.readable import readable
+
+if TYPE_CHECKING:
+    from recon_cli.robot.limits import JointLimits
 
 SETUP = (C.SetCell, C.SetObject)
 ACTIONS = (C.Move, C.MoveJoints, C.MoveHome, C.Scan)
@@ -73,14 +77,15 @@ def is_file_name(name: str) -> bool:
 
 
 @functools.lru_cache(maxsize=4)
-def _joint_limits(kind: str):
-    from recon_cli.robot.description import CellConfig, expand_urdf
+def _joint_limits(kind: str) -> JointLimits:
+    from recon_cli.robot.description import CellConfig, CellKind, expand_urdf
     from recon_cli.robot.limits import limits_from_urdf
+    from recon_cli.robot.urdf import attribute
 
-    urdf = expand_urdf(CellConfig(kind=kind))
+    urdf = expand_urdf(CellConfig(kind=CellKind.parse(kind)))
     from lxml import etree
 
-    names = [j.get("name") for j in etree.fromstring(urdf.encode()).iter("joint")
+    names = [attribute(j, "name") for j in etree.fromstring(urdf.encode()).iter("joint")
              if j.get("type") in ("revolute", "prismatic", "continuous")]
     return limits_from_urdf(urdf, names)
 
@@ -149,7 +154,7 @@ def check_script(script: C.Script, *, object_override: str | None = None) -> Non
                     raise ScriptError(f"{cmd.source}: scan name {cmd.name!r} is used already at {names[cmd.name]}",
                                       hint="give every scan its own name")
                 names[cmd.name] = cmd.source
-            if isinstance(cmd, C.FragmentScan):
+            if isinstance(cmd, C.FragmentScan) and cmd.name is not None:  # the schema requires it
                 fragments.add(cmd.name)
         elif isinstance(cmd, (C.Register, C.Reconstruct, C.Export, C.Evaluate)):
             if scans == 0:

@@ -127,8 +127,8 @@ def expand(path: Path) -> tuple[etree._Element, dict[etree._Element, C.Source], 
             pi.getparent().remove(pi)
     tagged = {}
     for el in root.iter():
-        if isinstance(el.tag, str) and el.get(SRC_ATTR):
-            file, _, line = el.get(SRC_ATTR).rpartition(":")
+        if isinstance(el.tag, str) and (tagged_at := el.get(SRC_ATTR)):
+            file, _, line = tagged_at.rpartition(":")
             tagged[el] = C.Source(file, int(line))
             del el.attrib[SRC_ATTR]
     etree.cleanup_namespaces(root)
@@ -145,7 +145,7 @@ _NOT_XML_CHAR = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010fff
 _MAX_NAME = 50_000  # libxml2's longest name
 
 
-def _name_problem(kind: str, name: str, prefixes: set[str]) -> str | None:
+def _name_problem(kind: str, name: str, prefixes: frozenset[str]) -> str | None:
     """Why ``name`` is no XML element or attribute name (a QName whose prefix is declared
     in ``prefixes``), or None; ``kind``: "element name" or "attribute name"."""
     if len(name) > _MAX_NAME:
@@ -247,7 +247,7 @@ def load_script(path: Path) -> C.Script:
     localname = etree.QName(root).localname
     dialect = {"recon": "recon", "script": "thesis"}.get(localname)
     if dialect is None or etree.QName(root).namespace:
-        raise ScriptError(f"{path}:{root.sourceline}: unknown root element <{root.tag}>",
+        raise ScriptError(f"{path}:{root.sourceline}: unknown root element <{root.tag!s}>",
                           hint="a script starts with <recon name=...> or the thesis system's <script name=...>")
     schema = etree.XMLSchema(etree.parse(str(SCHEMA_DIR / DIALECTS[localname])))
     if not schema.validate(root):
@@ -266,9 +266,9 @@ def load_script(path: Path) -> C.Script:
             raise ScriptError(f"{src}: the script has more than the limit of {LIMITS.max_commands} commands",
                               hint="split it into several scripts")
     if dialect == "recon":
-        name, on_failure, optimize = root.get("name"), root.get("on_failure", "skip"), as_bool(root.get("optimize"))
+        name, on_failure, optimize = root.get("name", ""), root.get("on_failure", "skip"), as_bool(root.get("optimize"))
     else:
-        name, on_failure, optimize = root.get("name"), "skip", as_bool(root.get("optimization"))
+        name, on_failure, optimize = root.get("name", ""), "skip", as_bool(root.get("optimization"))
     return C.Script(str(path), name, dialect, on_failure, optimize, tuple(cmds), expanded)
 
 

@@ -11,12 +11,17 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
 from recon_cli.errors import ReconError
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.state import RunState, SequenceMethod, SequenceReport
+
+if TYPE_CHECKING:
+    from recon_cli.planning.trajectory import Trajectory
+    from recon_cli.sequence.graph import ViewGraph
 
 
 def movable_groups(commands: tuple[C.Command, ...]) -> dict[int, int]:
@@ -59,11 +64,11 @@ class Tour:
     steps: list[PlannedStep]  # in tour order
     failed: list[tuple[C.Move, list[C.Command], ReconError]]  # moves without an IK solution
     report: SequenceReport | None
-    graph: object = None  # sequence.graph.ViewGraph with the planned edges
+    graph: ViewGraph | None = None  # with the planned edges
 
-    def trajectory(self, a: int, b: int):
+    def trajectory(self, a: int, b: int) -> Trajectory | Literal[False]:
         """The planned trajectory from vertex a to b, or False (plan it at run time)."""
-        traj = self.graph.trajectory(a, b)
+        traj = self.graph.trajectory(a, b) if self.graph is not None else None
         return traj if traj is not None else False
 
 

@@ -171,6 +171,12 @@ class RunState:
         self.cell = self.session.cell
         self.q_planned = self.session.start
 
+    def planned_start(self) -> np.ndarray:
+        """Dry run: where the previous planned move ended (the session's start before any)."""
+        if self.q_planned is None:
+            raise RuntimeError("no session is open (ensure_session opens it)")
+        return self.q_planned
+
     def _explicit_box(self):
         """The <box> with centre and size, in the world frame (None: the object's own box)."""
         b = self.box_command
@@ -202,6 +208,8 @@ class RunState:
     def goal_pose(self, cmd: C.Move) -> np.ndarray:
         if isinstance(cmd, C.MoveView):
             return self.cell.view_pose(cmd.view)
+        if not isinstance(cmd, C.MovePose):
+            raise TypeError(f"{type(cmd).__name__} has no goal pose")
         from scipy.spatial.transform import Rotation
 
         T = np.eye(4)

@@ -89,9 +89,9 @@ def improve_order(cost: np.ndarray, order: list[int]) -> list[int]:
                 for pos in range(1, len(rest) + 1):
                     for s in (seg, seg[::-1]):
                         cand = rest[:pos] + s + rest[pos:]
-                        c = sequence_cost(cost, cand)
-                        if c < best - 1e-9:
-                            best, best_order = c, cand
+                        cand_cost = sequence_cost(cost, cand)
+                        if cand_cost < best - 1e-9:
+                            best, best_order = cand_cost, cand
                 if best_order is not None:
                     order = best_order
                     improved = True

@@ -94,7 +94,9 @@ def baseline_views(method: Method, center: np.ndarray, radius: float, need: int,
         z = 1.0 - k / need * 0.95  # cos(theta) from ~1 down to 0.05
         phi = np.pi * (3.0 - np.sqrt(5.0)) * k
         dirs = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], 1)
-    out, infeasible, tries = [], [], 0
+    out: list[tuple[np.ndarray, np.ndarray]] = []
+    infeasible: list[np.ndarray] = []
+    tries = 0
     while len(out) < need and tries < 40 * need:
         if dirs is not None:
             if tries >= len(dirs):

@@ -16,7 +16,7 @@ import numpy as np
 from . import limits
 from .geometry import _area, _Scan
 from .limits import LIMITS, MAX_HEADER_BYTES
-from .ply_header import _INDEX_LISTS, PlyElement, PlyHeader, ply_header
+from .ply_header import _INDEX_LISTS, PlyElement, PlyHeader, PlyProperty, ply_header
 from .refused import _BINARY_PLY, _count, _Refused
 
 
@@ -39,7 +39,7 @@ def _ply_guard(path: Path, size: int, mesh: bool, scan: _Scan | None = None, tri
     except ValueError as exc:
         raise _Refused(f"is not a PLY file recon reads: {exc}") from None
     vertex = header.element("vertex")
-    if vertex is None or any(vertex.property(a) is None or vertex.property(a).is_list for a in "xyz"):
+    if vertex is None or any(p is None or p.is_list for p in (vertex.property(a) for a in "xyz")):
         raise _Refused("has no 'vertex' element with x, y and z")
     kind = "ASCII PLY" if header.format == "ascii" else "binary PLY"
     most_vertices, most_faces = LIMITS[kind]
@@ -107,8 +107,8 @@ def _ply_binary_scan(path: Path, header: PlyHeader, vertex: PlyElement, face: Pl
         offset += np.dtype(p.type).itemsize
     record = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": offset})
     groups = {noun: [a for a in axes if a in names] for noun, axes in _PLY_GROUPS.items()}
-    floats = {noun: any(vertex.property(a).type[0] == "f" for a in axes) for noun, axes in groups.items()}
-    exact32 = all(vertex.property(a).type in ("f4", "i1", "u1", "i2", "u2") for a in "xyz")
+    floats = {noun: any(_checked(vertex, a).type[0] == "f" for a in axes) for noun, axes in groups.items()}
+    exact32 = all(_checked(vertex, a).type in ("f4", "i1", "u1", "i2", "u2") for a in "xyz")
     points = np.empty((vertex.count, 3), np.float32 if exact32 else np.float64) if face is not None else None
     block = max(1, limits.SCAN_BYTES // offset)
     with open(path, "rb") as f:
@@ -128,6 +128,14 @@ def _ply_binary_scan(path: Path, header: PlyHeader, vertex: PlyElement, face: Pl
     if points is not None and face is not None:
         area = _ply_binary_area(path, header, face, points)
         scan.area(area, face.count)
+
+
+def _checked(element: PlyElement, name: str) -> PlyProperty:
+    """A property of ``element`` that :func:`_ply_guard` found there."""
+    found = element.property(name)
+    if found is None:
+        raise _Refused(f"has no property '{name}' in its element '{element.name}'")
+    return found
 
 
 def _ply_face_record(header: PlyHeader, fields: list, size: int) -> np.dtype:
@@ -151,7 +159,7 @@ def _ply_face_layout(f, header: PlyHeader, face: PlyElement, start: int) -> tupl
     e = header.format
     offset, fields = 0, []
     for p in face.properties:
-        if not p.is_list:
+        if p.count_type is None:  # not a list
             offset += np.dtype(p.type).itemsize
             continue
         count_type = np.dtype(e + p.count_type)
@@ -212,7 +220,10 @@ def _ply_binary_area(path: Path, header: PlyHeader, face: PlyElement, points: np
     start = _faces_start(header, face)
     total = 0.0
     with open(path, "rb") as f:
-        fields, offset = _ply_face_layout(f, header, face, start)
+        layout = _ply_face_layout(f, header, face, start)
+        if isinstance(layout, str):  # _ply_binary_faces refused such faces before
+            raise _Refused(layout)
+        fields, offset = layout
         record = _ply_face_record(header, fields, offset)
         f.seek(start)
         block = max(1, min(limits.SCAN_BYTES // offset, 1_000_000))
@@ -246,7 +257,7 @@ def _ascii_skip(mm: mmap.mmap, at: int, unit: bytes, n: int, block: int = 100_00
     return at, done
 
 
-def _ply_ascii_faces(mm: mmap.mmap, header: PlyHeader, before: list[PlyElement], face: PlyElement) -> str | None:
+def _ply_ascii_faces(mm: mmap.mmap, header: PlyHeader, before: tuple[PlyElement, ...], face: PlyElement) -> str | None:
     """Walk the values as Open3D's reader does (whitespace-separated, lines do not matter):
     those of the elements before the faces, then each face, whose index list must be '3'
     followed by three values. Why not, or None."""

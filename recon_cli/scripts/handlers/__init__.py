@@ -12,16 +12,21 @@ command's report and raises a ReconError when the command fails.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any, TypeVar
 
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.state import CommandReport, RunState
 
-Handler = Callable[[RunState, C.Command, CommandReport], None]
+#: a handler takes the command type it is registered for (the registry dispatches by type)
+Handler = Callable[[RunState, Any, CommandReport], None]
 _HANDLERS: dict[type[C.Command], Handler] = {}
+_CommandT = TypeVar("_CommandT", bound=C.Command)
 
 
-def handles(*types: type[C.Command]) -> Callable[[Handler], Handler]:
-    def register(fn: Handler) -> Handler:
+def handles(*types: type[_CommandT]) -> Callable[[Callable[[RunState, _CommandT, CommandReport], None]],
+                                                 Callable[[RunState, _CommandT, CommandReport], None]]:
+    def register(fn: Callable[[RunState, _CommandT, CommandReport], None]
+                 ) -> Callable[[RunState, _CommandT, CommandReport], None]:
         for t in types:
             _HANDLERS[t] = fn
         return fn

@@ -29,6 +29,9 @@ def make_fragment(state: RunState, name: str, scan, report: CommandReport) -> No
     if state.fragment_box is None:
         state.fragment_box = crop_box_marker(state.config.registration, state.store.session())
     pose = global_pose(scan, thesis_board(), state.cell.world_T_marker)
+    if pose is None:
+        raise ReconError(f"scan {name}: no camera pose (neither the board nor the robot's kinematics gave one)",
+                         hint="keep the board in view, or record the robot's joints with the scan")
     state.fragments[name] = scan_cloud(scan, pose, state.fragment_box, state.config.registration.surface)
     report.details.update(fragment=name, pose_source=pose.source.value,
                           fragment_points=len(state.fragments[name].points))

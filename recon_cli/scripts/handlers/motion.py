@@ -30,8 +30,8 @@ def move_to_pose(state: RunState, cmd: C.Move, report: CommandReport) -> None:
     state.move_failed = False
     T = state.goal_pose(cmd)
     if state.dry_run:
-        plan = MotionPlanner(state.cell, state.config.planner).plan_to_pose(state.q_planned, T, state.rng)
-        if not plan.ok:
+        plan = MotionPlanner(state.cell, state.config.planner).plan_to_pose(state.planned_start(), T, state.rng)
+        if not plan.ok or plan.trajectory is None:
             raise PlanningError(f"cannot plan the move: {plan.status.value} ({plan.message})",
                                 hint="try another view or a longer planning time")
         state.q_planned = plan.trajectory.goal
@@ -55,10 +55,10 @@ def move_joints(state: RunState, cmd: C.MoveJoints, report: CommandReport) -> No
                           f"cell has {state.cell.kin.nq} joints", hint="one value per joint, in URDF order")
     if cmd.unit == "deg":
         q = np.where(state.cell.limits.prismatic, q, np.radians(q))
-    start = state.q_planned if state.dry_run else state.station.robot.measured_joints()
+    start = state.planned_start() if state.dry_run else state.station.robot.measured_joints()
     plan = MotionPlanner(state.cell, state.config.planner).plan_to_joints(start, q,
                                                                           seed=int(state.rng.integers(1 << 30)))
-    if not plan.ok:
+    if not plan.ok or plan.trajectory is None:
         raise PlanningError(f"cannot move to the joint goal: {plan.status.value} ({plan.message})",
                             hint="check the values against the soft joint limits and the collision model")
     _move_report(report, plan)

@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import functools
 import shutil
 from dataclasses import replace
+from pathlib import Path
 
 from recon_cli.errors import ReconError
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.checks import readable_file
 from recon_cli.scripts.handlers import handles
 from recon_cli.scripts.state import CommandReport, RunState
+
+
+def _copy(source: Path, target: Path) -> None:
+    shutil.copyfile(source, target)
 
 
 def _need_scans(state: RunState, cmd: C.Command) -> None:
@@ -82,7 +88,7 @@ def export(state: RunState, cmd: C.Export, report: CommandReport) -> None:
             raise ReconError(f"{cmd.source}: no {kind} to export yet",
                              hint="put <register/> and <reconstruct/> before <export>")
         source = state.reconstruction[kind]
-        target = atomic_write(state.out_path(name, cmd, report), lambda tmp, src=source: shutil.copyfile(src, tmp))
+        target = atomic_write(state.out_path(name, cmd, report), functools.partial(_copy, source))
         state.outputs[f"export_{kind}"] = str(target)
 
 

@@ -41,6 +41,7 @@ from recon_cli.cli.options import (
     realism_profile,
 )
 from recon_cli.errors import FileError, InputError
+from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
 
 VIEW_SETS = ("single", "eq-4.1")
 
@@ -224,7 +225,8 @@ ALIGNMENTS = ("none", "icp")
 def evaluate(
     reconstruction: Annotated[Path, typer.Argument(help="Reconstructed cloud or mesh (PLY, ...).")],
     reference: Annotated[Path, typer.Option(help="Reference mesh (ground truth).")],
-    tolerance: Annotated[float, typer.Option(min=1e-5, max=0.1, help="Coverage tolerance [m].")] = 0.001,
+    tolerance: Annotated[float, typer.Option(min=1e-5, max=0.1, help="Coverage tolerance [m].")]
+    = COVERAGE_TOLERANCE,
     views: Annotated[Path | None, typer.Option(help="Scan store whose camera poses define the visible "
                                                     "surface (coverage of what could be seen).")] = None,
     align: Annotated[str, typer.Option(help="'none' (frames agree) or 'icp' (register the reconstruction "

@@ -167,7 +167,7 @@ def build_recon(el, src: C.Source) -> list[C.Command]:
         return [C.Export(src, *(None if a.get(k) is None else relative_output(a[k], src, f"<export {k}>")
                                 for k in ("cloud", "mesh")))]
     if tag == "evaluate":
-        return [C.Evaluate(src, a.get("reference", "ground_truth"), float(a.get("tolerance", 0.001)),
+        return [C.Evaluate(src, a.get("reference", "ground_truth"), float(a.get("tolerance", C.Evaluate.tolerance)),
                            a.get("align", "none"))]
     raise ScriptError(f"{src}: unexpected element <{tag}>", hint="see schemas/recon_script.xsd")
 

@@ -46,8 +46,9 @@ def _check_range(what: str, value: float, bounds: tuple[float, float], unit: str
     """One-line InputError unless lo <= value <= hi (NaN too)."""
     lo, hi = bounds
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
+        example = f", e.g. {example}" if example else ""
         raise InputError(f"{what} = {value!r}{unit} is outside {lo:g} ... {hi:g}{unit}",
-                         hint=f"choose {what} within {lo:g} ... {hi:g}{unit}" + (f", e.g. {example}" if example else ""))
+                         hint=f"choose {what} within {lo:g} ... {hi:g}{unit}{example}")
 
 
 @dataclass(frozen=True)

@@ -191,7 +191,8 @@ def register(
     if folder is None:
         folder = base.stored("store")
         if folder is None:
-            raise InputError("no scan store given", hint="give the scan store folder (or --config FILE of a register run)")
+            raise InputError("no scan store given",
+                             hint="give the scan store folder (or --config FILE of a register run)")
         folder = Path(folder)
     one_of(box_frame, ("world", "marker"), "box frame")
     one_of(loop_closures, ("icp", "global"), "loop closure initialization")

@@ -36,7 +36,6 @@ def load_points(path: Path, samples: int = 500_000, seed: int = 0) -> np.ndarray
     """Points of a cloud file (PLY, PCD), or uniform samples of a mesh file's surface (PLY,
     OBJ, STL; Open3D's generator seeded with ``seed``); a file of vertices only gives its
     vertices. Both through the guarded readers."""
-    import open3d as o3d
 
     path = Path(path)
     if path.suffix.lower() not in (*MESH_SUFFIXES, *CLOUD_SUFFIXES):

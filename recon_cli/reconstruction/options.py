@@ -32,7 +32,8 @@ def _one_of(what: str, value: str, allowed: tuple[str, ...]) -> None:
 
 def _positive(what: str, value: float, unit: str = " m") -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
-        raise InputError(f"{what} = {value!r}{unit} is not a positive number", hint=f"give {what} in metres, e.g. 0.001")
+        raise InputError(f"{what} = {value!r}{unit} is not a positive number",
+                         hint=f"give {what} in metres, e.g. 0.001")
 
 
 @dataclass(frozen=True)

@@ -23,12 +23,32 @@ from pathlib import Path
 
 import numpy as np
 
+from recon_cli.errors import InputError
 from recon_cli.planning.options import PlanOptions
 from recon_cli.realism import IDEAL, RealismProfile
 from recon_cli.reconstruction.options import RegisterOptions
 from recon_cli.robot.description import CellConfig
 
 CONFIG_FORMAT = 1
+
+#: the seed of every random number generator of a run (--seed, a script's run, a batch job)
+SEED_RANGE = (0, 2**32 - 1)
+#: the largest scale of a mesh file (0.001 for millimetres; meshes are read up to 1000 m after it)
+MAX_SCALE = 1000.0
+#: [m] the margin of the object's bounding box (collision and crop box)
+BOX_MARGIN_RANGE = (0.0, 1.0)
+#: the image scale of the simulated sensor, relative to its 1600 x 1200 pixels
+RESOLUTION_RANGE = (0.05, 1.0)
+
+
+def _check_range(what: str, value: float, bounds: tuple[float, float], unit: str = "",
+                 example: str | None = None) -> None:
+    """One-line InputError unless lo <= value <= hi (NaN too)."""
+    lo, hi = bounds
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
+        example = f", e.g. {example}" if example else ""
+        raise InputError(f"{what} = {value!r}{unit} is outside {lo:g} ... {hi:g}{unit}",
+                         hint=f"choose {what} within {lo:g} ... {hi:g}{unit}{example}")
 
 
 @dataclass(frozen=True)
@@ -40,11 +60,26 @@ class SceneConfig:
     object_scale: float = 1.0  # of a mesh file (0.001 for millimetres)
     box_margin: float = 0.01  # [m] object bounding box margin (collision and crop box)
 
+    def __post_init__(self) -> None:
+        if not isinstance(self.object_name, str) or not self.object_name:
+            raise InputError(f"object name {self.object_name!r} is not a name",
+                             hint="give a built-in object, a YCB object, a mesh file or 'auto'")
+        scale = self.object_scale
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0 < scale <= MAX_SCALE:
+            raise InputError(f"object scale {scale!r} is not a positive number up to {MAX_SCALE:g}",
+                             hint="e.g. 0.001 for millimetres")
+        _check_range("box margin", self.box_margin, BOX_MARGIN_RANGE, " m")
+
 
 @dataclass(frozen=True)
 class SensorConfig:
     noise: bool = True  # depth and colour noise of the simulated sensor
-    resolution: float = 1.0  # image size relative to the sensor's 1600 x 1200
+    resolution: float = 1.0  # image size relative to the sensor's 1600 x 1200 (RESOLUTION_RANGE)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.noise, bool):
+            raise InputError(f"sensor noise {self.noise!r} is not true or false", hint="write true or false")
+        _check_range("image scale", self.resolution, RESOLUTION_RANGE, example="0.5 for 800 x 600")
 
 
 #: bounds of the view planner's numbers (ViewPlanConfig checks them; the command line states
@@ -68,10 +103,9 @@ class ViewPlanConfig:
     lift: bool = True  # raise infeasible views toward the vertical (ours; False: as the thesis)
     min_height: float = 0.05  # [m] lowest camera height above the board plane (thesis: above it)
     min_axis_ratio: float = 0.3  # ours: no semi-axis below this share of the largest (0: the thesis)
+    partial_voxel: float = 0.002  # [m] down-sampling of each scan's points added to the partial object
 
     def __post_init__(self) -> None:
-        from recon_cli.errors import InputError
-
         for name, (lo, hi), unit in (("n", VIEWPLAN_N, ""), ("d_c", VIEWPLAN_DC, " m"), ("m", VIEWPLAN_M, ""),
                                      ("sigma", VIEWPLAN_SIGMA, "")):
             value = getattr(self, name)
@@ -91,14 +125,38 @@ class Config:
     seed: int = 0
     realism: RealismProfile = IDEAL  # the simulation only (a hardware station is as real as it is)
 
+    def __post_init__(self) -> None:
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) \
+                or not SEED_RANGE[0] <= self.seed <= SEED_RANGE[1]:
+            raise InputError(f"seed {self.seed!r} is not a whole number within {SEED_RANGE[0]} ... 2^32-1",
+                             hint="choose a seed within 0 ... 4294967295")
+
     def replace(self, **sections) -> Config:
         return dataclasses.replace(self, **sections)
+
+    def with_values(self, values: dict) -> Config:
+        """A copy with ``{"section.field": value}`` set (``"seed"`` for the seed)."""
+        out = self
+        for path, value in values.items():
+            out = _set(out, path.split("."), value)
+        return out
 
     def to_dict(self) -> dict:
         return {"format": CONFIG_FORMAT, **_plain(dataclasses.asdict(self))}
 
+    @classmethod
+    def from_dict(cls, data: dict, where: str = "config.yaml") -> Config:
+        """The inverse of :meth:`to_dict` (see :func:`config_from_dict`)."""
+        return config_from_dict(data, where)
+
 
 DEFAULTS = Config()
+
+
+def _set(obj, keys: list[str], value):
+    if len(keys) == 1:
+        return dataclasses.replace(obj, **{keys[0]: value})
+    return dataclasses.replace(obj, **{keys[0]: _set(getattr(obj, keys[0]), keys[1:], value)})
 
 
 def _plain(value):
@@ -131,3 +189,84 @@ def write_config(folder: Path, config: Config, **extra) -> Path:
     if extra:
         data["run"] = _plain(extra)
     return atomic_write_text(Path(folder) / "config.yaml", yaml.safe_dump(data, sort_keys=False))
+
+
+#: the keys of config.yaml besides the sections: the format and what describes the run
+RUN_KEY = "run"
+
+
+def _hints(cls) -> dict:
+    """The resolved field types of a section's dataclass."""
+    import sys
+    import typing
+
+    from recon_cli.perception.charuco import BoardSpec
+    from recon_cli.reconstruction.crop import CropBox
+
+    return typing.get_type_hints(cls, vars(sys.modules[cls.__module__]),
+                                 {"BoardSpec": BoardSpec, "CropBox": CropBox})
+
+
+def _build(tp, value):
+    """``value`` (plain YAML data, already checked by the schema) as the type ``tp``."""
+    import enum
+    import types
+    import typing
+
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        return _build(next(a for a in args if a is not type(None)), value)
+    if dataclasses.is_dataclass(tp):
+        hints = _hints(tp)
+        return tp(**{f.name: _build(hints[f.name], value[f.name]) for f in dataclasses.fields(tp)
+                     if f.init and f.name in value})
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_build(args[0], v) for v in value)
+        return tuple(_build(a, v) for a, v in zip(args, value, strict=True))
+    if tp is np.ndarray:
+        return np.asarray(value, dtype=float)
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        return tp(value)
+    if tp is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
+def config_from_dict(data: dict, where: str = "config.yaml") -> Config:
+    """The Config of ``data`` (what :meth:`Config.to_dict` wrote, or a part of it: a missing
+    key keeps its default). ``data`` is checked against schemas/config.schema.json first; a
+    value a section refuses is named with ``where:line`` too."""
+    from recon_cli.inputs.schema import check
+    from recon_cli.inputs.yamlfile import line_of
+
+    check(data, "config", where)
+    hints = _hints(Config)
+    sections = {}
+    for f in dataclasses.fields(Config):
+        if f.name not in data:
+            continue
+        try:
+            sections[f.name] = _build(hints[f.name], data[f.name])
+        except InputError as exc:
+            line = line_of(data, f.name)
+            at = f"{where}:{line}" if line else where
+            raise InputError(f"{at}: {f.name}: {exc.message}", hint=exc.hint) from None
+    return Config(**sections)
+
+
+def read_config(path: Path) -> tuple[Config, dict]:
+    """The configuration of a run folder's ``config.yaml`` (through the YAML reader and the
+    schema) and its ``run`` section (what else repeats the run: command, script, store, ...)."""
+    from recon_cli.inputs.yamlfile import plain, read_yaml
+
+    hint = "give the config.yaml of a run folder (recon writes one into each)"
+    data = read_yaml(Path(path), "configuration file", hint=hint)
+    if data is None:
+        raise InputError(f"{path} is empty", hint=hint)
+    config = config_from_dict(data, str(path))
+    return config, plain(data.get(RUN_KEY) or {})

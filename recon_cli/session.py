@@ -142,7 +142,8 @@ class Session:
             spec.recorder.cell(self.cell, self.station.robot.measured_joints(), box,
                                obj.mesh_world() if obj is not None and spec.backend is Backend.SIM else None)
         write_config(spec.run_folder or spec.out, cfg, mode=spec.mode.value, backend=spec.backend.value,
-                     script=spec.script, object=None if obj is None else obj.name, **spec.run)
+                     script=spec.script, object=None if obj is None else obj.name,
+                     station=None if spec.station is None else str(spec.station), **spec.run)
         if spec.backend is Backend.SIM:
             if obj is not None:
                 write_ground_truth_mesh(spec.out, obj)

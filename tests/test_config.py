@@ -3,6 +3,7 @@ run folder records the effective configuration."""
 
 from __future__ import annotations
 
+import pytest
 import yaml
 from lxml import etree
 
@@ -65,3 +66,251 @@ def test_config_yaml_round_trip(tmp_path):
     assert data["planner"]["velocity_scale"] == DEFAULTS.planner.velocity_scale
     assert data["viewplan"]["d_c"] == DEFAULTS.viewplan.d_c
     assert data["cell"]["kind"] == "gantry"
+
+
+# ----------------------------------------------------------------------------- from_dict
+def _doc(data: dict, where: str = "config.yaml"):
+    """``data`` as the YAML reader returns it (with the lines of its keys)."""
+    from recon_cli.inputs.yamlfile import parse_yaml
+
+    return parse_yaml(yaml.safe_dump(data, sort_keys=False), where)
+
+
+def test_config_round_trip_to_dict_from_dict():
+    import dataclasses
+
+    import numpy as np
+
+    from recon_cli.config import Config
+    from recon_cli.perception.charuco import thesis_board
+    from recon_cli.realism import load_profile
+    from recon_cli.reconstruction.crop import CropBox
+    from recon_cli.robot.description import CellConfig, CellKind
+
+    T = np.eye(4)
+    T[:3, 3] = (0.1, -0.2, 0.8)
+    config = DEFAULTS.replace(
+        seed=12345, realism=load_profile("thesis"),
+        cell=CellConfig(kind=CellKind.CEILING, safety_distance=0.05),
+        registration=dataclasses.replace(DEFAULTS.registration, board=thesis_board(), perturb=(0.002, 0.01),
+                                         box=CropBox(T, (0.2, 0.3, 0.4)), local=False),
+        viewplan=dataclasses.replace(DEFAULTS.viewplan, n=5, d_c=0.6))
+    data = config.to_dict()
+    again = Config.from_dict(_doc(data))
+    assert again.to_dict() == data
+    assert again.realism == config.realism and again.cell == config.cell and again.seed == 12345
+    assert np.array_equal(again.registration.box.frame_T_box, T)
+    assert Config.from_dict(_doc(DEFAULTS.to_dict())) == DEFAULTS
+    # a part of a configuration: the rest keeps its defaults
+    part = Config.from_dict(_doc({"sensor": {"resolution": 0.25}, "seed": 4}))
+    assert part == DEFAULTS.replace(sensor=dataclasses.replace(DEFAULTS.sensor, resolution=0.25), seed=4)
+
+
+@pytest.mark.parametrize("edit, line, needle", [
+    (lambda d: d["viewplan"].update(bogus=1), 11, "viewplan.bogus is not a known key"),
+    (lambda d: d["sensor"].update(resolution=3.0), 6, "sensor.resolution = 3 is outside [0.05, 1]"),
+    (lambda d: d.update(seed=-1), 11, "seed = -1 is outside [0, 4.29497e+09]"),
+    (lambda d: d["planner"].update(planner="RRTfast"), 8, "planner.planner = 'RRTfast' is not one of"),
+    (lambda d: d["scene"].update(object_name=""), 2, "scene: object name '' is not a name"),
+])
+def test_bad_config_is_one_line_with_file_and_line(tmp_path, edit, line, needle):
+    from recon_cli.config import read_config
+    from recon_cli.errors import InputError
+
+    data = {"format": 1, "scene": {"object_name": "bottle"}, "sensor": {"noise": True, "resolution": 0.5},
+            "planner": {"planner": "RRTConnect"}, "viewplan": {"n": 3}, "seed": 0}
+    edit(data)
+    path = tmp_path / "config.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    with pytest.raises(InputError) as exc:
+        read_config(path)
+    text = exc.value.one_line()
+    assert "\n" not in text and needle in text, text
+    assert text.startswith(f"{path}:{line}: "), text
+
+
+def test_sections_validate_themselves():
+    from recon_cli.config import SceneConfig, SensorConfig
+    from recon_cli.errors import InputError
+    from recon_cli.reconstruction.options import MultiwayOptions, SurfaceOptions
+
+    for make, needle in ((lambda: SensorConfig(resolution=0.01), "image scale = 0.01 is outside 0.05 ... 1"),
+                         (lambda: SceneConfig(object_scale=0.0), "object scale 0.0 is not a positive number"),
+                         (lambda: MultiwayOptions(anchor="middle"), "pose graph anchor 'middle' is not one of"),
+                         (lambda: SurfaceOptions(voxel=0.0), "surface voxel = 0.0 m is not a positive number"),
+                         (lambda: DEFAULTS.replace(seed=2**32), "seed 4294967296 is not a whole number")):
+        with pytest.raises(InputError) as exc:
+            make()
+        assert needle in exc.value.one_line()
+
+
+def test_the_image_scale_has_one_default_and_one_range():
+    import json
+
+    from recon_cli.config import RESOLUTION_RANGE
+    from recon_cli.paths import SCHEMA_DIR
+
+    station = json.loads((SCHEMA_DIR / "station.schema.json").read_text())
+    sim = station["properties"]["camera"]["properties"]["sim"]
+    sim = next(s for s in sim.get("anyOf", [sim]) if "properties" in s)["properties"]["resolution"]
+    assert (sim["minimum"], sim["maximum"]) == RESOLUTION_RANGE
+    config = json.loads((SCHEMA_DIR / "config.schema.json").read_text())["properties"]["sensor"]["properties"]
+    assert (config["resolution"]["minimum"], config["resolution"]["maximum"]) == RESOLUTION_RANGE
+
+
+def test_the_schema_names_every_field_of_every_section():
+    import dataclasses
+    import json
+
+    from recon_cli.config import Config
+    from recon_cli.paths import SCHEMA_DIR
+
+    schema = json.loads((SCHEMA_DIR / "config.schema.json").read_text())
+
+    def check(cls, node, path):
+        props = node["properties"]
+        assert set(props) >= {f.name for f in dataclasses.fields(cls)}, path
+        for f in dataclasses.fields(cls):
+            value = getattr(cls(), f.name) if path != "registration" or f.name not in ("box", "board") else None
+            if dataclasses.is_dataclass(value):
+                sub = props[f.name]
+                check(type(value), sub, f"{path}.{f.name}")
+
+    check(Config, schema, "")
+    assert set(schema["properties"]) == {"format", "run", *(f.name for f in dataclasses.fields(Config))}
+
+
+# ----------------------------------------------------------------------------- --config through the CLI
+def test_cli_bad_config_file_is_one_line_exit_1(tmp_path, capsys):
+    from recon_cli.cli import main
+
+    bad = tmp_path / "config.yaml"
+    bad.write_text("format: 1\nsensor:\n  noise: true\n  resolutoin: 0.5\n")
+    for argv in (["autoscan", "--config", str(bad), "--out", str(tmp_path / "a")],
+                 ["capture", "--config", str(bad), "--out", str(tmp_path / "c")],
+                 ["register", "--config", str(bad)],
+                 ["run", "--config", str(bad)]):
+        code = main(argv)
+        out, err = capsys.readouterr()
+        lines = [line for line in err.splitlines() if line.strip()]
+        assert code == 1 and len(lines) == 1 and "Traceback" not in out + err, (argv, err)
+        assert lines[0].startswith(f"error: {bad}:4: sensor.resolutoin is not a known key"), lines[0]
+    assert not (tmp_path / "a").exists() and not (tmp_path / "c").exists()
+    missing = tmp_path / "nothing.yaml"
+    code = main(["capture", "--config", str(missing)])
+    err = capsys.readouterr().err
+    assert code == 1 and f"configuration file {missing} does not exist" in err
+
+
+def test_cli_config_of_another_command_is_refused(tmp_path, capsys):
+    from recon_cli.cli import main
+
+    path = write_config(tmp_path, DEFAULTS, command="autoscan")
+    code = main(["capture", "--config", str(path), "--out", str(tmp_path / "c")])
+    err = capsys.readouterr().err
+    assert code == 1 and "is the configuration of a 'recon autoscan' run, not of 'recon capture'" in err
+
+
+#: report keys that hold wall-clock times or creation instants: the only ones that may differ
+#: between two runs of one seed (besides the run folder's name in paths)
+CLOCK_KEYS = frozenset({
+    "seconds", "seconds_scanning", "seconds_total", "seconds_register", "created",
+    "capture_start", "capture_end", "capture_seconds", "global_s", "local_s", "surface_s", "total_s",
+    "plan_time_s", "simplify_time_s", "planning_total_s", "planning_s", "plan_time",
+})
+#: numbers of the Poisson mesh: Open3D builds it on several threads that sum in varying order
+MESH_KEYS = frozenset({"triangles"})
+
+
+def _invoke(*argv: str) -> None:
+    from typer.testing import CliRunner
+
+    from recon_cli.cli import app
+
+    result = CliRunner().invoke(app, [str(a) for a in argv])
+    assert result.exit_code == 0, (result.output, result.exception)
+
+
+def _reports(folder, *patterns: str) -> dict:
+    """Every JSON report matching the patterns, without CLOCK_KEYS and MESH_KEYS, the folder's
+    own name in paths replaced; and config.yaml without its run: section's folder names."""
+    import json
+
+    def comparable(value):
+        if isinstance(value, dict):
+            return {k: comparable(v) for k, v in value.items() if k not in CLOCK_KEYS | MESH_KEYS}
+        if isinstance(value, list):
+            return [comparable(v) for v in value]
+        if isinstance(value, str):
+            return value.replace(str(folder), "<out>")
+        return value
+
+    out = {}
+    for pattern in patterns:
+        for path in sorted(folder.glob(pattern)):
+            out[str(path.relative_to(folder))] = comparable(json.loads(path.read_text()))
+    assert out, f"no reports in {folder}"
+    return out
+
+
+def _config_sections(folder) -> dict:
+    data = yaml.safe_load((folder / "config.yaml").read_text())
+    return {k: v for k, v in data.items() if k != "run"}
+
+
+def _same_three_times(tmp_path, argv: tuple, *patterns: str, out_option: str = "--out") -> tuple:
+    """Run argv twice and once from the first run's config.yaml; the reports and the
+    configurations agree."""
+    folders = [tmp_path / name for name in ("first", "second", "repeat")]
+    _invoke(*argv, out_option, folders[0])
+    _invoke(*argv, out_option, folders[1])
+    _invoke(argv[0], "--config", folders[0] / "config.yaml", out_option, folders[2])
+    reports = [_reports(f, *patterns) for f in folders]
+    assert reports[0] == reports[1], "two runs with one seed differ"
+    assert reports[0] == reports[2], "the run repeated from its config.yaml differs"
+    configs = [_config_sections(f) for f in folders]
+    assert configs[0] == configs[1] == configs[2]
+    return folders, reports[0]
+
+
+@pytest.mark.slow
+def test_autoscan_same_seed_same_reports(tmp_path):
+    argv = ("autoscan", "--n", "3", "--m", "20", "--resolution", "0.1", "--no-pictures", "--seed", "3",
+            "--object", "bottle")
+    folders, reports = _same_three_times(tmp_path, argv, "autoscan_report.json", "scan_*/*.json",
+                                         "reconstruction/report.json")
+    report = reports["autoscan_report.json"]
+    assert report["scans"] == 3 and report["seed"] == 3 and report["n"] == 3 and report["m"] == 20
+    repeat = yaml.safe_load((folders[2] / "config.yaml").read_text())
+    assert repeat["sensor"]["resolution"] == 0.1 and repeat["run"]["pictures"] is False
+
+
+@pytest.mark.slow
+def test_capture_and_register_same_seed_same_reports(tmp_path):
+    argv = ("capture", "--object", "bottle", "--resolution", "0.1", "--seed", "5", "--theta", "60")
+    folders, reports = _same_three_times(tmp_path / "capture", argv, "capture_report.json", "session.json",
+                                         "scan_*/*.json")
+    assert reports["session.json"]["seed"] == 5
+    store = folders[0]
+    argv = ("register", store, "--voxel", "0.002", "--global-only")
+    folders, reports = _same_three_times(tmp_path / "register", argv, "report.json")
+    repeat = yaml.safe_load((folders[2] / "config.yaml").read_text())
+    assert repeat["run"]["store"] == str(store)
+    assert repeat["registration"]["surface"]["voxel"] == 0.002 and repeat["registration"]["local"] is False
+    # an option given together with --config overrides the file's value, the others keep it
+    _invoke("register", "--config", folders[0] / "config.yaml", "--voxel", "0.003", "--out", tmp_path / "other")
+    other = yaml.safe_load((tmp_path / "other" / "config.yaml").read_text())
+    assert other["registration"]["surface"]["voxel"] == 0.003 and other["registration"]["local"] is False
+    assert other["seed"] == 0
+
+
+@pytest.mark.slow
+def test_script_run_same_seed_same_reports(tmp_path):
+    from recon_cli.paths import SCRIPTS_DIR
+
+    argv = ("run", SCRIPTS_DIR / "smoke.xml", "--seed", "3")
+    folders, reports = _same_three_times(tmp_path, argv, "run_report.json", "scans/scan_*/*.json",
+                                         "reconstruction/report.json")
+    assert reports["run_report.json"]["seed"] == 3
+    repeat = yaml.safe_load((folders[2] / "config.yaml").read_text())
+    assert repeat["run"]["script"] == str(SCRIPTS_DIR / "smoke.xml") and repeat["seed"] == 3

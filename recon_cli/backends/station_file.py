@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from recon_cli.config import DEFAULTS, RESOLUTION_RANGE
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.robot.description import CellConfig, CellKind
 
@@ -47,15 +48,16 @@ class SimCameraConfig:
     """``camera.sim``: the simulated sensor rendered at the robot's measured joints (a camera
     stand-in for wiring and testing a real robot adapter)."""
 
-    noise: bool = True
-    resolution: float = 1.0
+    noise: bool = DEFAULTS.sensor.noise
+    resolution: float = DEFAULTS.sensor.resolution
 
     @classmethod
     def from_mapping(cls, d: dict, where: str = "camera.sim") -> SimCameraConfig:
         _known_keys(d, where, ("noise", "resolution"))
-        cfg = cls(bool(d.get("noise", True)), float(d.get("resolution", 1.0)))
-        if not 0.05 <= cfg.resolution <= 1.0:
-            raise InputError(f"{where}.resolution = {cfg.resolution} is outside 0.05 ... 1", hint="e.g. 0.5")
+        cfg = cls(bool(d.get("noise", cls.noise)), float(d.get("resolution", cls.resolution)))
+        lo, hi = RESOLUTION_RANGE
+        if not lo <= cfg.resolution <= hi:
+            raise InputError(f"{where}.resolution = {cfg.resolution} is outside {lo:g} ... {hi:g}", hint="e.g. 0.5")
         return cfg
 
 

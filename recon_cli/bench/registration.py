@@ -31,6 +31,7 @@ from recon_cli.perception.sensor import motioncam_3d_m
 from recon_cli.realism import IDEAL, RealismProfile
 from recon_cli.reconstruction.assessment import run_evaluate
 from recon_cli.reconstruction.evaluation import histogram_png, signed_distances
+from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
 from recon_cli.reconstruction.pipeline import RegisterOptions, RegisterResult, run_register
 from recon_cli.reconstruction.scan_store import ScanStore
 from recon_cli.session import resolve_object_name
@@ -67,7 +68,8 @@ CASES = (  # name, perturbed, local registration
 KINEMATICS_CASE = "kinematics only, global only"  # every pose from forward kinematics
 
 
-def run_registration_bench(out: Path, object_name: str = "auto", seed: int = 0, resolution: float = 1.0,
+def run_registration_bench(out: Path, object_name: str = "auto", seed: int = DEFAULTS.seed,
+                           resolution: float = DEFAULTS.sensor.resolution,
                            progress: Callable[[str, int, int], None] | None = None,
                            realism: RealismProfile = IDEAL) -> dict:
     object_name = resolve_object_name(object_name)
@@ -82,12 +84,13 @@ def run_registration_bench(out: Path, object_name: str = "auto", seed: int = 0, 
     reference = scans / "ground_truth" / f"{capture.scene_object.name}.ply"
     rows, results = [], {}
     for k, (name, perturbed, local) in enumerate(cases):
-        base = RegisterOptions(local=local != "none", mesh=local == "icp" and not perturbed, seed=seed,
+        base = RegisterOptions(local=local != "none", mesh=local == "icp" and not perturbed,
                                perturb=THESIS_CHARUCO_ERROR if perturbed else None,
                                use_board=name != KINEMATICS_CASE)
         opts = replace(base, multiway=replace(base.multiway, loop_closure_init=local if local != "none" else "icp"))
-        result = run_register(scans, out / f"case_{k}", opts)
-        ev = run_evaluate(result.cloud, reference, 0.001, scans, samples=200_000, out=out / f"case_{k}").evaluation
+        result = run_register(scans, out / f"case_{k}", opts, seed=seed)
+        ev = run_evaluate(result.cloud, reference, COVERAGE_TOLERANCE, scans, samples=200_000,
+                          out=out / f"case_{k}").evaluation
         errors = [r.pose_errors() for r in result.used]
         rows.append(CaseRow(name, perturbed, local, ev.mean * 1e3, ev.std * 1e3, ev.within["±0.5 mm"],
                             ev.coverage_visible, ev.coverage,

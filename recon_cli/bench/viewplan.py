@@ -48,7 +48,8 @@ def face_on_view(name: str, d_c: float) -> View:
 
 
 def run_viewplan_bench(out: Path, objects=BUILT_IN, methods=METHODS, n: int = 16, d_c: float = 0.55,
-                       seed: int = 0, resolution: float = 1.0, cell: CellConfig | None = None,
+                       seed: int = DEFAULTS.seed, resolution: float = DEFAULTS.sensor.resolution,
+                       cell: CellConfig | None = None,
                        progress: Callable[[str, int, int], None] | None = None,
                        realism: RealismProfile = IDEAL) -> list[ViewplanRow]:
     rows = []

@@ -12,6 +12,7 @@ from recon_cli.cli.options import (
     MAX_THETA,
     MAX_TURN,
     CellOpt,
+    ConfigOpt,
     D,
     DcOpt,
     ForceOpt,
@@ -29,6 +30,7 @@ from recon_cli.cli.options import (
     output_folder,
     parse_vector,
     realism_profile,
+    run_base,
 )
 from recon_cli.config import VIEWPLAN_M, VIEWPLAN_SIGMA
 from recon_cli.errors import InputError
@@ -38,6 +40,7 @@ _V = D.viewplan
 
 @app.command()
 def autoscan(
+    ctx: typer.Context,
     dc: DcOpt = _V.d_c,
     n: ScansOpt = _V.n,
     object_name: Annotated[str, typer.Option("--object", metavar=object_metavar(True), callback=object_option(True),
@@ -64,22 +67,27 @@ def autoscan(
     realism: RealismOpt = D.realism.name,
     record: RecordOpt = False,
     force: ForceOpt = False,
+    config_file: ConfigOpt = None,
 ) -> None:
     """Scan an unknown object autonomously: the ellipsoid view planner of the thesis."""
-    from dataclasses import replace
-
-    from recon_cli.config import SceneConfig
     from recon_cli.console import console, progress_bar
-    from recon_cli.robot.description import CellConfig, CellKind
     from recon_cli.session import resolve_object_name
     from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions
 
     check_record(record)
-    object_name = resolve_object_name(object_name)
-    config = D.replace(
-        cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
-        scene=SceneConfig(object_name, scale), sensor=replace(D.sensor, resolution=resolution), seed=seed,
-        viewplan=replace(_V, n=n, d_c=dc, m=m, sigma=sigma), realism=realism_profile(realism))
+    base = run_base(ctx, config_file, "autoscan")
+    config = base.config.with_values(base.picked(
+        cell=("cell.kind", cell), safety=("cell.safety_distance", safety),
+        object_name=("scene.object_name", lambda: resolve_object_name(object_name)),
+        scale=("scene.object_scale", scale),
+        resolution=("sensor.resolution", resolution), seed=("seed", seed), n=("viewplan.n", n),
+        dc=("viewplan.d_c", dc), m=("viewplan.m", m), sigma=("viewplan.sigma", sigma),
+        realism=("realism", lambda: realism_profile(realism))))
+    object_name, scale, dc = config.scene.object_name, config.scene.object_scale, config.viewplan.d_c
+    initial = base.pick("initial", initial, base.stored("initial"))
+    pictures = base.pick("pictures", pictures, base.stored("pictures", pictures))
+    station = base.pick("station", station, base.stored("station"))
+    station = None if station is None else Path(station)
     view = None
     if initial is not None:
         theta, phi = parse_vector(initial, 2, "--initial", "degrees")
@@ -92,7 +100,8 @@ def autoscan(
         view = make_view(",".join(map(str, center)), dc + 0.1, theta, phi, 0.0, "world")
     folder = output_folder(out, "autoscan", force=force,
                            inputs=(station, Path(realism), Path(object_name))).path
-    opts = AutoscanOptions(folder, config, view, pictures=pictures, run={"command": "autoscan"}, station=station,
+    opts = AutoscanOptions(folder, config, view, pictures=pictures,
+                           run={"command": "autoscan", "initial": initial, "pictures": pictures}, station=station,
                            record=record)
     with progress_bar() as update:
         result = Autoscan(opts, update).run()

@@ -107,8 +107,7 @@ def bench_registration(
     object_name: Annotated[str, typer.Option("--object", metavar=object_metavar(True), callback=object_option(True),
                                              help="Object ('auto': the drill if the YCB data is here, else the "
                                                   "bottle).")] = D.scene.object_name,
-    resolution: Annotated[float, typer.Option(min=0.1, max=1.0, help="Image size relative to 1600 x 1200.")]
-    = D.sensor.resolution,
+    resolution: ResolutionOpt = D.sensor.resolution,
     seed: SeedOpt = D.seed,
     realism: RealismOpt = D.realism.name,
     out: OutOpt = None,

@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from recon_cli.config import DEFAULTS, VIEWPLAN_DC, VIEWPLAN_N
+from recon_cli.config import DEFAULTS, MAX_SCALE, RESOLUTION_RANGE, SEED_RANGE, VIEWPLAN_DC, VIEWPLAN_N, Config
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.geometry.view import MAX_COORDINATE, MAX_RADIUS, Frame
 from recon_cli.robot.description import CellKind
@@ -33,8 +34,9 @@ PLANNING_TIME_RANGE = (0.1, 3600.0)
 SAFETY_RANGE = (0.0, 0.2)
 #: the longest edge [m] of a box given on the command line (--object-box, --box)
 MAX_BOX_EDGE = 10.0
-#: the scale of a mesh file (0.001 for millimetres; meshes are read up to 1000 m after it)
-SCALE_RANGE = (1e-6, 1000.0)
+#: the scale of a mesh file (0.001 for millimetres; meshes are read up to MAX_SCALE x 1 m
+#: after it); the lower bound stands for "positive"
+SCALE_RANGE = (1e-6, MAX_SCALE)
 
 
 def _focus(value: str | None) -> str | None:
@@ -138,7 +140,7 @@ CellOpt = Annotated[CellKind, typer.Option("--cell", help="The cell: gantry (9 D
                                                           "(7 DoF).")]
 SafetyOpt = Annotated[float, typer.Option("--safety", min=SAFETY_RANGE[0], max=SAFETY_RANGE[1],
                                           help="Safety distance [m] that inflates every collision shape.")]
-SeedOpt = Annotated[int, typer.Option("--seed", min=0, max=2**32 - 1,
+SeedOpt = Annotated[int, typer.Option("--seed", min=SEED_RANGE[0], max=SEED_RANGE[1],
                                       help="Seed of the random number generator (0 ... 2^32-1).")]
 FocusOpt = Annotated[str, typer.Option("--focus", callback=_focus, help="Focus point f as x,y,z [m], each "
                                                                         f"within ±{MAX_COORDINATE:g} m.")]
@@ -150,7 +152,8 @@ PhiOpt = Annotated[float, typer.Option("--phi", min=-MAX_TURN, max=MAX_TURN, hel
 AlphaOpt = Annotated[float, typer.Option("--alpha", min=-MAX_TURN, max=MAX_TURN,
                                          help="Camera roll about its viewing axis [deg].")]
 FrameOpt = Annotated[Frame, typer.Option("--frame", help="Frame of f and the angles.")]
-ResolutionOpt = Annotated[float, typer.Option(min=0.05, max=1.0, help="Image size relative to 1600 x 1200.")]
+ResolutionOpt = Annotated[float, typer.Option(min=RESOLUTION_RANGE[0], max=RESOLUTION_RANGE[1],
+                                              help="Image size relative to 1600 x 1200.")]
 ScaleOpt = Annotated[float, typer.Option("--scale", min=SCALE_RANGE[0], max=SCALE_RANGE[1],
                                          help="Scale of a mesh file (0.001 for millimetres).")]
 PlanningTimeOpt = Annotated[float, typer.Option("--planning-time", min=PLANNING_TIME_RANGE[0],
@@ -175,6 +178,10 @@ ForceOpt = Annotated[bool, typer.Option("--force", help="Use a non-empty --out: 
                                                       "(links only as links; the rest stays; "
                                                       "docs/architecture.md); without it --out must be new or "
                                                       "empty.")]
+ConfigOpt = Annotated[Path | None, typer.Option(
+    "--config", help="Repeat a run: the config.yaml of its folder gives every setting (and what its 'run:' section "
+                     "records, e.g. the script or the scan store); options given together with --config override "
+                     "the file's values, the other options keep the file's.")]
 RecordOpt = Annotated[bool, typer.Option("--record", help="Also write a 3D recording of the run (recording.rrd "
                                                          "in the output folder; recon view opens it; needs "
                                                          "recon-scan[viz]).")]
@@ -268,3 +275,50 @@ def positive(value: float, option: str, hint: str) -> float:
     if not math.isfinite(value) or value <= 0:
         raise InputError(f"{option} {value} is not a positive number", hint=hint)
     return value
+
+
+@dataclass(frozen=True)
+class RunBase:
+    """What a command starts from: the configuration and the ``run:`` section of ``--config
+    FILE`` (else the defaults and nothing), and which options were given on the command line."""
+
+    config: Config
+    run: dict
+    path: Path | None
+    given: frozenset[str]
+
+    def pick(self, name: str, value, stored):
+        """The option ``name``'s ``value`` where it was given or there is no --config file,
+        else the file's ``stored`` value."""
+        return value if self.path is None or name in self.given else stored
+
+    def picked(self, **options) -> dict:
+        """``{config path: value}`` of the options that override the file (all without
+        --config): ``options`` maps an option's parameter name to (dotted config path, value);
+        a value may be a function, called only when it is used."""
+        out = {}
+        for name, (path, value) in options.items():
+            if self.path is None or name in self.given:
+                out[path] = value() if callable(value) else value
+        return out
+
+    def stored(self, key: str, default=None):
+        return self.run.get(key, default)
+
+
+def run_base(ctx: typer.Context, path: Path | None, command: str) -> RunBase:
+    """The --config FILE of ``command`` (a one-line error when it was written by another
+    command) and the options given on the command line beside it."""
+    sources = {name: ctx.get_parameter_source(name) for name in ctx.params}
+    given = frozenset(name for name, source in sources.items()
+                      if source is not None and source.name not in ("DEFAULT", "DEFAULT_MAP"))
+    if path is None:
+        return RunBase(DEFAULTS, {}, None, given)
+    from recon_cli.config import read_config
+
+    config, run = read_config(path)
+    written = run.get("command")
+    if written is not None and written != command:
+        raise InputError(f"{path} is the configuration of a 'recon {written}' run, not of 'recon {command}'",
+                         hint=f"repeat it with recon {written} --config {path}")
+    return RunBase(config, run, Path(path), given)

@@ -11,6 +11,7 @@ import typer
 
 from recon_cli.cli.app import app
 from recon_cli.cli.options import ForceOpt, output_folder, parse_vector
+from recon_cli.reconstruction.options import RECORDING_SCALE
 
 
 @app.command()
@@ -20,7 +21,8 @@ def replay(
     out: Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default runs/replay-<time>).")]
     = None,
     voxel: Annotated[float, typer.Option(min=0.0005, max=0.5, help="Registration voxel and finest ICP "
-                                                                   "correspondence distance [m].")] = 0.02,
+                                                                   "correspondence distance [m].")]
+    = RECORDING_SCALE.voxel,
     depth_scale: Annotated[float, typer.Option(min=1e-6, max=1e6, help="Depth image units per metre (image folders).")]
     = 1000.0,
     intrinsics: Annotated[str | None, typer.Option(help="Pinhole intrinsics fx,fy,cx,cy [px] (image folders without "

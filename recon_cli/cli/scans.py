@@ -17,6 +17,7 @@ from recon_cli.cli.options import (
     THETA,
     AlphaOpt,
     CellOpt,
+    ConfigOpt,
     D,
     FocusOpt,
     ForceOpt,
@@ -40,10 +41,12 @@ from recon_cli.cli.options import (
     parse_vector,
     positive,
     realism_profile,
+    run_base,
 )
 from recon_cli.errors import FileError, InputError
 from recon_cli.geometry.view import Frame
 from recon_cli.planning.options import PLANNERS
+from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
 
 #: the view sets of ``recon capture --views``
 VIEW_SETS = ("single", "eq-4.1")
@@ -51,6 +54,7 @@ VIEW_SETS = ("single", "eq-4.1")
 
 @app.command()
 def capture(
+    ctx: typer.Context,
     object_name: Annotated[
         str, typer.Option("--object", metavar=object_metavar(True), callback=object_option(True),
                           help="Built-in object, YCB object or mesh file; 'auto': the drill if the YCB data is here, "
@@ -84,20 +88,32 @@ def capture(
                                                           "--out (same cell and object); without it --out must be "
                                                           "new or empty.")] = False,
     force: ForceOpt = False,
+    config_file: ConfigOpt = None,
 ) -> None:
     """Move the simulated robot through views and write one scan per view into a scan store."""
-    from dataclasses import replace
-
     import numpy as np
 
-    from recon_cli.config import SceneConfig, SensorConfig
     from recon_cli.console import console, progress_bar, styled
-    from recon_cli.robot.description import CellConfig, CellKind
+    from recon_cli.robot.description import CellKind
     from recon_cli.session import resolve_object_name
     from recon_cli.workflows.capture import CaptureOptions, run_capture
 
     check_record(record)
-    object_name = resolve_object_name(object_name)
+    base = run_base(ctx, config_file, "capture")
+    stored_view = base.stored("view") or {}
+    focus, radius, theta, phi, alpha, frame = (
+        base.pick(name, value, stored_view.get(name, value))
+        for name, value in (("focus", focus), ("radius", radius), ("theta", theta), ("phi", phi), ("alpha", alpha),
+                            ("frame", frame)))
+    views = base.pick("views", views, base.stored("views", views))
+    cover_board = base.pick("cover_board", cover_board, base.stored("cover_board", cover_board))
+    frame = Frame(frame)
+    station = base.pick("station", station, base.stored("station"))
+    station = None if station is None else Path(station)
+    if "object_name" in base.given or base.path is None:
+        object_name = resolve_object_name(object_name)
+    else:
+        object_name = base.config.scene.object_name
     if views == "single":
         view_list = (make_view(focus, radius, theta, phi, alpha, frame),)
     else:
@@ -106,15 +122,18 @@ def capture(
         view_list = tuple(eq_4_1_views())
     covered = index_list(cover_board, "--cover-board", len(view_list))
     positive(scale, "--scale", "e.g. 0.001 for millimetres")
-    config = D.replace(
-        cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
-        scene=SceneConfig(object_name, scale), sensor=SensorConfig(noise, resolution), seed=seed,
-        planner=replace(D.planner, planner=planner, time_limit=planning_time), realism=realism_profile(realism))
+    config = base.config.with_values({"scene.object_name": object_name, **base.picked(
+        cell=("cell.kind", lambda: CellKind.parse(cell)), safety=("cell.safety_distance", safety),
+        scale=("scene.object_scale", scale), noise=("sensor.noise", noise),
+        resolution=("sensor.resolution", resolution), seed=("seed", seed), planner=("planner.planner", planner),
+        planning_time=("planner.time_limit", planning_time), realism=("realism", lambda: realism_profile(realism)))})
     folder = output_folder(out, "capture", append=append, force=force,
                            append_hint="--append to add this capture's scans to the scan store in it",
                            inputs=(station, Path(realism), Path(object_name))).path
     options = CaptureOptions(views=view_list, out=folder, config=config, cover_board=frozenset(covered),
-                             run={"command": "capture", "views": views}, station=station,
+                             run={"command": "capture", "views": views, "cover_board": cover_board,
+                                  "view": {"focus": focus, "radius": radius, "theta": theta, "phi": phi,
+                                           "alpha": alpha, "frame": frame}}, station=station,
                              record=record, append=append)
     with progress_bar() as update:
         result = run_capture(options, update)
@@ -143,7 +162,9 @@ _CROP_FRAME = Frame(_R.box_frame)
 
 @app.command()
 def register(
-    folder: Annotated[Path, typer.Argument(help="Scan store folder (simulated or recorded).")],
+    ctx: typer.Context,
+    folder: Annotated[Path | None, typer.Argument(help="Scan store folder (simulated or recorded); with --config "
+                                                       "the store the file names by default.")] = None,
     out: Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default "
                                                                  "<folder>/reconstruction).")] = None,
     crop_box: Annotated[str | None, typer.Option(help="Crop box cx,cy,cz,sx,sy,sz [m] (default: the session's "
@@ -163,13 +184,13 @@ def register(
     = _R.surface.density_quantile,
     record: RecordOpt = False,
     force: ForceOpt = False,
+    config_file: ConfigOpt = None,
 ) -> None:
     """Register all scans of a folder (ChArUco or kinematics, pose-graph ICP), fuse, mesh.
 
     Scans that cannot be read, or are links out of the folder, are skipped with their reason;
-    the run fails only when no scan is usable."""
-    from dataclasses import replace
-
+    the run fails only when no scan is usable. Its config.yaml names the store and holds the
+    registration settings, so that --config repeats it."""
     import numpy as np
 
     from recon_cli.console import console, progress_bar, styled
@@ -178,6 +199,13 @@ def register(
     from recon_cli.workflows.register import register_folder
 
     check_record(record)
+    base = run_base(ctx, config_file, "register")
+    if folder is None:
+        folder = base.stored("store")
+        if folder is None:
+            raise InputError("no scan store given",
+                             hint="give the scan store folder (or --config FILE of a register run)")
+        folder = Path(folder)
     crop = None
     if crop_box is not None:
         v = parse_vector(crop_box, 6, "--crop-box", "metres")
@@ -189,15 +217,18 @@ def register(
         T = np.eye(4)
         T[:3, 3] = v[:3]
         crop = CropBox(T, tuple(v[3:]))
-    options = replace(_R, box=crop, box_frame=crop_frame.value, use_board=board, local=local,
-                      multiway=replace(_R.multiway, loop_closure_init=loop_closures),
-                      surface=replace(_R.surface, voxel=voxel, poisson_depth=depth, density_quantile=trim))
+    config = base.config.with_values(base.picked(
+        crop_box=("registration.box", crop), crop_frame=("registration.box_frame", crop_frame.value),
+        board=("registration.use_board", board), local=("registration.local", local),
+        loop_closures=("registration.multiway.loop_closure_init", loop_closures),
+        voxel=("registration.surface.voxel", voxel), depth=("registration.surface.poisson_depth", depth),
+        trim=("registration.surface.density_quantile", trim)))
     if not Path(folder).is_dir():
         raise FileError(f"{folder} is not a folder", hint="point to a scan store (a folder of scan_NNNN)")
     target = output_folder(out or Path(folder) / "reconstruction", "register", force=force,
                            nested_in=None if out else Path(folder), inputs=(folder,), make=False)
     with progress_bar() as update:  # the folder is made when there is something to write
-        result = register_folder(folder, target, options, record, update)
+        result = register_folder(folder, target, config, record, update)
     page = write_pages_after_register(result.folder)
     sources = {k: v for k, v in result.pose_sources.items() if v}
     skipped = len(result.scans) - len(result.used)
@@ -234,7 +265,8 @@ ALIGNMENTS = ("none", "icp")
 def evaluate(
     reconstruction: Annotated[Path, typer.Argument(help="Reconstructed cloud or mesh (PLY, ...).")],
     reference: Annotated[Path, typer.Option(help="Reference mesh (ground truth).")],
-    tolerance: Annotated[float, typer.Option(min=1e-5, max=0.1, help="Coverage tolerance [m].")] = 0.001,
+    tolerance: Annotated[float, typer.Option(min=1e-5, max=0.1, help="Coverage tolerance [m].")]
+    = COVERAGE_TOLERANCE,
     scan_store: Annotated[Path | None, typer.Option(help="Scan store whose camera poses define the visible "
                                                          "surface (coverage of what could be seen).")] = None,
     align: Annotated[Literal[ALIGNMENTS], typer.Option(help="'none' (frames agree) or 'icp' (register the "

@@ -10,6 +10,7 @@ import typer
 from recon_cli.cli.app import app
 from recon_cli.cli.options import (
     REALISM_HELP,
+    ConfigOpt,
     D,
     ForceOpt,
     RecordOpt,
@@ -20,7 +21,9 @@ from recon_cli.cli.options import (
     output_folder,
     realism_option,
     realism_profile,
+    run_base,
 )
+from recon_cli.errors import InputError
 from recon_cli.scripts.state import SequenceMethod
 from recon_cli.session import Backend
 
@@ -52,7 +55,9 @@ RUN_EPILOG = ("Exit codes: 0 every command done; 1 error before or outside the c
 
 @app.command("run", epilog=RUN_EPILOG)
 def run_script(
-    script: Annotated[Path, typer.Argument(help="Automation script (recon or thesis dialect).")],
+    ctx: typer.Context,
+    script: Annotated[Path | None, typer.Argument(help="Automation script (recon or thesis dialect); with --config "
+                                                       "the script the file names by default.")] = None,
     out: Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default runs/run-<time>).")] = None,
     backend: Annotated[Backend | None, typer.Option(help="The backend (overrides the script).")] = None,
     dry_run: Annotated[bool, typer.Option("--dry-run", help="Plan every move, move nothing, scan nothing.")] = False,
@@ -76,8 +81,13 @@ def run_script(
     = None,
     record: RecordOpt = False,
     force: ForceOpt = False,
+    config_file: ConfigOpt = None,
 ) -> None:
-    """Run an automation script: moves, scans, registration, reconstruction, exports."""
+    """Run an automation script: moves, scans, registration, reconstruction, exports.
+
+    Its config.yaml records the script and the options that override it; with --config FILE
+    the script runs again on that configuration (the script's elements set what they set
+    the first time)."""
     from recon_cli.console import console, progress_bar, styled
     from recon_cli.interrupts import stop_signals
     from recon_cli.scripts.checks import check_backend, check_script
@@ -85,16 +95,40 @@ def run_script(
     from recon_cli.scripts.state import RunOptions
     from recon_cli.workflows.script_run import ScriptRunner
 
+    base = run_base(ctx, config_file, "run")
+    if script is None:
+        script = base.stored("script")
+        if script is None:
+            raise InputError("no script given", hint="give the automation script (or --config FILE of a run)")
+        script = Path(script)
+    backend = base.pick("backend", backend, base.stored("backend_override"))
+    backend = None if backend is None else Backend(backend)
+    dry_run = base.pick("dry_run", dry_run, base.stored("dry_run", dry_run))
+    object_name = base.pick("object_name", object_name, base.stored("object_override"))
+    optimize = base.pick("optimize", optimize, base.stored("optimize"))
+    sequence_method = SequenceMethod(base.pick("sequence_method", sequence_method,
+                                               base.stored("sequence_method", sequence_method)))
+    station = base.pick("station", station, base.stored("station"))
+    station = None if station is None else Path(station)
+    stored_realism = base.stored("realism_override")
     check_record(record)
     s = load_script(script)
     check_script(s, object_override=object_name)  # before the output folder is made
     check_backend(s, backend, station, dry_run)
-    profile = None if realism is None else realism_profile(realism)
+    if realism is not None:
+        profile = realism_profile(realism)
+    elif stored_realism is not None:  # the profile the file records (it overrode the script then)
+        profile = base.config.realism
+    else:
+        profile = None
     folder = output_folder(out, "run", append=append, force=force,
                            append_hint="--append to add this run's scans to the scan store in it",
                            inputs=(script, station, None if realism is None else Path(realism))).path
-    options = RunOptions(folder, backend, seed, dry_run, object_name, optimize, sequence_method, append, station,
-                         profile, record)
+    config = base.config.with_values(base.picked(seed=("seed", seed)))
+    run = {"dry_run": dry_run, "backend_override": backend, "object_override": object_name, "optimize": optimize,
+           "sequence_method": sequence_method, "realism_override": realism or stored_realism}
+    options = RunOptions(folder, backend, config, dry_run, object_name, optimize, sequence_method, append, station,
+                         profile, record, run=run)
     with stop_signals(), progress_bar() as update:
         result = ScriptRunner(s, options, update).run()
     counts: dict[str, int] = {}

@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from recon_cli.cli.app import app
+from recon_cli.cli.options import D
 
 station_app = typer.Typer(help="Station files: the robot and camera adapters of a real cell.", no_args_is_help=True,
                           rich_markup_mode=None)
@@ -30,7 +31,7 @@ def check(
     console.print(f"station {sf.name!r} ({station}): robot {sf.robot_adapter}, camera {sf.camera_adapter}, "
                   f"cell {sf.cell.kind.value}")
     try:
-        result = check_station(sf)
+        result = check_station(sf, D.seed)
     except RobotFault as exc:
         if exc.kind != "connection" or exc.stopped:
             raise

@@ -22,7 +22,7 @@ from recon_cli.inputs.numbers import range_text
 from recon_cli.inputs.yamlfile import line_of
 
 #: the YAML file kinds with a schema (schemas/KIND.schema.json)
-KINDS = ("station", "realism", "camera", "batch")
+KINDS = ("station", "realism", "camera", "batch", "config")
 
 
 @cache

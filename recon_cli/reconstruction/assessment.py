@@ -17,7 +17,11 @@ from recon_cli.errors import FileError
 from recon_cli.geometry.transforms import pose_error
 from recon_cli.inputs.meshes import CLOUD_SUFFIXES, MESH_SUFFIXES, read_cloud, read_mesh
 from recon_cli.reconstruction.evaluation import CameraView, Evaluation, evaluate, histogram_png, signed_distances
+from recon_cli.reconstruction.options import SurfaceOptions
+from recon_cli.reconstruction.randomness import open3d_draws
 from recon_cli.reconstruction.scan_store import ScanStore
+
+_SURFACE = SurfaceOptions()  # its voxel and normal radius serve the ICP alignment to a reference
 
 
 @dataclass(frozen=True)
@@ -32,7 +36,6 @@ def load_points(path: Path, samples: int = 500_000, seed: int = 0) -> np.ndarray
     """Points of a cloud file (PLY, PCD), or uniform samples of a mesh file's surface (PLY,
     OBJ, STL; Open3D's generator seeded with ``seed``); a file of vertices only gives its
     vertices. Both through the guarded readers."""
-    import open3d as o3d
 
     path = Path(path)
     if path.suffix.lower() not in (*MESH_SUFFIXES, *CLOUD_SUFFIXES):
@@ -41,8 +44,8 @@ def load_points(path: Path, samples: int = 500_000, seed: int = 0) -> np.ndarray
         return np.asarray(read_cloud(path, "reconstruction").points)
     mesh = read_mesh(path, "reconstruction", triangles=False)
     if len(mesh.triangles):
-        o3d.utility.random.seed(seed)
-        return np.asarray(mesh.sample_points_uniformly(number_of_points=samples).points)
+        with open3d_draws(seed):
+            return np.asarray(mesh.sample_points_uniformly(number_of_points=samples).points)
     return np.asarray(mesh.vertices)
 
 
@@ -69,10 +72,10 @@ def align_icp(points: np.ndarray, reference, distance: float = 0.005, seed: int 
     import open3d as o3d
 
     reg = o3d.pipelines.registration
-    src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)).voxel_down_sample(0.001)
-    o3d.utility.random.seed(seed)
-    tgt = reference.sample_points_uniformly(number_of_points=200_000)
-    tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.004, max_nn=30))
+    src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)).voxel_down_sample(_SURFACE.voxel)
+    with open3d_draws(seed):
+        tgt = reference.sample_points_uniformly(number_of_points=200_000)
+    tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=_SURFACE.normal_radius, max_nn=30))
     T = np.eye(4)
     for d in (distance, distance / 2, distance / 5):
         T = reg.registration_icp(src, tgt, d, T, reg.TransformationEstimationPointToPlane(),

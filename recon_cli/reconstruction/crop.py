@@ -33,6 +33,8 @@ class CropBox:
 
 
 PLANE_SLAB = 0.006  # [m] above the box's bottom face, where crop_cloud looks for the support plane
+#: the fixed seed of the support plane's RANSAC: a scan is cropped alike in every run
+PLANE_RANSAC_SEED = 0
 
 
 def box_pixels(box: CropBox, camera_T_frame: np.ndarray, intrinsics,
@@ -74,16 +76,13 @@ def crop_cloud(cloud, box: CropBox, plane_slab: float = PLANE_SLAB, plane_tolera
     if slab.sum() >= 200:
         import open3d as o3d
 
+        from recon_cli.reconstruction.randomness import open3d_draws
+
         sub = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(local[slab]))
-        # Open3D's RANSAC draws its samples from several threads, in whatever order they run:
-        # with one thread the seed fixes the planes it tries, and a run repeats exactly
-        threads = o3d.utility.get_max_threads()
-        o3d.utility.set_max_threads(1)
-        try:
-            o3d.utility.random.seed(0)
+        # on one thread with a fixed seed the planes RANSAC tries are fixed: a scan is cropped
+        # the same way in every run and whatever ran before
+        with open3d_draws(PLANE_RANSAC_SEED, single_thread=True):
             plane, inliers = sub.segment_plane(plane_tolerance / 2.0, 3, 200)
-        finally:
-            o3d.utility.set_max_threads(threads)
         n = np.asarray(plane[:3])
         if len(inliers) >= 100 and abs(n[2]) > np.cos(np.radians(5.0)):
             a, b, c, d = (v / np.linalg.norm(n) * np.sign(n[2]) for v in plane)

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from recon_cli.perception.camera_model import Intrinsics
+from recon_cli.reconstruction.randomness import open3d_draws
 
 
 @dataclass(frozen=True)
@@ -84,8 +85,8 @@ def sample_surface(reference, n: int, seed: int = 0):
 
     mesh = o3d.geometry.TriangleMesh(reference)
     mesh.compute_triangle_normals()
-    o3d.utility.random.seed(seed)
-    cloud = mesh.sample_points_uniformly(number_of_points=n, use_triangle_normal=True)
+    with open3d_draws(seed):
+        cloud = mesh.sample_points_uniformly(number_of_points=n, use_triangle_normal=True)
     return np.asarray(cloud.points), np.asarray(cloud.normals)
 
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from recon_cli.errors import InputError
+
 if TYPE_CHECKING:
     from recon_cli.perception.charuco import BoardSpec
     from recon_cli.reconstruction.crop import CropBox
@@ -17,6 +19,21 @@ if TYPE_CHECKING:
 #: of the board: in simulation such a pose was 2.85 mm off at 2.7 px, the good ones < 0.4 px)
 MAX_REPROJECTION_PX = 1.0
 MAX_BOARD_SIGMA = 0.002  # [m]
+#: [m] a reference sample closer than this to a reconstruction counts as covered (recon
+#: evaluate, a script's <evaluate>, the ground-truth coverage of autoscan and the benchmarks)
+COVERAGE_TOLERANCE = 0.001
+
+
+def _one_of(what: str, value: str, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise InputError(f"{what} {value!r} is not one of {', '.join(allowed)}",
+                         hint=f"choose {' or '.join(allowed)}")
+
+
+def _positive(what: str, value: float, unit: str = " m") -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
+        raise InputError(f"{what} = {value!r}{unit} is not a positive number",
+                         hint=f"give {what} in metres, e.g. 0.001")
 
 
 @dataclass(frozen=True)
@@ -36,6 +53,14 @@ class SurfaceOptions:
     outlier_std_ratio: float = 3.0
     poisson_depth: int = 9  # octree depth (thesis: 8)
     density_quantile: float = 0.02  # drop mesh vertices below this quantile of Poisson density
+
+    def __post_init__(self) -> None:
+        _positive("surface voxel", self.voxel)
+        _positive("surface normal_radius", self.normal_radius)
+        _one_of("outlier filter", self.outlier_filter, ("radius", "statistical"))
+        if not 0.0 <= self.density_quantile < 1.0:
+            raise InputError(f"density quantile {self.density_quantile!r} is outside 0 ... 1",
+                             hint="trim a share within 0 ... 0.5, e.g. 0.02")
 
 
 @dataclass(frozen=True)
@@ -87,12 +112,25 @@ class MultiwayOptions:
     method: str = "point_to_plane"  # pairwise ICP: point_to_plane | point_to_point | colored
 
     def __post_init__(self) -> None:
-        if self.loop_closure_init not in ("icp", "global"):
-            raise ValueError(f"loop_closure_init must be 'icp' or 'global', not {self.loop_closure_init!r}")
-        if self.method not in ("point_to_plane", "point_to_point", "colored"):
-            raise ValueError(f"method must be point_to_plane, point_to_point or colored, not {self.method!r}")
-        if self.anchor not in ("prior", "mean", "reference"):
-            raise ValueError(f"anchor must be 'prior', 'mean' or 'reference', not {self.anchor!r}")
+        _one_of("loop closure initialization", self.loop_closure_init, ("icp", "global"))
+        _one_of("ICP method", self.method, ("point_to_plane", "point_to_point", "colored"))
+        _one_of("pose graph anchor", self.anchor, ("prior", "mean", "reference"))
+        _positive("registration voxel", self.voxel)
+        _positive("registration overlap_voxel", self.overlap_voxel)
+        _positive("ICP max_correspondence", self.max_correspondence)
+        if not self.scales or any(not 0 < x < float("inf") for x in self.scales):
+            raise InputError(f"ICP scales {list(self.scales)} are not positive numbers", hint="e.g. [4, 2, 1]")
+
+
+#: a script's <pair_register threshold=...>: ICP on copies down-sampled to this share of the
+#: correspondence distance, but no finer than MIN_PAIR_VOXEL [m]
+PAIR_VOXEL_RATIO = 0.25
+MIN_PAIR_VOXEL = 5e-4
+
+
+def pair_voxel(threshold: float) -> float:
+    """[m] the registration voxel of a pairwise ICP with correspondence distance ``threshold``."""
+    return max(threshold * PAIR_VOXEL_RATIO, MIN_PAIR_VOXEL)
 
 
 @dataclass(frozen=True)
@@ -123,4 +161,28 @@ class RegisterOptions:
     # random directions (seeded), e.g. the thesis' ChArUco errors on a simulated camera whose
     # poses are otherwise nearly exact; recorded in the report
     perturb: tuple[float, float] | None = None
-    seed: int = 0
+
+    def __post_init__(self) -> None:
+        _one_of("box frame", self.box_frame, ("world", "marker"))
+
+
+@dataclass(frozen=True)
+class RecordingScale:
+    """The scale a recording is registered at its recorded poses (``recon replay``): hand-held
+    and tabletop sensors see centimetres where the cell sees tenths of a millimetre. Every
+    length is a ratio of ``voxel``."""
+
+    voxel: float = 0.02  # [m] registration voxel and finest ICP correspondence distance
+    prior: tuple[float, float] = (0.05, 2.0)  # [m, deg] uncertainty of a recorded pose
+    surface_ratio: float = 0.5  # the fused cloud's voxel
+    normal_radius_ratio: float = 3.0  # the fused cloud's normal neighbourhood
+    overlap_ratio: float = 2.0  # the sparser copies the overlaps are counted on
+    point_sigma_divisor: float = 10.0  # the floor of the ICP residual is voxel / this
+    residual_voxel_ratio: float = 0.5  # down-sampling of the clouds the overlap residuals are measured on
+    residual_distance_ratio: float = 2.5  # overlap gate of the residuals
+
+    def __post_init__(self) -> None:
+        _positive("recording voxel", self.voxel)
+
+
+RECORDING_SCALE = RecordingScale()

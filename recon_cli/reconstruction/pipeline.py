@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from recon_cli.config import DEFAULTS
 from recon_cli.errors import FileError, InputError, MetadataError
 from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.outputs import OutputFolder
@@ -192,11 +193,11 @@ def crop_box_marker(options: RegisterOptions, session: SessionInfo) -> CropBox:
 
 
 def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOptions = RegisterOptions(),  # noqa: B008
-                 progress: Progress | None = None) -> RegisterResult:
+                 progress: Progress | None = None, *, seed: int = DEFAULTS.seed) -> RegisterResult:
     """Register the scan store ``folder`` into ``out`` (a folder, or one a command claimed:
     it is made, and what ``--force`` removes is removed, only when there is something to
     write). Scans that cannot be read, or that are links out of the store, are skipped with
-    their reason."""
+    their reason. ``seed``: the run's seed (Config.seed), of the ``perturb`` directions."""
     from recon_cli.runs import register as reg_file
     from recon_cli.runs.codec import from_json, matrix, plain
 
@@ -215,7 +216,7 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
     world_T_marker = session.world_T_marker
     box = _crop_box(options, session, world_T_marker)
     board = options.board or thesis_board()
-    rng = np.random.default_rng(options.seed)
+    rng = np.random.default_rng(seed)
 
     # 1. global registration, cropping, oriented normals (per scan)
     records: list[ScanRecord] = []

@@ -128,9 +128,9 @@ def framed_view(vertices: np.ndarray, azimuth_deg: float, elevation_deg: float, 
 
 
 def render_mesh(mesh_path: Path, out_dir: Path, views: tuple[str, ...] = tuple(MESH_VIEWS),
-                width: int = 480) -> tuple[MeshView, ...]:
+                width: int = 480, *, seed: int) -> tuple[MeshView, ...]:
     """``mesh_<view>.png`` in ``out_dir`` for each view; a FileError when the file holds no
-    triangles."""
+    triangles. ``seed``: of the vertex subset that frames a large mesh (the run's seed)."""
     import cv2
     import open3d as o3d
 
@@ -145,7 +145,7 @@ def render_mesh(mesh_path: Path, out_dir: Path, views: tuple[str, ...] = tuple(M
         mesh.compute_vertex_normals()
     vertices = np.asarray(mesh.vertices)
     if len(vertices) > 50_000:  # the framing needs the outline only
-        vertices = vertices[np.random.default_rng(0).choice(len(vertices), 50_000, replace=False)]
+        vertices = vertices[np.random.default_rng(seed).choice(len(vertices), 50_000, replace=False)]
     height = max(1, round(width * 3 / 4))
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))

@@ -14,6 +14,7 @@ import shutil
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from recon_cli.config import DEFAULTS
 from recon_cli.errors import FileError, ReconError
 from recon_cli.report.mesh_view import MeshView
 from recon_cli.report.model import RunFolder, RunKind
@@ -58,7 +59,9 @@ def _draw(run: RunFolder, options: ReportOptions, out: Path) -> Assets:
         why = "the mesh was not rendered (--no-render)"
     else:
         try:
-            views = render_mesh(mesh, out, options.views, options.image_width)
+            seed = next((s.seed for s in (run.session, run.script_run, run.autoscan)
+                         if s is not None and s.seed is not None), DEFAULTS.seed)
+            views = render_mesh(mesh, out, options.views, options.image_width, seed=seed)
         except FileError as exc:
             why = f"the mesh cannot be shown: {exc.one_line()}"
     pictures: list[Picture] = []

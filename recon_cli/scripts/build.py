@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from recon_cli.config import DEFAULTS as D
-from recon_cli.errors import ScriptError
+from recon_cli.config import SensorConfig
+from recon_cli.errors import InputError, ScriptError
 from recon_cli.geometry.view import Frame, View
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.sandbox import LIMITS
@@ -105,10 +106,14 @@ def relative_output(name: str, src: C.Source, what: str) -> str:
 def build_recon(el, src: C.Source) -> list[C.Command]:
     tag, a = el.tag, el.attrib
     if tag == "cell":
+        resolution = float(a.get("resolution", D.sensor.resolution))
+        try:
+            SensorConfig(resolution=resolution)
+        except InputError as exc:
+            raise ScriptError(f"{src}: <cell resolution> {exc.message}", hint=exc.hint) from None
         return [C.SetCell(src, a.get("kind", D.cell.kind.value),
                           float(a.get("safety_distance", D.cell.safety_distance)), a.get("backend", "sim"),
-                          float(a.get("resolution", D.sensor.resolution)), as_bool(a.get("noise"), D.sensor.noise),
-                          a.get("realism", D.realism.name))]
+                          resolution, as_bool(a.get("noise"), D.sensor.noise), a.get("realism", D.realism.name))]
     if tag == "object":
         return [C.SetObject(src, a["name"], float(a.get("scale", D.scene.object_scale)))]
     if tag == "box":
@@ -182,7 +187,7 @@ def build_recon(el, src: C.Source) -> list[C.Command]:
         return [C.Export(src, *(None if a.get(k) is None else relative_output(a[k], src, f"<export {k}>")
                                 for k in ("cloud", "mesh")))]
     if tag == "evaluate":
-        return [C.Evaluate(src, a.get("reference", "ground_truth"), float(a.get("tolerance", 0.001)),
+        return [C.Evaluate(src, a.get("reference", "ground_truth"), float(a.get("tolerance", C.Evaluate.tolerance)),
                            a.get("align", "none"))]
     raise ScriptError(f"{src}: unexpected element <{tag}>", hint="see schemas/recon_script.xsd")
 

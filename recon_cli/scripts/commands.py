@@ -12,6 +12,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from recon_cli.geometry.view import View
+from recon_cli.reconstruction.options import COVERAGE_TOLERANCE, SurfaceOptions
+
+_SURFACE = SurfaceOptions()
 
 
 @dataclass(frozen=True)
@@ -184,7 +187,7 @@ class Export(Command):
 @dataclass(frozen=True)
 class Evaluate(Command):
     reference: str = "ground_truth"
-    tolerance: float = 0.001
+    tolerance: float = COVERAGE_TOLERANCE
     align: str = "none"
 
     def describe(self) -> str:
@@ -233,7 +236,7 @@ class AddFragment(Command):
 @dataclass(frozen=True)
 class Downsample(Command):
     fragment: str = ""
-    voxel: float = 0.001
+    voxel: float = _SURFACE.voxel
 
     def describe(self) -> str:
         return f"down-sample {self.fragment} (voxel {self.voxel:g} m)"

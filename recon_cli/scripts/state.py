@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from recon_cli.config import Config
+from recon_cli.config import DEFAULTS, Config
 from recon_cli.errors import FileError
 from recon_cli.geometry.view import Frame
 from recon_cli.realism import RealismProfile
@@ -62,7 +62,7 @@ class RunStatus(StrEnum):
 class RunOptions:
     out: Path
     backend: Backend | None = None  # overrides the script's <cell backend=...>
-    seed: int = 0
+    config: Config = DEFAULTS  # what the script's elements start from (its seed is the run's)
     dry_run: bool = False
     object_name: str | None = None  # simulated object (overrides the script's <object>)
     optimize: bool | None = None  # sequence optimization (None: as the script says)
@@ -72,6 +72,7 @@ class RunOptions:
     realism: RealismProfile | None = None  # overrides the script's <cell realism=...>
     record: bool = False  # write a 3D recording of the run (recording.rrd in ``out``)
     page: bool = True  # write the run's report page (report.html) at its end
+    run: dict = field(default_factory=dict)  # what config.yaml's run: section records to repeat the run
 
 
 @dataclass
@@ -165,7 +166,7 @@ class RunState:
             return
         spec = SessionSpec(self.out / "scans", self.config, Mode.SCRIPT, self.backend, box=self._explicit_box(),
                            script=self.script.path, append=self.options.append, run_folder=self.out,
-                           run={"command": "run", "dialect": self.script.dialect, "dry_run": self.dry_run},
+                           run={"command": "run", "dialect": self.script.dialect, **self.options.run},
                            station=self.options.station, recorder=None if self.dry_run else self.recorder)
         self.session = open_session(spec, self.rng, plan_only=self.dry_run)
         self.cell = self.session.cell

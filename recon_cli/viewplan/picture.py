@@ -12,7 +12,8 @@ COLORS = {"infeasible": "#d62728", "completed": "#2ca02c", "planned": "#1f77b4",
 
 
 def iteration_png(path: Path, iteration: int, points: np.ndarray, ellipsoid, views, planned: list[np.ndarray],
-                  active: np.ndarray) -> None:
+                  active: np.ndarray, seed: int) -> None:
+    """``seed``: of the subset of a large partial object that is drawn (the run's seed)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -23,7 +24,7 @@ def iteration_png(path: Path, iteration: int, points: np.ndarray, ellipsoid, vie
     ax = fig.add_subplot(projection="3d")
     pts = np.asarray(points)
     if len(pts) > 4000:
-        pts = pts[np.random.default_rng(0).choice(len(pts), 4000, replace=False)]
+        pts = pts[np.random.default_rng(seed).choice(len(pts), 4000, replace=False)]
     ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], s=0.5, c="0.35", alpha=0.6)
     # ellipsoid wireframe and its box (the box = ellipsoid axes / sqrt(3) * 2 / 2)
     u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 30), np.linspace(0, np.pi, 15))

@@ -135,13 +135,12 @@ class Autoscan:
         from recon_cli.perception.charuco import thesis_board
         from recon_cli.reconstruction.global_registration import global_pose
         from recon_cli.reconstruction.pipeline import scan_cloud
-        from recon_cli.reconstruction.surface import SurfaceOptions
 
         scan = self.acq.scan(view_record(None, view_T))
         pose = global_pose(scan, thesis_board(), self.cell.world_T_marker)
-        cloud = scan_cloud(scan, pose, self.crop_marker, SurfaceOptions())
+        cloud = scan_cloud(scan, pose, self.crop_marker, self.opt.config.registration.surface)
         cloud.transform(self.cell.world_T_marker)
-        pts = np.asarray(cloud.voxel_down_sample(0.002).points)
+        pts = np.asarray(cloud.voxel_down_sample(self.vp.partial_voxel).points)
         if len(pts):
             self.partial.append(pts)
 
@@ -293,11 +292,12 @@ class Autoscan:
             from dataclasses import replace
 
             from recon_cli.reconstruction.evaluation import histogram_png, signed_distances, within_shares
+            from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
             from recon_cli.reconstruction.pipeline import run_register
 
             try:
-                reg = run_register(opt.out, opt.out / "reconstruction",
-                                   replace(cfg.registration, mesh=opt.mesh, seed=cfg.seed))
+                reg = run_register(opt.out, opt.out / "reconstruction", replace(cfg.registration, mesh=opt.mesh),
+                                   seed=cfg.seed)
             except ReconError as exc:
                 error = exc
             else:
@@ -305,7 +305,7 @@ class Autoscan:
                 from recon_cli.inputs.meshes import read_cloud
 
                 pts = np.asarray(read_cloud(cloud, "fused cloud", points=False).points)
-                coverage = surface_coverage(self.obj, pts, 0.001, np.random.default_rng(cfg.seed))
+                coverage = surface_coverage(self.obj, pts, COVERAGE_TOLERANCE, np.random.default_rng(cfg.seed))
                 d = signed_distances(pts, self.obj.mesh_world())
                 if self.recorder is not None:
                     from recon_cli.recording.results import record_registration
@@ -337,7 +337,7 @@ class Autoscan:
         from recon_cli.viewplan.picture import iteration_png
 
         path = self.opt.out / "iterations" / f"iteration_{it:02d}.png"
-        iteration_png(path, it, self._partial_points(), ell, views, planned, active)
+        iteration_png(path, it, self._partial_points(), ell, views, planned, active, self.opt.config.seed)
         return path
 
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from recon_cli.backends.hardware.replay import ImportedRecording, ReplayConfig, import_recording
 from recon_cli.reconstruction.consistency import PairResidual, cloud_png, overlap_residuals, summary
-from recon_cli.reconstruction.options import MultiwayOptions, RegisterOptions, SurfaceOptions
+from recon_cli.reconstruction.options import RECORDING_SCALE, MultiwayOptions, RegisterOptions, SurfaceOptions
 
 
 @dataclass(frozen=True)
@@ -39,12 +39,12 @@ class ReplayOptions:
     half of it); prior [m, deg]: uncertainty of a recorded pose; crop_box: "auto", (centre,
     size) [m] in the recording's frame, or None (everything); local: run the pose graph;
     mesh: Poisson mesh too; residual_distance [m]: overlap gate of the residuals (default
-    2.5 voxel)."""
+    RecordingScale.residual_distance_ratio x voxel)."""
 
     source: ReplayConfig
     out: Path
-    voxel: float = 0.02
-    prior: tuple[float, float] = (0.05, 2.0)
+    voxel: float = RECORDING_SCALE.voxel
+    prior: tuple[float, float] = RECORDING_SCALE.prior
     crop_box: str | tuple | None = "auto"
     local: bool = True
     mesh: bool = False
@@ -68,12 +68,13 @@ class ReplayResult:
 def register_options(voxel: float, prior: tuple[float, float], local: bool = True, mesh: bool = False,
                      box=None) -> RegisterOptions:
     """``recon register --no-board`` settings at the scale ``voxel`` [m] (see the module
-    docstring)."""
+    docstring; the other lengths are RECORDING_SCALE's ratios of it)."""
+    r = RECORDING_SCALE
     return RegisterOptions(
         box=box, use_board=False, board_plane=False, local=local, mesh=mesh,
-        surface=SurfaceOptions(voxel=voxel / 2, normal_radius=3 * voxel),
-        multiway=MultiwayOptions(voxel=voxel, max_correspondence=voxel, overlap_voxel=2 * voxel,
-                                 prior_sigma=prior, point_sigma=voxel / 10))
+        surface=SurfaceOptions(voxel=voxel * r.surface_ratio, normal_radius=voxel * r.normal_radius_ratio),
+        multiway=MultiwayOptions(voxel=voxel, max_correspondence=voxel, overlap_voxel=voxel * r.overlap_ratio,
+                                 prior_sigma=prior, point_sigma=voxel / r.point_sigma_divisor))
 
 
 def camera_correction(record) -> dict:
@@ -110,9 +111,10 @@ def run_replay(opt: ReplayOptions, progress: Callable[[str, int, int], None] | N
             before.append(c)
     else:
         before = after
-    gate = opt.residual_distance or 2.5 * opt.voxel
-    res_before = overlap_residuals(before, gate, voxel=opt.voxel / 2)
-    res_after = res_before if before is after else overlap_residuals(after, gate, voxel=opt.voxel / 2)
+    gate = opt.residual_distance or RECORDING_SCALE.residual_distance_ratio * opt.voxel
+    residual_voxel = opt.voxel * RECORDING_SCALE.residual_voxel_ratio
+    res_before = overlap_residuals(before, gate, voxel=residual_voxel)
+    res_after = res_before if before is after else overlap_residuals(after, gate, voxel=residual_voxel)
     first = result.used[0].final_marker_T_camera
     from recon_cli.inputs.meshes import read_cloud
 

@@ -19,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 
-from recon_cli.config import DEFAULTS, SceneConfig
 from recon_cli.errors import ReconError, RobotFault, RunInterrupted, ScriptAborted
 from recon_cli.interrupts import exit_code, signal_name
 from recon_cli.runs.codec import from_json, plain
@@ -74,10 +73,10 @@ class ScriptRunner:
         self.script = script
         self.options = options
         self.progress = progress or (lambda *a: None)
-        config = replace(DEFAULTS, seed=options.seed,
-                         scene=SceneConfig(options.object_name or DEFAULTS.scene.object_name),
-                         realism=options.realism or DEFAULTS.realism)
-        self.state = RunState(script, options, config, np.random.default_rng(options.seed),
+        base = options.config
+        scene = base.scene if options.object_name is None else replace(base.scene, object_name=options.object_name)
+        config = base.replace(scene=scene, realism=options.realism or base.realism)
+        self.state = RunState(script, options, config, np.random.default_rng(config.seed),
                               backend=options.backend or Backend.SIM)
         self.on_failure = OnFailure(script.on_failure)
         self.reports: list[CommandReport] = []
@@ -227,7 +226,7 @@ class ScriptRunner:
         run_file.write(self.out, run_file.ScriptRunReport(
             script=self.script.path, name=self.script.name, dialect=self.script.dialect,
             on_failure=self.on_failure.value, dry_run=self.options.dry_run, backend=self.state.backend.value,
-            seed=self.options.seed, seconds=seconds, scans=self.state.scan_count(), status=status.value,
+            seed=self.state.config.seed, seconds=seconds, scans=self.state.scan_count(), status=status.value,
             exit_code=code, aborted=aborted or None, interrupted=interrupted, append=self.options.append,
             outputs=dict(self.state.outputs),
             sequence_optimization=tuple(from_json(run_file.SequenceOptimization, plain(s.to_dict()))

@@ -258,14 +258,14 @@ def test_blank_pictures_are_recognized(tmp_path):
     sphere = o3d.geometry.TriangleMesh.create_sphere(0.05)
     sphere.translate((0.3, -0.2, 0.8))
     o3d.io.write_triangle_mesh(str(tmp_path / "sphere.ply"), sphere)
-    views = render_mesh(tmp_path / "sphere.ply", tmp_path / "out", width=160)
+    views = render_mesh(tmp_path / "sphere.ply", tmp_path / "out", width=160, seed=0)
     for v in views:  # the sphere fills the middle of every view, shaded
         image = cv2.imread(str(v.path), cv2.IMREAD_UNCHANGED)
         assert image.shape == (120, 160) and not v.stats.blank() and 0.2 < v.stats.foreground < 0.8
         assert image[60, 80] < 250 and image[2, 2] == 255
     o3d.io.write_triangle_mesh(str(tmp_path / "empty.ply"), o3d.geometry.TriangleMesh())
     with pytest.raises(FileError, match="no triangles"):
-        render_mesh(tmp_path / "empty.ply", tmp_path / "out")
+        render_mesh(tmp_path / "empty.ply", tmp_path / "out", seed=0)
 
 
 def test_many_icp_results_are_one_matrix(tmp_path):

@@ -117,9 +117,9 @@ class StationCheck:
     seconds: float
 
 
-def check_station(station: StationFile) -> StationCheck:
+def check_station(station: StationFile, seed: int) -> StationCheck:
     """Connect to the robot and the camera of a station file, read the joint state and grab
-    one frame; nothing moves."""
+    one frame; nothing moves. ``seed``: of a rendered camera's noise."""
     import time
 
     t0 = time.perf_counter()
@@ -127,7 +127,7 @@ def check_station(station: StationFile) -> StationCheck:
     from recon_cli.robot.poses import named_configuration
 
     start = named_configuration(station.cell.kind, "home", cell.joint_names)
-    with HardwareStation(station, cell, None, start, np.random.default_rng(0)) as st:
+    with HardwareStation(station, cell, None, start, np.random.default_rng(seed)) as st:
         q = st.robot.measured_joints()
         frame = st.camera.capture()
     depth = np.asarray(frame.depth)

@@ -100,7 +100,9 @@ class SimCamera:
         self.realism = realism
         self._ideal = realism.is_ideal
         if not self._ideal:
-            self._set_up_realism(realism, realism_rng or np.random.default_rng(0))
+            if realism_rng is None:
+                raise ValueError("a realism profile's effects need their generator (realism_rng)")
+            self._set_up_realism(realism, realism_rng)
 
     def _set_up_realism(self, realism: RealismProfile, rng: np.random.Generator) -> None:
         render = self.intrinsics  # the pinhole MuJoCo renders

@@ -15,6 +15,7 @@ from recon_cli.backends.sim.camera import SimCamera
 from recon_cli.backends.sim.robot import SimRobot
 from recon_cli.backends.sim.scene import build_scene, mujoco
 from recon_cli.backends.sim.truth import JointSensor, TrueCell, true_cell
+from recon_cli.config import DEFAULTS
 from recon_cli.objects import SceneObject
 from recon_cli.realism import IDEAL, RealismProfile
 from recon_cli.robot.cell import Cell
@@ -27,7 +28,8 @@ class SimStation:
     backend = "sim"
 
     def __init__(self, cell: Cell, scene_object: SceneObject | None, start: np.ndarray,
-                 rng: np.random.Generator, noise: bool = True, resolution: float = 1.0,
+                 rng: np.random.Generator, noise: bool = DEFAULTS.sensor.noise,
+                 resolution: float = DEFAULTS.sensor.resolution,
                  realism: RealismProfile = IDEAL) -> None:
         self.cell = cell
         self.scene_object = scene_object

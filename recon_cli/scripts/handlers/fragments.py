@@ -45,10 +45,11 @@ def _fragment(state: RunState, name: str, cmd: C.Command):
 
 
 def _icp_options(method: str, threshold: float):
+    from recon_cli.reconstruction.options import pair_voxel
     from recon_cli.reconstruction.pose_graph import MultiwayOptions
 
     return MultiwayOptions(max_correspondence=threshold, scales=(1.0,), method=_ICP_METHODS[method],
-                           voxel=max(threshold / 4, 5e-4))
+                           voxel=pair_voxel(threshold))
 
 
 @handles(C.PairRegister)
@@ -158,7 +159,7 @@ def _guarded(cmd, reader, path, what: str, **kw):
 def export(state: RunState, cmd: C.ExportFragment, report: CommandReport) -> None:
     import open3d as o3d
 
-    from recon_cli.reconstruction.surface import SurfaceOptions, poisson_mesh, write_cloud, write_mesh
+    from recon_cli.reconstruction.surface import poisson_mesh, write_cloud, write_mesh
 
     if state.skipped_in_dry_run(report):
         return
@@ -169,10 +170,11 @@ def export(state: RunState, cmd: C.ExportFragment, report: CommandReport) -> Non
         write_cloud(target, frag, T)
     else:
         cloud = o3d.geometry.PointCloud(frag)
+        surface = state.config.registration.surface
         if not cloud.has_normals():
-            cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.004, max_nn=30))
+            cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=surface.normal_radius, max_nn=30))
             cloud.orient_normals_consistent_tangent_plane(20)
-        mesh, _ = poisson_mesh(cloud, SurfaceOptions())
+        mesh, _ = poisson_mesh(cloud, surface)
         write_mesh(target, mesh, T)
     state.outputs[f"export_{cmd.fragment}_{cmd.kind}"] = str(target)
 

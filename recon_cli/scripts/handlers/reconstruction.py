@@ -26,11 +26,11 @@ def _need_scans(state: RunState, cmd: C.Command) -> None:
 def register_scans(state: RunState, local=True, board=True, loop_closures="icp", mesh=False, surface=None):
     from recon_cli.reconstruction.pipeline import run_register
 
-    opts = replace(state.config.registration, local=local, use_board=board, mesh=mesh, seed=state.options.seed)
+    opts = replace(state.config.registration, local=local, use_board=board, mesh=mesh)
     opts = replace(opts, multiway=replace(opts.multiway, loop_closure_init=loop_closures))
     if surface is not None:
         opts = replace(opts, surface=surface)
-    state.registered = run_register(state.store.root, state.out / "reconstruction", opts)
+    state.registered = run_register(state.store.root, state.out / "reconstruction", opts, seed=state.config.seed)
     if state.recorder is not None:
         from recon_cli.recording.results import record_registration
 

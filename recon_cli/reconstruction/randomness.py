@@ -1,0 +1,27 @@
+"""Open3D's random draws (surface sampling, RANSAC) come from one global generator that no
+Open3D call takes as an argument; :func:`open3d_draws` is the one place that seeds it, with
+the seed its caller passes in, right before the draws it governs, so that a result depends
+on that seed only and not on what ran before in the process."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+
+@contextmanager
+def open3d_draws(seed: int, *, single_thread: bool = False) -> Iterator[None]:
+    """Open3D's generator seeded with ``seed`` for the calls inside. ``single_thread``: run
+    them on one thread (Open3D's RANSAC draws from several threads in whatever order they
+    run; with one thread the seed fixes its samples)."""
+    import open3d as o3d
+
+    threads = o3d.utility.get_max_threads()
+    if single_thread:
+        o3d.utility.set_max_threads(1)
+    try:
+        o3d.utility.random.seed(seed)
+        yield
+    finally:
+        if single_thread:
+            o3d.utility.set_max_threads(threads)

@@ -25,14 +25,13 @@ import numpy as np
 
 from recon_cli.errors import InputError
 from recon_cli.planning.options import PlanOptions
+from recon_cli.randomness import DEFAULT_SEED, SEED_RANGE
 from recon_cli.realism import IDEAL, RealismProfile
 from recon_cli.reconstruction.options import RegisterOptions
 from recon_cli.robot.description import CellConfig
 
 CONFIG_FORMAT = 1
 
-#: the seed of every random number generator of a run (--seed, a script's run, a batch job)
-SEED_RANGE = (0, 2**32 - 1)
 #: the largest scale of a mesh file (0.001 for millimetres; meshes are read up to 1000 m after it)
 MAX_SCALE = 1000.0
 #: [m] the margin of the object's bounding box (collision and crop box)
@@ -122,7 +121,7 @@ class Config:
     planner: PlanOptions = field(default_factory=PlanOptions)
     registration: RegisterOptions = field(default_factory=RegisterOptions)
     viewplan: ViewPlanConfig = field(default_factory=ViewPlanConfig)
-    seed: int = 0
+    seed: int = DEFAULT_SEED
     realism: RealismProfile = IDEAL  # the simulation only (a hardware station is as real as it is)
 
     def __post_init__(self) -> None:

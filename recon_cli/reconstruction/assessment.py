@@ -16,9 +16,9 @@ import numpy as np
 from recon_cli.errors import FileError
 from recon_cli.geometry.transforms import pose_error
 from recon_cli.inputs.meshes import CLOUD_SUFFIXES, MESH_SUFFIXES, read_cloud, read_mesh
+from recon_cli.randomness import open3d_draws
 from recon_cli.reconstruction.evaluation import CameraView, Evaluation, evaluate, histogram_png, signed_distances
 from recon_cli.reconstruction.options import SurfaceOptions
-from recon_cli.reconstruction.randomness import open3d_draws
 from recon_cli.reconstruction.scan_store import ScanStore
 
 _SURFACE = SurfaceOptions()  # its voxel and normal radius serve the ICP alignment to a reference

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from recon_cli.perception.camera_model import Intrinsics
-from recon_cli.reconstruction.randomness import open3d_draws
+from recon_cli.randomness import open3d_draws
 
 
 @dataclass(frozen=True)

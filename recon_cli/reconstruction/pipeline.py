@@ -18,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from recon_cli.config import DEFAULTS
 from recon_cli.errors import FileError, InputError, MetadataError
 from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.outputs import OutputFolder
 from recon_cli.perception.charuco import thesis_board
+from recon_cli.randomness import DEFAULT_SEED
 from recon_cli.reconstruction.crop import CropBox, box_pixels, crop_cloud
 from recon_cli.reconstruction.global_registration import (
     GlobalPose,
@@ -193,7 +193,7 @@ def crop_box_marker(options: RegisterOptions, session: SessionInfo) -> CropBox:
 
 
 def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOptions = RegisterOptions(),  # noqa: B008
-                 progress: Progress | None = None, *, seed: int = DEFAULTS.seed) -> RegisterResult:
+                 progress: Progress | None = None, *, seed: int = DEFAULT_SEED) -> RegisterResult:
     """Register the scan store ``folder`` into ``out`` (a folder, or one a command claimed:
     it is made, and what ``--force`` removes is removed, only when there is something to
     write). Scans that cannot be read, or that are links out of the store, are skipped with

@@ -20,5 +20,5 @@ the file and the key. ``session.json`` and ``scan.json`` of a scan store are
 :mod:`.files` writes and reads one file.
 
 This package is a low layer: it imports only :mod:`recon_cli.inputs`,
-:mod:`recon_cli.outputs`, :mod:`recon_cli.errors` and :mod:`recon_cli.reconstruction.metadata`.
+:mod:`recon_cli.outputs` and :mod:`recon_cli.errors`.
 """

@@ -29,7 +29,7 @@ def write_model(path: Path, model) -> Path:
 def read_document(path: Path, schema: str, what: str) -> dict:
     """The checked JSON object of ``path`` (a MetadataError when it cannot be read or does
     not match ``schemas/<schema>``)."""
-    from recon_cli.reconstruction.metadata import check
+    from recon_cli.inputs.jsonschemas import check
 
     path = Path(path)
     data = load_json(path, what, MAX_JSON_BYTES)

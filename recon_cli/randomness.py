@@ -1,12 +1,20 @@
-"""Open3D's random draws (surface sampling, RANSAC) come from one global generator that no
-Open3D call takes as an argument; :func:`open3d_draws` is the one place that seeds it, with
-the seed its caller passes in, right before the draws it governs, so that a result depends
-on that seed only and not on what ran before in the process."""
+"""The seed of a run and Open3D's random draws.
+
+:data:`DEFAULT_SEED` and :data:`SEED_RANGE` are the seed of every random number generator of a
+run (``Config.seed``: --seed, a script's run, a batch job). Open3D's random draws (surface
+sampling, RANSAC) come from one global generator that no Open3D call takes as an argument;
+:func:`open3d_draws` is the one place that seeds it, with the seed its caller passes in, right
+before the draws it governs, so that a result depends on that seed only and not on what ran
+before in the process."""
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import contextmanager
+
+#: the seed of a run unless one is given, and the seeds there are (numpy takes 0 ... 2^32-1)
+DEFAULT_SEED = 0
+SEED_RANGE = (0, 2**32 - 1)
 
 
 @contextmanager

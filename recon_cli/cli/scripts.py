@@ -19,7 +19,6 @@ from recon_cli.cli.options import (
     realism_profile,
 )
 
-BACKENDS = ("sim", "hardware")
 SEQUENCE_METHODS = ("ours", "thesis")
 
 
@@ -85,7 +84,7 @@ def run_script(
     from recon_cli.workflows.script_run import ScriptRunner
 
     if backend is not None:
-        one_of(backend, BACKENDS, "backend")
+        one_of(backend, [b.value for b in Backend], "backend")
     check_record(record)
     one_of(sequence_method, SEQUENCE_METHODS, "sequence method")
     s = load_script(script)

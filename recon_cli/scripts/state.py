@@ -115,7 +115,7 @@ class RunState:
     options: RunOptions
     config: Config
     rng: np.random.Generator
-    backend: Backend = Backend.SIM
+    backend: Backend = Backend.SIM  # the script's (or --backend), then the session's
     box_command: C.SetBox | None = None
     session: Session | None = None
     cell: Any = None  # robot.cell.Cell, once the session (or a dry run's cell) is open
@@ -168,6 +168,7 @@ class RunState:
                            run={"command": "run", "dialect": self.script.dialect, "dry_run": self.dry_run},
                            station=self.options.station, recorder=None if self.dry_run else self.recorder)
         self.session = open_session(spec, self.rng, plan_only=self.dry_run)
+        self.backend = self.session.spec.backend  # a station file's adapters decide
         self.cell = self.session.cell
         self.q_planned = self.session.start
 

@@ -73,6 +73,7 @@ class SessionSpec:
     station: Path | None = None  # a station file: the robot and camera adapters (and the cell) to use
     board_only: bool = False  # nothing on the table but the ChArUco board (calibration views)
     recorder: Recorder | None = None  # the cell, every motion and every scan go into it
+    station_checked: bool = False  # the station file passed its check already (recon run checks it first)
 
 
 class Session:
@@ -201,7 +202,7 @@ def open_session(spec: SessionSpec, rng: np.random.Generator | None = None, *, p
 
         station_file = load_station(spec.station)
         spec = replace(spec, config=cfg.replace(cell=station_file.cell), backend=station_file.capabilities.backend)
-        if not plan_only:  # the check of `recon station check`, before anything moves or is written
+        if not (plan_only or spec.station_checked):  # `recon station check`, before anything moves or is written
             from recon_cli.backends.hardware.station import preflight
 
             preflight(station_file)

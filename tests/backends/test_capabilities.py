@@ -191,3 +191,27 @@ def test_run_refuses_a_station_whose_check_fails_before_anything_moves(tmp_path,
     assert not (tmp_path / "run" / "scans" / "session.json").exists()
     assert main(["station", "check", str(station)]) == 1  # the same check, the same refusal
     assert "the camera's frame has no depth" in capsys.readouterr().err
+
+
+def test_autoscan_measures_accuracy_only_where_the_truth_is_known(tmp_path):
+    """The same small autoscan on a station of simulated parts (ground truth: coverage and
+    signed distances) and with a camera replaying those scans (no ground truth: none)."""
+    from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig, ViewPlanConfig
+    from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions
+
+    config = DEFAULTS.replace(scene=SceneConfig("bottle"), seed=1, sensor=SensorConfig(resolution=0.25),
+                              viewplan=ViewPlanConfig(n=3))
+    station = tmp_path / "allsim.yaml"
+    station.write_text(ALL_SIM)
+    sim = Autoscan(AutoscanOptions(tmp_path / "a", config, mesh=False, pictures=False, page=False,
+                                   station=station)).run()
+    assert sim.scans == 3 and sim.coverage > 0.3 and abs(sim.accuracy.mean_mm) < 1.0
+    assert json.loads((tmp_path / "a" / "session.json").read_text())["backend"] == "sim"
+    replay = tmp_path / "replay.yaml"
+    replay.write_text(f"format: 1\nrobot: {{adapter: sim}}\ncamera:\n  adapter: replay\n"
+                      f"  replay: {{source: {tmp_path / 'a'}}}\n")
+    recorded = Autoscan(AutoscanOptions(tmp_path / "b", config, mesh=False, pictures=False, page=False,
+                                        station=replay)).run()
+    assert recorded.scans == 3 and recorded.cloud.exists()
+    assert recorded.coverage is None and recorded.accuracy is None
+    assert json.loads((tmp_path / "b" / "session.json").read_text())["backend"] == "hardware"

@@ -95,8 +95,7 @@ class Acquisition:
     def _not_settled(self, execution: ExecutionReport, what: str) -> RobotFault:
         """A robot that has not settled at the goal is not scanned: stop it and say how far
         off each joint is (the largest three)."""
-        stop = getattr(self.robot, "stop", None)
-        stopped = bool(stop()) if callable(stop) else True  # a robot without stop() holds still
+        stopped = bool(self.robot.stop())
         err = np.asarray(execution.final_error, dtype=float)
         worst = np.argsort(-err)[:3]
         names = self.cell.joint_names

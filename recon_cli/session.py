@@ -8,10 +8,12 @@ else::
         s.acquisition.scan(view_record(view, T))  # capture -> write the scan (atomic)
 
 :func:`open_session` loads the object, builds the cell with the object's box as collision
-object, opens the station (the simulation, or a hardware station when the backend says
-so), creates the scan store with a typed :class:`SessionInfo` (``session.json``, versioned)
-and writes the effective configuration (``config.yaml``) beside it. ``plan_only=True``
-(dry runs) stops after the cell: nothing is written, nothing moves.
+object, opens the station (the simulation, or the adapters of a station file after the
+check of ``recon station check`` has passed), creates the scan store with a typed
+:class:`SessionInfo` (``session.json``, versioned) and writes the effective configuration
+(``config.yaml``) beside it. What the session writes besides the scans (the backend, the
+object's exact mesh, the realism record) follows the station's capabilities.
+``plan_only=True`` (dry runs) stops after the cell: nothing is written, nothing moves.
 """
 
 from __future__ import annotations
@@ -20,18 +22,18 @@ import math
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from recon_cli.backends.base import Station
+from recon_cli.backends.base import Backend, Capabilities, Station  # noqa: F401 (Backend re-exported)
 from recon_cli.config import DEFAULTS, Config, write_config
 from recon_cli.errors import FileError, HardwareUnavailable, InputError
 from recon_cli.reconstruction.metadata import SESSION_FORMAT, BoxInfo, SessionInfo  # noqa: F401 (re-exported)
 
-
-class Backend(StrEnum):
-    SIM = "sim"
-    HARDWARE = "hardware"
+if TYPE_CHECKING:
+    from recon_cli.backends.station_file import StationFile
+    from recon_cli.recording.recorder import Recorder
 
 
 class Mode(StrEnum):
@@ -62,7 +64,7 @@ class SessionSpec:
     out: Path  # the scan store folder
     config: Config = DEFAULTS
     mode: Mode = Mode.CAPTURE
-    backend: Backend = Backend.SIM
+    backend: Backend = Backend.SIM  # HARDWARE needs a station file; with one, its capabilities decide
     box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None  # centre, size [m] (world)
     script: str | None = None  # the script of a script run
     append: bool = False  # add to the scan store in ``out`` (same cell, object and backend)
@@ -70,7 +72,8 @@ class SessionSpec:
     run: dict = field(default_factory=dict)  # what else config.yaml records (command, options)
     station: Path | None = None  # a station file: the robot and camera adapters (and the cell) to use
     board_only: bool = False  # nothing on the table but the ChArUco board (calibration views)
-    recorder: object | None = None  # a recording.Recorder: the cell, every motion and every scan go into it
+    recorder: Recorder | None = None  # the cell, every motion and every scan go into it
+    station_checked: bool = False  # the station file passed its check already (recon run checks it first)
 
 
 class Session:
@@ -78,7 +81,7 @@ class Session:
     station)."""
 
     def __init__(self, spec: SessionSpec, rng: np.random.Generator, plan_only: bool = False,
-                 station_file=None) -> None:
+                 station_file: StationFile | None = None) -> None:
         from recon_cli.objects import load_object
         from recon_cli.robot.cell import Cell
         from recon_cli.robot.poses import named_configuration
@@ -93,6 +96,7 @@ class Session:
         self.cell = Cell(cfg.cell, object_box=self.object_box)
         self.start = named_configuration(cfg.cell.kind, "home", self.cell.joint_names)
         self.station = self.store = self.acquisition = None
+        self.capabilities: Capabilities | None = None  # the station's, once it is open
         self.info: SessionInfo | None = None
         if plan_only:
             return
@@ -123,16 +127,17 @@ class Session:
         else:
             c, s = obj.crop_box(cfg.scene.box_margin)
             crop = BoxInfo(tuple(c), tuple(s))
+        self.station = open_station(spec.backend, self.cell, self.scene_object, self.start, self.rng, cfg,
+                                    self.station_file)
+        caps = self.capabilities = self.station.capabilities
         self.info = SessionInfo(
-            backend=spec.backend.value, mode=spec.mode.value, cell_kind=cfg.cell.kind.value,
+            backend=caps.backend.value, mode=spec.mode.value, cell_kind=cfg.cell.kind.value,
             safety_distance=cfg.cell.safety_distance, table_lift=cfg.cell.table_lift, sensor=sensor.name,
             noise=cfg.sensor.noise, seed=cfg.seed, object_name=None if obj is None else obj.name,
             world_T_object=None if obj is None else obj.world_T_object,
             object_box=None if box is None else BoxInfo(tuple(box.center), tuple(box.size)), crop_box=crop,
             world_T_marker=self.cell.world_T_marker, script=spec.script,
-            realism=cfg.realism.summary() if spec.backend is Backend.SIM and self.station_file is None else None)
-        self.station = open_station(spec.backend, self.cell, self.scene_object, self.start, self.rng, cfg,
-                                    self.station_file)
+            realism=cfg.realism.summary() if caps.realism else None)
         self.store = self._open_store()
         if spec.recorder is not None:
             from recon_cli.recording.station import RecordedStation
@@ -140,15 +145,14 @@ class Session:
             self.station = RecordedStation(self.station, spec.recorder)
             spec.recorder.depth_scale = sensor.depth_scale
             spec.recorder.cell(self.cell, self.station.robot.measured_joints(), box,
-                               obj.mesh_world() if obj is not None and spec.backend is Backend.SIM else None)
-        write_config(spec.run_folder or spec.out, cfg, mode=spec.mode.value, backend=spec.backend.value,
+                               obj.mesh_world() if obj is not None and caps.ground_truth else None)
+        write_config(spec.run_folder or spec.out, cfg, mode=spec.mode.value, backend=caps.backend.value,
                      script=spec.script, object=None if obj is None else obj.name,
                      station=None if spec.station is None else str(spec.station), **spec.run)
-        if spec.backend is Backend.SIM:
-            if obj is not None:
-                write_ground_truth_mesh(spec.out, obj)
-            if self.station_file is None and not cfg.realism.is_ideal:  # the SimStation of open_station
-                write_realism_record(spec.out, self.station.realism_record())
+        if caps.ground_truth and obj is not None:
+            write_ground_truth_mesh(spec.out, obj)
+        if caps.realism and not cfg.realism.is_ideal:
+            write_realism_record(spec.out, self.station.realism_record())
         self.acquisition = Acquisition(self.cell, self.station.robot, self.station.camera, self.store, self.rng,
                                        cfg.planner, depth_scale=sensor.depth_scale,
                                        ground_truth=self.station.ground_truth,
@@ -198,20 +202,23 @@ def open_session(spec: SessionSpec, rng: np.random.Generator | None = None, *, p
         from recon_cli.backends.station_file import load_station
 
         station_file = load_station(spec.station)
-        spec = replace(spec, config=cfg.replace(cell=station_file.cell),
-                       backend=Backend.HARDWARE if station_file.hardware else Backend.SIM)
+        spec = replace(spec, config=cfg.replace(cell=station_file.cell), backend=station_file.capabilities.backend)
+        if not (plan_only or spec.station_checked):  # `recon station check`, before anything moves or is written
+            from recon_cli.backends.hardware.station import preflight
+
+            preflight(station_file)
     seed_ompl(spec.config.seed)
     return Session(spec, rng if rng is not None else np.random.default_rng(spec.config.seed), plan_only,
                    station_file)
 
 
 def open_station(backend: Backend, cell, scene_object, start: np.ndarray, rng: np.random.Generator,
-                 cfg: Config, station_file=None) -> Station:
+                 cfg: Config, station_file: StationFile | None = None) -> Station:
     """The station of a backend: the adapters of a station file, or the MuJoCo simulation."""
     if station_file is not None:
-        from recon_cli.backends.hardware.station import HardwareStation
+        from recon_cli.backends.hardware.station import AdapterStation
 
-        return HardwareStation(station_file, cell, scene_object, start, rng)
+        return AdapterStation(station_file, cell, scene_object, start, rng)
     if backend is Backend.HARDWARE:
         raise HardwareUnavailable(
             "the hardware backend needs a station file (which robot and camera adapters, how to reach them)",

@@ -16,66 +16,49 @@ A YAML file (documented with a complete example in docs/hardware.md)::
       genicam: {serial: PhoXi-1234, ...}
 
 Every key is checked when the file is read: an unknown key, a wrong type or a missing
-section is one line naming ``FILE: key``. The adapters' own sections are parsed by their
-modules (recon_cli/backends/hardware/).
+section is one line naming ``FILE: key``. The adapters (their names, what they are, how
+their sections are read) are the registry of recon_cli/backends/adapters.py.
 """
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from recon_cli.config import DEFAULTS, RESOLUTION_RANGE
+from recon_cli.backends.adapters import (
+    CAMERA_ADAPTERS,
+    ROBOT_ADAPTERS,
+    CameraConfig,
+    RobotConfig,
+    station_capabilities,
+)
+from recon_cli.backends.base import Capabilities
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.robot.description import CellConfig, CellKind
 
 STATION_FORMAT = 1
-ROBOT_ADAPTERS = ("ads", "sim")
-CAMERA_ADAPTERS = ("sim", "genicam", "realsense", "replay")
-#: camera adapter -> (module, config class); each module has ``open_camera(config)``
-CAMERA_MODULES = {
-    "genicam": ("recon_cli.backends.hardware.genicam", "GenICamConfig"),
-    "realsense": ("recon_cli.backends.hardware.realsense", "RealSenseConfig"),
-    "replay": ("recon_cli.backends.hardware.replay", "ReplayConfig"),
-}
 TOP_KEYS = ("format", "name", "cell", "hand_eye", "robot", "camera")
 
 
 @dataclass(frozen=True)
-class SimCameraConfig:
-    """``camera.sim``: the simulated sensor rendered at the robot's measured joints (a camera
-    stand-in for wiring and testing a real robot adapter)."""
-
-    noise: bool = DEFAULTS.sensor.noise
-    resolution: float = DEFAULTS.sensor.resolution
-
-    @classmethod
-    def from_mapping(cls, d: dict, where: str = "camera.sim") -> SimCameraConfig:
-        _known_keys(d, where, ("noise", "resolution"))
-        cfg = cls(bool(d.get("noise", cls.noise)), float(d.get("resolution", cls.resolution)))
-        lo, hi = RESOLUTION_RANGE
-        if not lo <= cfg.resolution <= hi:
-            raise InputError(f"{where}.resolution = {cfg.resolution} is outside {lo:g} ... {hi:g}", hint="e.g. 0.5")
-        return cfg
-
-
-@dataclass(frozen=True)
 class StationFile:
+    """A read station file: its cell, and the adapter (registry name) and typed section of
+    the robot and of the camera."""
+
     path: Path
     name: str
     cell: CellConfig
     robot_adapter: str
-    robot: Any  # the adapter's config (AdsConfig) or None for "sim"
+    robot: RobotConfig
     camera_adapter: str
-    camera: Any  # the adapter's config
+    camera: CameraConfig
     raw: dict = field(default_factory=dict, repr=False)
 
     @property
-    def hardware(self) -> bool:
-        """True when anything but the simulation is involved."""
-        return self.robot_adapter != "sim" or self.camera_adapter != "sim"
+    def capabilities(self) -> Capabilities:
+        """What the station of this file can do (simulated only when both adapters are)."""
+        return station_capabilities(ROBOT_ADAPTERS[self.robot_adapter], CAMERA_ADAPTERS[self.camera_adapter])
 
 
 def _known_keys(d: Any, where: str, known: tuple[str, ...]) -> None:
@@ -84,15 +67,6 @@ def _known_keys(d: Any, where: str, known: tuple[str, ...]) -> None:
     for key in d:
         if key not in known:
             raise InputError(f"{where}.{key} is not a known key", hint=f"known keys: {', '.join(known)}")
-
-
-def camera_config(adapter: str, mapping: dict, where: str):
-    """The typed config of a camera adapter (its module imported lazily)."""
-    if adapter == "sim":
-        return SimCameraConfig.from_mapping(mapping, where)
-    module_name, cls_name = CAMERA_MODULES[adapter]
-    module = importlib.import_module(module_name)
-    return getattr(module, cls_name).from_mapping(mapping, where)
 
 
 def load_station(path: Path) -> StationFile:
@@ -129,30 +103,24 @@ def load_station(path: Path) -> StationFile:
         line = line_of(data, key)
         raise InputError(f"{w}:{line}: {exc.message}" if line else f"{w}: {exc.message}", hint=exc.hint) from None
 
-    robot_map = data.get("robot")
-    if robot_map is None:
-        raise InputError(f"{w}: no robot section", hint="robot: {adapter: ads, ads: {...}} or {adapter: sim}")
-    _known_keys(robot_map, f"{w}: robot", ("adapter", *ROBOT_ADAPTERS))
-    robot_adapter = str(robot_map.get("adapter", ""))
-    if robot_adapter not in ROBOT_ADAPTERS:
-        raise UnknownNameError("robot adapter", robot_adapter, ROBOT_ADAPTERS)
-    robot = None
-    if robot_adapter == "ads":
-        from recon_cli.backends.hardware.ads import AdsConfig
-
-        line = line_of(robot_map, "ads")
-        robot = AdsConfig.from_mapping(robot_map.get("ads") or {},
-                                       f"{w}:{line}: robot.ads" if line else f"{w}: robot.ads")
-
-    camera_map = data.get("camera")
-    if camera_map is None:
-        raise InputError(f"{w}: no camera section", hint="camera: {adapter: genicam, genicam: {...}}")
-    _known_keys(camera_map, f"{w}: camera", ("adapter", *CAMERA_ADAPTERS))
-    camera_adapter = str(camera_map.get("adapter", ""))
-    if camera_adapter not in CAMERA_ADAPTERS:
-        raise UnknownNameError("camera adapter", camera_adapter, CAMERA_ADAPTERS)
-    line = line_of(camera_map, camera_adapter) or line_of(data, "camera")
-    camera = camera_config(camera_adapter, camera_map.get(camera_adapter) or {},
-                           f"{w}:{line}: camera.{camera_adapter}" if line else f"{w}: camera.{camera_adapter}")
+    robot_adapter, robot = _part(data, "robot", ROBOT_ADAPTERS, w,
+                                 "robot: {adapter: ads, ads: {...}} or {adapter: sim}")
+    camera_adapter, camera = _part(data, "camera", CAMERA_ADAPTERS, w, "camera: {adapter: genicam, genicam: {...}}")
     return StationFile(path, str(data.get("name", path.stem)), cell, robot_adapter, robot, camera_adapter, camera,
                        data)
+
+
+def _part(data: dict, part: str, registry: dict, w: str, example: str):
+    """The adapter name and typed config of the ``robot`` or ``camera`` section."""
+    from recon_cli.inputs.yamlfile import line_of
+
+    mapping = data.get(part)
+    if mapping is None:
+        raise InputError(f"{w}: no {part} section", hint=example)
+    _known_keys(mapping, f"{w}: {part}", ("adapter", *registry))
+    name = str(mapping.get("adapter", ""))
+    if name not in registry:
+        raise UnknownNameError(f"{part} adapter", name, tuple(registry))
+    line = line_of(mapping, name) or line_of(data, part)
+    where = f"{w}:{line}: {part}.{name}" if line else f"{w}: {part}.{name}"
+    return name, registry[name].read(mapping.get(name) or {}, where)

@@ -22,22 +22,14 @@ def check(
     """Connect to the robot and the camera of a station file, print the joints and one frame's size."""
     import numpy as np
 
-    from recon_cli.backends.hardware.station import check_station
+    from recon_cli.backends.hardware.station import check_station, refuse_unready
     from recon_cli.backends.station_file import load_station
     from recon_cli.console import console
-    from recon_cli.errors import ReconError, RobotFault
 
     sf = load_station(station)
     console.print(f"station {sf.name!r} ({station}): robot {sf.robot_adapter}, camera {sf.camera_adapter}, "
-                  f"cell {sf.cell.kind.value}")
-    try:
-        result = check_station(sf, D.seed)
-    except RobotFault as exc:
-        if exc.kind != "connection" or exc.stopped:
-            raise
-        # nothing moved and nothing was running: a connection check that cannot connect is an
-        # error of the station file or the cell's network (exit 1), not a stopped robot (exit 4)
-        raise ReconError(exc.message, hint=exc.hint) from None
+                  f"cell {sf.cell.kind.value}, backend {sf.capabilities.backend.value}")
+    result = check_station(sf, D.seed)  # a robot it cannot reach: exit 1 (the file or the network), not 4
     console.print("joints: " + ", ".join(f"{k} {v:.4f} m" if result.prismatic[k] else f"{k} {np.degrees(v):.3f}°"
                                          for k, v in result.joints.items())
                   + ("" if result.within_limits else "  (outside the soft limits!)"))
@@ -45,4 +37,5 @@ def check(
         f"depth {result.depth_range[0]:.3f} ... {result.depth_range[1]:.3f} m"
     console.print(f"frame: {result.width} x {result.height} px, {result.valid_depth * 100:.1f} % with depth, {rng}; "
                   f"fx {result.intrinsics['fx']:.1f} px, fy {result.intrinsics['fy']:.1f} px")
+    refuse_unready(sf, result)
     console.print(f"station ok in {result.seconds:.2f} s")

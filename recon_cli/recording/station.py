@@ -6,7 +6,7 @@ records the same way on the simulation and on hardware, whoever asks the robot t
 
 from __future__ import annotations
 
-from recon_cli.backends.base import ExecutionReport
+from recon_cli.backends.base import ExecutionReport, Station
 
 
 class RecordedRobot:
@@ -30,26 +30,24 @@ class RecordedRobot:
         return getattr(self._robot, name)
 
 
-class RecordedStation:
-    """A station with a :class:`RecordedRobot`; everything else is the station's own."""
+class RecordedStation(Station):
+    """A station with a :class:`RecordedRobot`; everything else (capabilities included) is
+    the station's own."""
 
-    def __init__(self, station, recorder) -> None:
+    def __init__(self, station: Station, recorder) -> None:
         self._station = station
+        self.capabilities = station.capabilities
         self.robot = RecordedRobot(station.robot, recorder)
         self.camera = station.camera
-        self.backend = station.backend
 
-    def ground_truth(self):
+    def ground_truth(self) -> dict | None:
         return self._station.ground_truth()
+
+    def cover_board(self, covered: bool) -> None:
+        self._station.cover_board(covered)
+
+    def realism_record(self) -> dict:
+        return self._station.realism_record()
 
     def close(self) -> None:
         self._station.close()
-
-    def __getattr__(self, name: str):  # cover_board(), realism_record(), ...
-        return getattr(self._station, name)
-
-    def __enter__(self) -> RecordedStation:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()

@@ -209,9 +209,11 @@ def check_script(script: C.Script, *, object_override: str | None = None) -> Non
 
 def check_backend(script: C.Script, backend: str | None, station: Path | None, dry_run: bool = False) -> None:
     """A run on the hardware backend needs a station file; refuse before anything is written."""
+    from recon_cli.backends.base import Backend
+
     cells = [c for c in script.commands if isinstance(c, C.SetCell)]
-    wanted = backend or (cells[-1].backend if cells else "sim")
-    if wanted == "hardware" and station is None and not dry_run:
+    wanted = Backend(backend or (cells[-1].backend if cells else Backend.SIM))
+    if wanted is Backend.HARDWARE and station is None and not dry_run:
         from recon_cli.errors import HardwareUnavailable
 
         where = f"{cells[-1].source}: " if backend is None and cells else ""

@@ -116,7 +116,7 @@ class RunState:
     options: RunOptions
     config: Config
     rng: np.random.Generator
-    backend: Backend = Backend.SIM
+    backend: Backend = Backend.SIM  # the script's (or --backend), then the session's
     box_command: C.SetBox | None = None
     session: Session | None = None
     cell: Any = None  # robot.cell.Cell, once the session (or a dry run's cell) is open
@@ -130,6 +130,7 @@ class RunState:
     outputs: dict[str, str] = field(default_factory=dict)
     sequences: list[SequenceReport] = field(default_factory=list)
     recorder: Any = None  # recording.recorder.Recorder of a recorded run
+    station_checked: bool = False  # the station file passed the check of `recon station check`
 
     @property
     def out(self) -> Path:
@@ -167,8 +168,10 @@ class RunState:
         spec = SessionSpec(self.out / "scans", self.config, Mode.SCRIPT, self.backend, box=self._explicit_box(),
                            script=self.script.path, append=self.options.append, run_folder=self.out,
                            run={"command": "run", "dialect": self.script.dialect, **self.options.run},
-                           station=self.options.station, recorder=None if self.dry_run else self.recorder)
+                           station=self.options.station, recorder=None if self.dry_run else self.recorder,
+                           station_checked=self.station_checked)
         self.session = open_session(spec, self.rng, plan_only=self.dry_run)
+        self.backend = self.session.spec.backend  # a station file's adapters decide
         self.cell = self.session.cell
         self.q_planned = self.session.start
 
@@ -177,6 +180,18 @@ class RunState:
         if self.q_planned is None:
             raise RuntimeError("no session is open (ensure_session opens it)")
         return self.q_planned
+
+    def check_station(self) -> None:
+        """The check of ``recon station check`` on the station file, before the first command:
+        a station that fails it ends the run with one line before anything moves (a dry run
+        moves nothing and opens no station)."""
+        if self.options.station is None or self.dry_run:
+            return
+        from recon_cli.backends.hardware.station import preflight
+        from recon_cli.backends.station_file import load_station
+
+        preflight(load_station(self.options.station))
+        self.station_checked = True
 
     def _explicit_box(self):
         """The <box> with centre and size, in the world frame (None: the object's own box)."""

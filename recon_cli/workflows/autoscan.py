@@ -302,6 +302,7 @@ class Autoscan:
                 error = exc
             else:
                 cloud, mesh = reg.cloud, reg.mesh
+            if error is None and self.session.capabilities.ground_truth:  # the true surface is known
                 from recon_cli.inputs.meshes import read_cloud
 
                 pts = np.asarray(read_cloud(cloud, "fused cloud", points=False).points)
@@ -314,6 +315,10 @@ class Autoscan:
                 accuracy = Accuracy(float(d.mean() * 1e3), float(d.std() * 1e3), len(pts), within_shares(d))
                 histogram_png(cloud.parent / f"{cloud.stem}_distances.png", {cloud.stem: d},
                               f"{cloud.name} vs the true {self.obj.name}")
+            elif error is None and self.recorder is not None:
+                from recon_cli.recording.results import record_registration
+
+                record_registration(self.recorder, reg, opt.out)
         seconds_total = time.perf_counter() - t0
         infeasible = sum(v.status is Status.INFEASIBLE for v in views)
         from recon_cli.runs import autoscan as autoscan_file

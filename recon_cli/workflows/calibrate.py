@@ -220,10 +220,11 @@ def _truth_flange_T_camera(scans: Path, model: np.ndarray) -> np.ndarray | None:
     """Simulation only: the true camera mount (ground_truth/realism.json; without a realism
     profile the simulated camera is where the model says)."""
 
+    from recon_cli.backends.base import Backend
     from recon_cli.reconstruction.metadata import read_session
 
     info = read_session(scans)
-    if info.backend != "sim":
+    if info.backend != Backend.SIM:
         return None
     record = Path(scans) / "ground_truth" / "realism.json"
     if record.exists():

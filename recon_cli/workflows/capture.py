@@ -95,7 +95,7 @@ def run_capture(opt: CaptureOptions, progress: Callable[[str, int, int], None] |
                     failures.append(ViewFailure(k, str(exc)))
                     step(k)
                     continue
-                if hasattr(session.station, "cover_board"):
+                if session.capabilities.cover_board:
                     session.station.cover_board(k in opt.cover_board)
                 t_cap = time.perf_counter()
                 scans.append(acq.scan(view_record(view, T), move))

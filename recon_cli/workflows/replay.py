@@ -24,12 +24,16 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from recon_cli.backends.hardware.replay import ImportedRecording, ReplayConfig, import_recording
 from recon_cli.reconstruction.consistency import PairResidual, cloud_png, overlap_residuals, summary
 from recon_cli.reconstruction.options import RECORDING_SCALE, MultiwayOptions, RegisterOptions, SurfaceOptions
+
+if TYPE_CHECKING:
+    from recon_cli.reconstruction.pipeline import RegisterResult
 
 
 @dataclass(frozen=True)
@@ -54,7 +58,7 @@ class ReplayOptions:
 @dataclass(frozen=True)
 class ReplayResult:
     imported: ImportedRecording
-    register: object  # recon_cli.reconstruction.pipeline.RegisterResult
+    register: RegisterResult
     before: list[PairResidual]  # consecutive frames at the recorded poses
     after: list[PairResidual]  # after the pose graph (same as before without it)
     picture: Path

@@ -94,6 +94,7 @@ class ScriptRunner:
         from recon_cli.outputs import atomic_write_text, refuse_links
 
         t0 = time.perf_counter()
+        self.state.check_station()  # before anything moves or is written
         self.out.mkdir(parents=True, exist_ok=True)
         if self.options.append:
             refuse_links(self.out)

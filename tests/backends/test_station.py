@@ -246,3 +246,38 @@ def test_station_check_refuses_a_nan_measurement(plc, files, capsys):
     assert err.count("\n") == 1 and "Traceback" not in err
     assert "the PLC reports the measured position of arm_joint_1 (axis 2) as nan, not a finite number" in err
     assert plc.get("stop", "B")[0] == 1
+
+
+def test_run_checks_the_station_before_the_first_move(files, tmp_path, capsys):
+    """`recon run --station` runs the check of `recon station check` first: a robot standing
+    outside its soft limits (inside the hard ones) is refused with one line, and the PLC has
+    not been asked to move."""
+    station, script = files
+    cell = Cell(CellConfig())
+    start = named_configuration(cell.config.kind, "home", cell.joint_names).copy()
+    j = cell.joint_names.index("arm_joint_2")
+    start[j] = cell.kin.limits.soft_upper[j] + 0.05
+    assert start[j] < cell.kin.limits.upper[j]
+    stand_in = PLCStandIn(len(cell.joint_names), start, speedup=10.0).start()
+    try:
+        out = tmp_path / "run"
+        code = main(["run", str(script), "--out", str(out), "--station", str(station)])
+        err = capsys.readouterr().err
+        assert code == 1 and err.count("\n") == 1 and "Traceback" not in err, err
+        assert f"station {station}: the measured joints arm_joint_2 are outside their soft limits; nothing was " \
+               "moved" in err
+        assert stand_in.started == 0 and not (out / "scans" / "session.json").exists()
+    finally:
+        stand_in.close()
+    assert stand_in.crash is None, stand_in.crash
+
+
+def test_run_refuses_a_station_it_cannot_reach(files, tmp_path, capsys):
+    """No PLC listening: the check before the run cannot connect; one line, exit 1 (as
+    `recon station check`), nothing written into the scan store."""
+    station, script = files
+    out = tmp_path / "run"
+    code = main(["run", str(script), "--out", str(out), "--station", str(station)])
+    err = capsys.readouterr().err
+    assert code == 1 and err.count("\n") == 1 and "cannot reach the PLC" in err, err
+    assert not (out / "scans" / "session.json").exists()

@@ -1,104 +1,78 @@
 """A station of a robot adapter and a camera adapter, opened from a station file.
 
-Robot adapters: ``ads`` (TwinCAT over ADS) or ``sim`` (the MuJoCo robot); camera
-adapters: ``genicam``, ``realsense``, ``replay`` or ``sim`` (the simulated sensor rendered
-at the robot's measured joints, a stand-in camera for wiring a real robot). Closing stops
-the robot first, then releases the camera.
+The adapters are the registry's (recon_cli/backends/adapters.py): robots ``ads`` (TwinCAT
+over ADS) or ``sim`` (the MuJoCo robot); cameras ``genicam``, ``realsense``, ``replay`` or
+``sim`` (the simulated sensor rendered at the robot's measured joints, a stand-in camera
+for wiring a real robot). The station's capabilities are composed from what the two
+adapters declare: a station of ``sim`` parts only is a simulation (backend ``sim``, with
+ground truth). Closing stops the robot first, then releases the camera.
+
+``check_station`` is ``recon station check``: connect, read the joints, grab one frame,
+move nothing. ``preflight`` is the same check before a session on the station moves
+anything, refusing with one line when it fails.
 """
 
 from __future__ import annotations
 
-import importlib
+import time
+from dataclasses import dataclass
 
 import numpy as np
 
-from recon_cli.backends.station_file import CAMERA_MODULES, StationFile
+from recon_cli.backends.adapters import CAMERA_ADAPTERS, ROBOT_ADAPTERS, CameraPart, RobotPart, Surroundings
+from recon_cli.backends.base import Backend, Capabilities, Station
+from recon_cli.backends.station_file import StationFile
+from recon_cli.errors import ReconError, RobotFault
 from recon_cli.objects import SceneObject
 from recon_cli.robot.cell import Cell
 
 
-class RenderedCamera:
-    """CameraBackend: the simulated sensor, posed at the joints a robot adapter measures."""
-
-    def __init__(self, cell: Cell, scene_object: SceneObject | None, robot, rng: np.random.Generator,
-                 noise: bool, resolution: float) -> None:
-        from recon_cli.backends.sim.camera import SimCamera
-        from recon_cli.backends.sim.scene import build_scene, mujoco
-
-        self._mujoco = mujoco
-        self.robot = robot
-        self.scene = build_scene(cell.config, scene_object)
-        self.data = mujoco.MjData(self.scene.model)
-        self._camera = SimCamera(self.scene, self.data, rng, noise=noise, scale=resolution)
-        self.intrinsics = self._camera.intrinsics
-
-    def capture(self):
-        self.data.qpos[self.scene.qpos_index] = self.robot.measured_joints()
-        self._mujoco.mj_forward(self.scene.model, self.data)
-        return self._camera.capture()
-
-    def close(self) -> None:
-        self._camera.close()
-
-
-class HardwareStation:
+class AdapterStation(Station):
     """Station of a station file (see recon_cli/backends/base.py for the interface)."""
-
-    backend = "hardware"
 
     def __init__(self, station: StationFile, cell: Cell, scene_object: SceneObject | None, start: np.ndarray,
                  rng: np.random.Generator) -> None:
         self.station_file = station
         self.cell = cell
-        self.robot = self.camera = None
-        self._sim = None
+        self.scene_object = scene_object
+        self.capabilities: Capabilities = station.capabilities
+        self.robot: RobotPart | None = None
+        self.camera: CameraPart | None = None
+        around = Surroundings(cell, scene_object, start, rng)
         try:
-            if station.robot_adapter == "ads":
-                from recon_cli.backends.hardware.ads import AdsRobot
-
-                self.robot = AdsRobot(station.robot, cell.joint_names, cell.kin.limits)
-            else:
-                from recon_cli.backends.sim.station import SimStation
-
-                self._sim = SimStation(cell, scene_object, start, rng, noise=False, resolution=0.05)
-                self.robot = self._sim.robot
-            if station.camera_adapter == "sim":
-                cfg = station.camera
-                self.camera = RenderedCamera(cell, scene_object, self.robot, rng, cfg.noise, cfg.resolution)
-            else:
-                module = importlib.import_module(CAMERA_MODULES[station.camera_adapter][0])
-                self.camera = module.open_camera(station.camera)
+            self.robot = ROBOT_ADAPTERS[station.robot_adapter].open(station.robot, around)
+            self.camera = CAMERA_ADAPTERS[station.camera_adapter].open(station.camera, around, self.robot)
         except BaseException:
             self.close()
             raise
 
-    def ground_truth(self) -> None:
-        return None  # a real cell does not know the truth
+    def ground_truth(self) -> dict | None:
+        """The simulated parts' truth (a station of simulated parts only), else None: a real
+        cell does not know it."""
+        if not self.capabilities.ground_truth:
+            return None
+        from recon_cli.backends.sim.station import simulation_truth
+
+        return simulation_truth(self.robot, self.camera.world_T_camera_truth(), self.scene_object)
+
+    def cover_board(self, covered: bool) -> None:
+        if not self.capabilities.cover_board:
+            super().cover_board(covered)
+        self.camera.cover_board(covered)
 
     def close(self) -> None:
         """Stop the robot, then release robot and camera (idempotent)."""
-        robot, camera, sim = self.robot, self.camera, self._sim
-        self.robot = self.camera = self._sim = None
+        robot, camera = self.robot, self.camera
+        self.robot = self.camera = None
         try:
-            if robot is not None and hasattr(robot, "close"):
+            if robot is not None:
                 robot.close()
         finally:
-            if camera is not None and hasattr(camera, "close"):
+            if camera is not None:
                 camera.close()
-            if sim is not None:
-                sim.close()
-
-    def __enter__(self) -> HardwareStation:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
 
 # --------------------------------------------------------------------- recon station check
-from dataclasses import dataclass  # noqa: E402
-
-
 @dataclass(frozen=True)
 class StationCheck:
     """What ``recon station check`` found: the joint state and one frame."""
@@ -106,9 +80,11 @@ class StationCheck:
     name: str
     robot_adapter: str
     camera_adapter: str
+    backend: Backend  # sim: every part is simulated
     joints: dict[str, float]  # [rad or m]
     prismatic: dict[str, bool]  # True: the joint is linear (m)
     within_limits: bool
+    outside_limits: tuple[str, ...]  # the joints outside their soft limits
     width: int
     height: int
     intrinsics: dict[str, float]
@@ -116,28 +92,59 @@ class StationCheck:
     depth_range: tuple[float, float] | None  # [m] of the valid pixels
     seconds: float
 
+    def problem(self) -> str | None:
+        """Why a run must not start on this station (None: it may)."""
+        if not self.within_limits:
+            return f"the measured joints {', '.join(self.outside_limits)} are outside their soft limits"
+        if self.depth_range is None:
+            return "the camera's frame has no depth"
+        return None
+
 
 def check_station(station: StationFile, seed: int) -> StationCheck:
     """Connect to the robot and the camera of a station file, read the joint state and grab
-    one frame; nothing moves. ``seed``: of a rendered camera's noise."""
-    import time
-
+    one frame; nothing moves. ``seed``: of a rendered camera's noise. A robot that cannot be
+    reached (nothing moved, nothing was running) is a one-line ReconError, as a wrong address
+    in the file is."""
     t0 = time.perf_counter()
     cell = Cell(station.cell)
     from recon_cli.robot.poses import named_configuration
 
     start = named_configuration(station.cell.kind, "home", cell.joint_names)
-    with HardwareStation(station, cell, None, start, np.random.default_rng(seed)) as st:
-        q = st.robot.measured_joints()
-        frame = st.camera.capture()
+    try:
+        with AdapterStation(station, cell, None, start, np.random.default_rng(seed)) as st:
+            q = st.robot.measured_joints()
+            frame = st.camera.capture()
+    except RobotFault as exc:
+        if exc.kind != "connection" or exc.stopped:
+            raise
+        raise ReconError(exc.message, hint=exc.hint) from None
     depth = np.asarray(frame.depth)
     valid = depth > 0
     k = frame.intrinsics
     return StationCheck(
-        station.name, station.robot_adapter, station.camera_adapter,
+        station.name, station.robot_adapter, station.camera_adapter, station.capabilities.backend,
         dict(zip(cell.joint_names, map(float, q), strict=True)),
         dict(zip(cell.joint_names, map(bool, cell.kin.limits.prismatic), strict=True)),
         bool(cell.kin.limits.within_soft(q, 1e-6)),
+        tuple(n for n, m in zip(cell.joint_names, cell.kin.limits.margin_to_soft(q), strict=True) if m < -1e-6),
         int(depth.shape[1]), int(depth.shape[0]),
         {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy}, float(valid.mean()) if depth.size else 0.0,
         (float(depth[valid].min()), float(depth[valid].max())) if valid.any() else None, time.perf_counter() - t0)
+
+
+def refuse_unready(station: StationFile, result: StationCheck) -> None:
+    """One line when a run must not start on the station (``StationCheck.problem``)."""
+    problem = result.problem()
+    if problem is not None:
+        raise ReconError(f"station {station.path}: {problem}; nothing was moved",
+                         hint=f"recon station check {station.path} shows the joints and the frame")
+
+
+def preflight(station: StationFile) -> StationCheck:
+    """``check_station`` before a session on the station moves anything (its own connection,
+    closed again: a replayed recording still starts at its first frame); a station that
+    fails it is refused with one line."""
+    result = check_station(station)
+    refuse_unready(station, result)
+    return result

@@ -92,6 +92,13 @@ class SimRobot:
         self.data.ctrl[:] = 0.0
         mujoco.mj_forward(self.scene.model, self.data)
 
+    def stop(self) -> bool:
+        """The simulated robot moves only inside ``execute``: it holds still already."""
+        return True
+
+    def close(self) -> None:
+        """Nothing to release: the scene belongs to whoever built it."""
+
     # ------------------------------------------------------------------ control
     def _torque(self, q, qd, q_d, qd_d, qdd_d, integral) -> np.ndarray:
         g = self.gains

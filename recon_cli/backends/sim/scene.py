@@ -33,6 +33,7 @@ import mujoco  # noqa: E402  (MUJOCO_GL must be set before the import)
 from recon_cli.inputs.yamlfile import read_yaml
 
 CAMERA_NAME = "depth_camera"
+BOARD_PRINT_NAME = "charuco_print"
 OBJECT_NAME = "scan_object"
 BOARD_PIXELS_PER_METRE = 8000.0  # texture resolution of the printed board (0.125 mm per texel)
 
@@ -118,7 +119,7 @@ def build_scene(config: CellConfig, scene_object: SceneObject | None = None,
     mat.shininess = 0.0
     sx, sy = board.size
     g = spec.body("marker").add_geom()
-    g.name = "charuco_print"
+    g.name = BOARD_PRINT_NAME
     g.type = mujoco.mjtGeom.mjGEOM_PLANE
     g.size = [sx / 2.0, sy / 2.0, 0.01]
     g.pos = [sx / 2.0, sy / 2.0, 1e-5]
@@ -180,3 +181,20 @@ def build_scene(config: CellConfig, scene_object: SceneObject | None = None,
     dof_index = np.array([model.jnt_dofadr[model.joint(n).id] for n in names])
     return SimScene(model, names, qpos_index, dof_index, model.camera(CAMERA_NAME).id, sensor,
                     scene_object)
+
+
+class BoardSheet:
+    """A plain grey sheet that can be laid over the printed ChArUco board of a scene: the
+    board is then not found, and registration has to use the robot's kinematics."""
+
+    GREY = (0.6, 0.6, 0.6, 1.0)
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        self._model = model
+        self._geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, BOARD_PRINT_NAME)
+        self._printed = (int(model.geom_matid[self._geom]), model.geom_rgba[self._geom].copy())
+
+    def cover(self, covered: bool) -> None:
+        matid, rgba = (-1, self.GREY) if covered else self._printed
+        self._model.geom_matid[self._geom] = matid
+        self._model.geom_rgba[self._geom] = rgba

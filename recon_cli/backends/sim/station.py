@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from recon_cli.backends.base import Capabilities, Station
 from recon_cli.backends.sim.camera import SimCamera
 from recon_cli.backends.sim.robot import SimRobot
-from recon_cli.backends.sim.scene import build_scene, mujoco
+from recon_cli.backends.sim.scene import BoardSheet, build_scene, mujoco
 from recon_cli.backends.sim.truth import JointSensor, TrueCell, true_cell
 from recon_cli.config import DEFAULTS
 from recon_cli.objects import SceneObject
@@ -21,11 +22,22 @@ from recon_cli.realism import IDEAL, RealismProfile
 from recon_cli.robot.cell import Cell
 
 
-class SimStation:
+def simulation_truth(robot: SimRobot, world_T_camera: np.ndarray, scene_object: SceneObject | None) -> dict:
+    """What only a simulation knows at a capture: the true camera pose and joints, and the
+    object; stored apart from the scan data, for evaluation."""
+    truth = {"world_T_camera": world_T_camera,
+             "joints": dict(zip(robot.joint_names, robot.true_joints().tolist(), strict=True))}
+    if scene_object is not None:
+        truth["object"] = scene_object.name
+        truth["world_T_object"] = scene_object.world_T_object
+    return truth
+
+
+class SimStation(Station):
     """MuJoCo scene of a cell with an object; robot at rest at ``start``. Close it (or use it
     as a context manager) to free the offscreen renderer."""
 
-    backend = "sim"
+    capabilities = Capabilities(simulated=True, ground_truth=True, cover_board=True, realism=True)
 
     def __init__(self, cell: Cell, scene_object: SceneObject | None, start: np.ndarray,
                  rng: np.random.Generator, noise: bool = DEFAULTS.sensor.noise,
@@ -47,6 +59,7 @@ class SimStation:
         self.robot.reset(np.asarray(start, dtype=float))
         self.camera = SimCamera(self.scene, self.data, rng, noise=noise, scale=resolution, realism=realism,
                                 realism_rng=camera_rng)
+        self._board = BoardSheet(self.scene.model)
 
     def realism_record(self) -> dict:
         """What the realism profile drew for this session (ground truth, evaluation only)."""
@@ -60,27 +73,11 @@ class SimStation:
     def cover_board(self, covered: bool) -> None:
         """Lay a plain grey sheet over the printed ChArUco board (or take it away): the
         board is then not found and registration has to use the robot's kinematics."""
-        model = self.scene.model
-        gid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "charuco_print")
-        if not hasattr(self, "_board_look"):
-            self._board_look = (int(model.geom_matid[gid]), model.geom_rgba[gid].copy())
-        model.geom_matid[gid] = -1 if covered else self._board_look[0]
-        model.geom_rgba[gid] = [0.6, 0.6, 0.6, 1.0] if covered else self._board_look[1]
+        self._board.cover(covered)
 
     def ground_truth(self) -> dict:
         """What only a simulation knows; stored apart from the scan data, for evaluation."""
-        truth = {"world_T_camera": self.camera.world_T_camera_truth(),
-                 "joints": dict(zip(self.robot.joint_names, self.robot.true_joints().tolist(), strict=True))}
-        if self.scene_object is not None:
-            truth["object"] = self.scene_object.name
-            truth["world_T_object"] = self.scene_object.world_T_object
-        return truth
+        return simulation_truth(self.robot, self.camera.world_T_camera_truth(), self.scene_object)
 
     def close(self) -> None:
         self.camera.close()
-
-    def __enter__(self) -> SimStation:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()

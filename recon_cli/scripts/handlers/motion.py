@@ -123,7 +123,11 @@ def scan(state: RunState, cmd: C.Scan, report: CommandReport) -> None:
 
 @handles(C.Wait)
 def wait(state: RunState, cmd: C.Wait, report: CommandReport) -> None:
-    if state.backend.value == "sim" or state.dry_run:
-        report.message = "simulation: the robot holds its pose; no wall-clock wait"
+    if state.dry_run:
+        report.message = "dry run: no wall-clock wait"
+        return
+    state.ensure_session()
+    if not state.session.capabilities.wall_clock:
+        report.message = "no physical robot or camera: the robot holds its pose; no wall-clock wait"
     else:  # pragma: no cover - hardware only
         time.sleep(cmd.seconds)

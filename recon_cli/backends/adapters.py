@@ -1,0 +1,157 @@
+"""The robot and camera adapters a station file may name: one registry entry per ``adapter``.
+
+Each entry declares what its part is (simulated or not, physical or not, whether the board
+under it can be covered), reads its section of the station file into a typed frozen config
+and opens the part. A driver module is imported only when one of its adapters is read or
+opened, so a missing driver library is a one-line hint of that adapter alone.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol, TypeAlias
+
+import numpy as np
+
+from recon_cli.backends.base import CameraBackend, Capabilities, RobotBackend
+
+if TYPE_CHECKING:
+    from recon_cli.backends.hardware.ads_config import AdsConfig
+    from recon_cli.backends.hardware.genicam import GenICamConfig
+    from recon_cli.backends.hardware.realsense import RealSenseConfig
+    from recon_cli.backends.hardware.replay import ReplayConfig
+    from recon_cli.backends.sim.config import SimCameraConfig, SimRobotConfig
+    from recon_cli.objects import SceneObject
+    from recon_cli.robot.cell import Cell
+
+#: the typed section of a station file's ``robot:`` / ``camera:`` (one class per adapter)
+RobotConfig: TypeAlias = "AdsConfig | SimRobotConfig"
+CameraConfig: TypeAlias = "SimCameraConfig | GenICamConfig | RealSenseConfig | ReplayConfig"
+
+
+class RobotPart(RobotBackend, Protocol):
+    def close(self) -> None:
+        """Stop the robot, then release it (idempotent)."""
+
+
+class CameraPart(CameraBackend, Protocol):
+    def close(self) -> None:
+        """Release the camera (idempotent)."""
+
+
+@dataclass(frozen=True)
+class Surroundings:
+    """What an adapter may need to open its part: the cell, the simulated object (None on a
+    real cell), where a simulated robot starts (n,) and the session's random generator."""
+
+    cell: Cell
+    scene_object: SceneObject | None
+    start: np.ndarray
+    rng: np.random.Generator
+
+
+@dataclass(frozen=True)
+class RobotAdapter:
+    """simulated: the part is a simulation; physical: it moves in real time (waits are real)."""
+
+    name: str
+    simulated: bool
+    physical: bool
+    read: Callable[[dict, str], RobotConfig]
+    open: Callable[[RobotConfig, Surroundings], RobotPart]
+
+
+@dataclass(frozen=True)
+class CameraAdapter:
+    """As :class:`RobotAdapter`; cover_board: the part can lay a sheet over the printed board
+    it sees (``cover_board(covered)``)."""
+
+    name: str
+    simulated: bool
+    physical: bool
+    read: Callable[[dict, str], CameraConfig]
+    open: Callable[[CameraConfig, Surroundings, RobotBackend], CameraPart]
+    cover_board: bool = False
+
+
+def station_capabilities(robot: RobotAdapter, camera: CameraAdapter) -> Capabilities:
+    """What a station of these two adapters can do: simulated (and knowing the ground truth)
+    when both parts are; real waits when either part is physical."""
+    simulated = robot.simulated and camera.simulated
+    return Capabilities(simulated=simulated, ground_truth=simulated, cover_board=camera.cover_board,
+                        wall_clock=robot.physical or camera.physical)
+
+
+# --------------------------------------------------------------------- robots
+def _read_ads(mapping: dict, where: str) -> AdsConfig:
+    from recon_cli.backends.hardware.ads_config import AdsConfig
+
+    return AdsConfig.from_mapping(mapping, where)
+
+
+def _open_ads(config: AdsConfig, around: Surroundings) -> RobotPart:
+    from recon_cli.backends.hardware.ads import AdsRobot
+
+    return AdsRobot(config, around.cell.joint_names, around.cell.kin.limits)
+
+
+def _read_sim_robot(mapping: dict, where: str) -> SimRobotConfig:
+    from recon_cli.backends.sim.config import SimRobotConfig
+
+    return SimRobotConfig.from_mapping(mapping, where)
+
+
+def _open_sim_robot(config: SimRobotConfig, around: Surroundings) -> RobotPart:
+    from recon_cli.backends.sim.robot import SimRobot
+    from recon_cli.backends.sim.scene import build_scene, mujoco
+
+    scene = build_scene(around.cell.config, around.scene_object)
+    robot = SimRobot(scene, mujoco.MjData(scene.model), around.cell.kin)
+    robot.reset(np.asarray(around.start, dtype=float))
+    return robot
+
+
+# --------------------------------------------------------------------- cameras
+def _read_sim_camera(mapping: dict, where: str) -> SimCameraConfig:
+    from recon_cli.backends.sim.config import SimCameraConfig
+
+    return SimCameraConfig.from_mapping(mapping, where)
+
+
+def _open_sim_camera(config: SimCameraConfig, around: Surroundings, robot: RobotBackend) -> CameraPart:
+    from recon_cli.backends.sim.rendered import RenderedCamera
+
+    return RenderedCamera(around.cell, around.scene_object, robot, around.rng, config.noise, config.resolution)
+
+
+def _driver_camera(module: str, config_class: str) -> tuple[Callable, Callable]:
+    """read and open of a camera adapter whose module has ``config_class.from_mapping`` and
+    ``open_camera(config)``."""
+    import importlib
+
+    def read(mapping: dict, where: str):
+        return getattr(importlib.import_module(module), config_class).from_mapping(mapping, where)
+
+    def open_camera(config, around: Surroundings, robot: RobotBackend) -> CameraPart:
+        return importlib.import_module(module).open_camera(config)
+
+    return read, open_camera
+
+
+ROBOT_ADAPTERS: dict[str, RobotAdapter] = {
+    "ads": RobotAdapter("ads", simulated=False, physical=True, read=_read_ads, open=_open_ads),
+    "sim": RobotAdapter("sim", simulated=True, physical=False, read=_read_sim_robot, open=_open_sim_robot),
+}
+
+CAMERA_ADAPTERS: dict[str, CameraAdapter] = {
+    "sim": CameraAdapter("sim", simulated=True, physical=False, read=_read_sim_camera, open=_open_sim_camera,
+                         cover_board=True),
+    "genicam": CameraAdapter("genicam", False, True,
+                             *_driver_camera("recon_cli.backends.hardware.genicam", "GenICamConfig")),
+    "realsense": CameraAdapter("realsense", False, True,
+                               *_driver_camera("recon_cli.backends.hardware.realsense", "RealSenseConfig")),
+    # recorded frames of a real camera: not a simulation (no ground truth), nothing to wait for
+    "replay": CameraAdapter("replay", False, False,
+                            *_driver_camera("recon_cli.backends.hardware.replay", "ReplayConfig")),
+}

@@ -206,7 +206,7 @@ def open_session(spec: SessionSpec, rng: np.random.Generator | None = None, *, p
         if not (plan_only or spec.station_checked):  # `recon station check`, before anything moves or is written
             from recon_cli.backends.hardware.station import preflight
 
-            preflight(station_file)
+            preflight(station_file, spec.config.seed)
     seed_ompl(spec.config.seed)
     return Session(spec, rng if rng is not None else np.random.default_rng(spec.config.seed), plan_only,
                    station_file)

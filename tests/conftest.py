@@ -49,3 +49,25 @@ def pytest_unconfigure(config):
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(_EXIT_STATUS[-1])
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _ads_port_held():
+    """ADS clients connect to TCP port 48898, which lies in Linux's ephemeral range: a client
+    that connects while no stand-in listens can be given 48898 as its own port and connect to
+    itself, and the TIME-WAIT of that connection keeps every stand-in from binding the port
+    for a minute. A socket bound to the port (SO_REUSEADDR, never listening) for the whole
+    session keeps the port out of the ephemeral range: such a connect is refused at once, and
+    the stand-ins (SO_REUSEADDR too) still bind and listen on it."""
+    import socket
+
+    holder = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    holder.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        holder.bind(("127.0.0.1", 48898))
+    except OSError:  # held already (another test session): it is out of the ephemeral range then too
+        holder.close()
+        yield
+        return
+    yield
+    holder.close()

@@ -190,7 +190,7 @@ class RunState:
         from recon_cli.backends.hardware.station import preflight
         from recon_cli.backends.station_file import load_station
 
-        preflight(load_station(self.options.station))
+        preflight(load_station(self.options.station), self.config.seed)
         self.station_checked = True
 
     def _explicit_box(self):

@@ -130,6 +130,22 @@ def test_genicam_close_is_idempotent_and_capture_after_close_fails(viky):
         cam.capture()
 
 
+def test_genicam_camera_leaves_ctrl_c_to_the_run(viky):
+    """harvesters' acquirer installs a SIGINT handler of its own: with the camera open, Ctrl-C
+    still raises KeyboardInterrupt (the run stops the robot), not only harvesters' stop."""
+    import os
+    import signal
+    import time
+
+    before = signal.getsignal(signal.SIGINT)
+    with _genicam(serial="0") as cam:
+        cam.capture()
+        assert signal.getsignal(signal.SIGINT) is before
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1.0)
+
+
 def test_genicam_config_is_checked_key_by_key():
     from recon_cli.backends.hardware.genicam import GenICamConfig
 

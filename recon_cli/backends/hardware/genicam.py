@@ -32,6 +32,8 @@ import glob
 import logging
 import os
 import re
+import signal
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -583,6 +585,20 @@ def _safe(info, attr: str):
         return None
 
 
+def _keeping_ctrl_c(make):
+    """``make()`` with recon's Ctrl-C handler kept: harvesters' image acquirer replaces the
+    SIGINT handler of the main thread with its own, which only stops its acquisition, so that
+    Ctrl-C would no longer reach the run (and stop the robot)."""
+    if threading.current_thread() is not threading.main_thread():
+        return make()
+    handler = signal.getsignal(signal.SIGINT)
+    try:
+        return make()
+    finally:
+        if handler is not None:
+            signal.signal(signal.SIGINT, handler)
+
+
 def open_camera(cfg: GenICamConfig) -> GenICamCamera:
     """Load the producers, open the device of ``cfg.serial`` and set it up for capture."""
     require_driver("harvesters.core", INSTALL, "GenICam")
@@ -597,7 +613,7 @@ def open_camera(cfg: GenICamConfig) -> GenICamCamera:
         h.update()
         info = choose_device(list(h.device_info_list), cfg.serial, producers)
         try:
-            ia = h.create(info)
+            ia = _keeping_ctrl_c(lambda: h.create(info))
         except Exception as exc:  # noqa: BLE001 - GenTL access errors come in many types
             raise CameraFault(f"cannot open the GenICam device {_device_names(info)[:1]} ({exc})", adapter=ADAPTER,
                               hint="is another program using the camera?") from None

@@ -141,10 +141,10 @@ def refuse_unready(station: StationFile, result: StationCheck) -> None:
                          hint=f"recon station check {station.path} shows the joints and the frame")
 
 
-def preflight(station: StationFile) -> StationCheck:
+def preflight(station: StationFile, seed: int) -> StationCheck:
     """``check_station`` before a session on the station moves anything (its own connection,
     closed again: a replayed recording still starts at its first frame); a station that
-    fails it is refused with one line."""
-    result = check_station(station)
+    fails it is refused with one line. ``seed``: the run's."""
+    result = check_station(station, seed)
     refuse_unready(station, result)
     return result

@@ -18,15 +18,25 @@ be repeated from its folder.
 from __future__ import annotations
 
 import dataclasses
+import enum
+import sys
+import types
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from recon_cli.errors import InputError
+from recon_cli.inputs.schema import check
+from recon_cli.inputs.yamlfile import line_of, plain, read_yaml
+from recon_cli.outputs import atomic_write_text
+from recon_cli.perception.charuco import BoardSpec
 from recon_cli.planning.options import PlanOptions
 from recon_cli.randomness import DEFAULT_SEED, SEED_RANGE
 from recon_cli.realism import IDEAL, RealismProfile
+from recon_cli.reconstruction.crop import CropBox
 from recon_cli.reconstruction.options import RegisterOptions
 from recon_cli.robot.description import CellConfig
 
@@ -160,7 +170,6 @@ def _set(obj, keys: list[str], value):
 
 def _plain(value):
     """YAML-friendly: enums by value, tuples and arrays as lists, paths as strings."""
-    import enum
 
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
@@ -180,9 +189,7 @@ def _plain(value):
 def write_config(folder: Path, config: Config, **extra) -> Path:
     """The effective configuration of a run as ``folder/config.yaml`` (with what else
     describes the run: command, script, object, ...)."""
-    import yaml
 
-    from recon_cli.outputs import atomic_write_text
 
     data = config.to_dict()
     if extra:
@@ -196,11 +203,7 @@ RUN_KEY = "run"
 
 def _hints(cls) -> dict:
     """The resolved field types of a section's dataclass."""
-    import sys
-    import typing
 
-    from recon_cli.perception.charuco import BoardSpec
-    from recon_cli.reconstruction.crop import CropBox
 
     return typing.get_type_hints(cls, vars(sys.modules[cls.__module__]),
                                  {"BoardSpec": BoardSpec, "CropBox": CropBox})
@@ -208,9 +211,6 @@ def _hints(cls) -> dict:
 
 def _build(tp, value):
     """``value`` (plain YAML data, already checked by the schema) as the type ``tp``."""
-    import enum
-    import types
-    import typing
 
     origin = typing.get_origin(tp)
     if origin in (typing.Union, types.UnionType):
@@ -240,8 +240,6 @@ def config_from_dict(data: dict, where: str = "config.yaml") -> Config:
     """The Config of ``data`` (what :meth:`Config.to_dict` wrote, or a part of it: a missing
     key keeps its default). ``data`` is checked against schemas/config.schema.json first; a
     value a section refuses is named with ``where:line`` too."""
-    from recon_cli.inputs.schema import check
-    from recon_cli.inputs.yamlfile import line_of
 
     check(data, "config", where)
     hints = _hints(Config)
@@ -261,7 +259,6 @@ def config_from_dict(data: dict, where: str = "config.yaml") -> Config:
 def read_config(path: Path) -> tuple[Config, dict]:
     """The configuration of a run folder's ``config.yaml`` (through the YAML reader and the
     schema) and its ``run`` section (what else repeats the run: command, script, store, ...)."""
-    from recon_cli.inputs.yamlfile import plain, read_yaml
 
     hint = "give the config.yaml of a run folder (recon writes one into each)"
     data = read_yaml(Path(path), "configuration file", hint=hint)

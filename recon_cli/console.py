@@ -12,8 +12,10 @@ from pathlib import Path
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn, TimeElapsedColumn
+from rich.text import Text
 
 from recon_cli.errors import FileError
+from recon_cli.outputs import atomic_write_text
 from recon_cli.serialization import to_jsonable
 
 # piped output (logs, CI, tests) gets wide tables instead of rich's 80 columns
@@ -28,7 +30,6 @@ err_console = Console(stderr=True, highlight=False, markup=False, emoji=False, s
 
 def styled(label: str, style: str, rest: str = ""):
     """``label`` in ``style`` followed by ``rest`` printed literally."""
-    from rich.text import Text
 
     return Text.assemble((label, style), rest)
 
@@ -76,6 +77,5 @@ def run_folder(base: Path | None, name: str, fresh: bool = False) -> Path:
 
 def write_json(path: Path, data) -> None:
     """Write JSON atomically (temporary name, then rename)."""
-    from recon_cli.outputs import atomic_write_text
 
     atomic_write_text(path, json.dumps(data, indent=2, default=to_jsonable) + "\n")

@@ -17,7 +17,9 @@ import numpy as np
 
 from recon_cli.errors import FileError, InputError, UnknownNameError
 from recon_cli.geometry.transforms import pose, rot_x, rpy_to_matrix, transform_points
+from recon_cli.inputs.meshes import read_mesh
 from recon_cli.paths import SHARED_DATA_DIR
+from recon_cli.robot.collision import ObjectBox
 
 #: the board centre on the table top (world) where objects stand (thesis cell: board and objects)
 BOARD_CENTRE = np.array([0.0, 0.0, 0.683])
@@ -89,7 +91,6 @@ class SceneObject:
 
     def bounding_box(self, margin: float = 0.0):
         """The object's axis-aligned bounding box in the world as a collision ObjectBox."""
-        from recon_cli.robot.collision import ObjectBox
 
         lo, hi = self.world_aabb()
         lo, hi = lo - margin, hi + margin
@@ -218,7 +219,6 @@ def available_objects() -> dict[str, str]:
 def _read_mesh(path: Path, scale: float = 1.0):
     """The mesh of an OBJ, PLY or STL file through the guarded reader (extent limits after
     ``scale``)."""
-    from recon_cli.inputs.meshes import read_mesh
 
     return read_mesh(path, "mesh file", scale=scale,
                      units_hint="pass a scale, e.g. --scale 0.001 for millimetres, or convert it to metres")

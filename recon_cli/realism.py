@@ -33,6 +33,8 @@ from pathlib import Path
 from typing import Any
 
 from recon_cli.errors import InputError, UnknownNameError
+from recon_cli.inputs.schema import check
+from recon_cli.inputs.yamlfile import parse_yaml, read_text
 from recon_cli.paths import ROBOT_DIR
 from recon_cli.perception.camera_model import Intrinsics
 
@@ -170,7 +172,6 @@ def load_profile(name_or_path: str | Path) -> RealismProfile:
         path = Path(text)
         if path.suffix.lower() not in (".yaml", ".yml") and not path.exists():
             raise UnknownNameError("realism profile", text, [*BUILT_IN, "FILE.yaml"])
-    from recon_cli.inputs.yamlfile import read_text
 
     raw = read_text(path, "realism profile",
                     hint=f"use {', '.join(BUILT_IN)} or a YAML file (docs/simulation.md)")
@@ -182,8 +183,6 @@ def load_profile(name_or_path: str | Path) -> RealismProfile:
 
 def parse_profile(text: str, where: str = "<profile>") -> RealismProfile:
     """Parse a profile's YAML text; ``where`` names it in errors."""
-    from recon_cli.inputs.schema import check
-    from recon_cli.inputs.yamlfile import parse_yaml
 
     data = parse_yaml(text, where)
     check(data, "realism", where)

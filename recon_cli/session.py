@@ -26,10 +26,21 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from recon_cli.acquisition import Acquisition
 from recon_cli.backends.base import Backend, Capabilities, Station  # noqa: F401 (Backend re-exported)
+from recon_cli.backends.sim.station import SimStation
 from recon_cli.config import DEFAULTS, Config, write_config
+from recon_cli.console import write_json
 from recon_cli.errors import FileError, HardwareUnavailable, InputError
+from recon_cli.objects import available_objects, load_object
+from recon_cli.outputs import atomic_write
+from recon_cli.perception.sensor import motioncam_3d_m
+from recon_cli.planning.planner import seed_ompl
 from recon_cli.reconstruction.metadata import SESSION_FORMAT, BoxInfo, SessionInfo  # noqa: F401 (re-exported)
+from recon_cli.reconstruction.scan_store import ScanStore
+from recon_cli.robot.cell import Cell
+from recon_cli.robot.collision import ObjectBox
+from recon_cli.robot.poses import named_configuration
 
 if TYPE_CHECKING:
     from recon_cli.backends.station_file import StationFile
@@ -51,7 +62,6 @@ def resolve_object_name(name: str) -> str:
     built-in bottle; any other name as given."""
     if name != "auto":
         return name
-    from recon_cli.objects import available_objects
 
     return "drill" if "drill" in available_objects() else "bottle"
 
@@ -82,9 +92,6 @@ class Session:
 
     def __init__(self, spec: SessionSpec, rng: np.random.Generator, plan_only: bool = False,
                  station_file: StationFile | None = None) -> None:
-        from recon_cli.objects import load_object
-        from recon_cli.robot.cell import Cell
-        from recon_cli.robot.poses import named_configuration
 
         cfg = spec.config
         self.spec = spec
@@ -107,15 +114,12 @@ class Session:
             raise
 
     def _object_box(self):
-        from recon_cli.robot.collision import ObjectBox
 
         if self.spec.box is not None:
             return ObjectBox(tuple(self.spec.box[0]), tuple(self.spec.box[1]))
         return self.scene_object.bounding_box(self.spec.config.scene.box_margin)
 
     def _open(self) -> None:
-        from recon_cli.acquisition import Acquisition
-        from recon_cli.perception.sensor import motioncam_3d_m
 
         spec, cfg = self.spec, self.spec.config
         sensor = motioncam_3d_m()
@@ -159,7 +163,6 @@ class Session:
                                        on_scan=None if spec.recorder is None else spec.recorder.scan)
 
     def _open_store(self):
-        from recon_cli.reconstruction.scan_store import ScanStore
 
         root = Path(self.spec.out)
         if not (self.spec.append and (root / "session.json").exists()):
@@ -189,7 +192,6 @@ class Session:
 
 def open_session(spec: SessionSpec, rng: np.random.Generator | None = None, *, plan_only: bool = False) -> Session:
     """Open the session a workflow asks for (see the module docstring)."""
-    from recon_cli.planning.planner import seed_ompl
 
     cfg = spec.config
     if not (math.isfinite(cfg.scene.object_scale) and cfg.scene.object_scale > 0):
@@ -223,7 +225,6 @@ def open_station(backend: Backend, cell, scene_object, start: np.ndarray, rng: n
         raise HardwareUnavailable(
             "the hardware backend needs a station file (which robot and camera adapters, how to reach them)",
             hint="pass --station cell.yaml (docs/hardware.md has a complete example)")
-    from recon_cli.backends.sim.station import SimStation
 
     return SimStation(cell, scene_object, start, rng, noise=cfg.sensor.noise, resolution=cfg.sensor.resolution,
                       realism=cfg.realism)
@@ -233,7 +234,6 @@ def write_realism_record(folder: Path, record: dict) -> Path:
     """What the realism profile drew for a simulated session (encoder offsets, base and
     hand-eye errors, the actual camera) as ``ground_truth/realism.json``, beside the scans
     and never read by any algorithm (evaluation only)."""
-    from recon_cli.console import write_json
 
     gt = Path(folder) / "ground_truth"
     gt.mkdir(exist_ok=True)
@@ -246,7 +246,6 @@ def write_ground_truth_mesh(folder: Path, obj) -> Path:
     data (``ground_truth/NAME.ply``; evaluation only)."""
     import open3d as o3d
 
-    from recon_cli.outputs import atomic_write
 
     gt = Path(folder) / "ground_truth"
     gt.mkdir(exist_ok=True)

@@ -8,6 +8,7 @@ opened, so a missing driver library is a one-line hint of that adapter alone.
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol, TypeAlias
@@ -15,6 +16,12 @@ from typing import TYPE_CHECKING, Protocol, TypeAlias
 import numpy as np
 
 from recon_cli.backends.base import CameraBackend, Capabilities, RobotBackend
+from recon_cli.backends.hardware.ads import AdsRobot
+from recon_cli.backends.hardware.ads_config import AdsConfig
+from recon_cli.backends.sim.config import SimCameraConfig, SimRobotConfig
+from recon_cli.backends.sim.rendered import RenderedCamera
+from recon_cli.backends.sim.robot import SimRobot
+from recon_cli.backends.sim.scene import build_scene, mujoco
 
 if TYPE_CHECKING:
     from recon_cli.backends.hardware.ads_config import AdsConfig
@@ -85,26 +92,21 @@ def station_capabilities(robot: RobotAdapter, camera: CameraAdapter) -> Capabili
 
 # --------------------------------------------------------------------- robots
 def _read_ads(mapping: dict, where: str) -> AdsConfig:
-    from recon_cli.backends.hardware.ads_config import AdsConfig
 
     return AdsConfig.from_mapping(mapping, where)
 
 
 def _open_ads(config: AdsConfig, around: Surroundings) -> RobotPart:
-    from recon_cli.backends.hardware.ads import AdsRobot
 
     return AdsRobot(config, around.cell.joint_names, around.cell.kin.limits)
 
 
 def _read_sim_robot(mapping: dict, where: str) -> SimRobotConfig:
-    from recon_cli.backends.sim.config import SimRobotConfig
 
     return SimRobotConfig.from_mapping(mapping, where)
 
 
 def _open_sim_robot(config: SimRobotConfig, around: Surroundings) -> RobotPart:
-    from recon_cli.backends.sim.robot import SimRobot
-    from recon_cli.backends.sim.scene import build_scene, mujoco
 
     scene = build_scene(around.cell.config, around.scene_object)
     robot = SimRobot(scene, mujoco.MjData(scene.model), around.cell.kin)
@@ -114,13 +116,11 @@ def _open_sim_robot(config: SimRobotConfig, around: Surroundings) -> RobotPart:
 
 # --------------------------------------------------------------------- cameras
 def _read_sim_camera(mapping: dict, where: str) -> SimCameraConfig:
-    from recon_cli.backends.sim.config import SimCameraConfig
 
     return SimCameraConfig.from_mapping(mapping, where)
 
 
 def _open_sim_camera(config: SimCameraConfig, around: Surroundings, robot: RobotBackend) -> CameraPart:
-    from recon_cli.backends.sim.rendered import RenderedCamera
 
     return RenderedCamera(around.cell, around.scene_object, robot, around.rng, config.noise, config.resolution)
 
@@ -128,7 +128,6 @@ def _open_sim_camera(config: SimCameraConfig, around: Surroundings, robot: Robot
 def _driver_camera(module: str, config_class: str) -> tuple[Callable, Callable]:
     """read and open of a camera adapter whose module has ``config_class.from_mapping`` and
     ``open_camera(config)``."""
-    import importlib
 
     def read(mapping: dict, where: str):
         return getattr(importlib.import_module(module), config_class).from_mapping(mapping, where)

@@ -35,6 +35,8 @@ from recon_cli.backends.adapters import (
 )
 from recon_cli.backends.base import Capabilities
 from recon_cli.errors import InputError, UnknownNameError
+from recon_cli.inputs.schema import check
+from recon_cli.inputs.yamlfile import line_of, read_yaml
 from recon_cli.robot.description import CellConfig, CellKind
 
 STATION_FORMAT = 1
@@ -72,8 +74,6 @@ def _known_keys(d: Any, where: str, known: tuple[str, ...]) -> None:
 def load_station(path: Path) -> StationFile:
     """Read and check a station file (the one YAML reader, then schemas/station.schema.json,
     then the adapters' own checks)."""
-    from recon_cli.inputs.schema import check
-    from recon_cli.inputs.yamlfile import line_of, read_yaml
 
     path = Path(path)
     data = read_yaml(path, "station file", hint="see docs/hardware.md for an example")
@@ -112,7 +112,6 @@ def load_station(path: Path) -> StationFile:
 
 def _part(data: dict, part: str, registry: dict, w: str, example: str):
     """The adapter name and typed config of the ``robot`` or ``camera`` section."""
-    from recon_cli.inputs.yamlfile import line_of
 
     mapping = data.get(part)
     if mapping is None:

@@ -22,6 +22,8 @@ from pathlib import Path
 from typing import TypeVar
 
 from recon_cli.batch.spec import LABELS, METRICS, Expectations, JobKind, JobSpec
+from recon_cli.errors import ReconError
+from recon_cli.runs import autoscan, register, script_run
 
 T = TypeVar("T")
 
@@ -76,7 +78,6 @@ def _fmt(value: float) -> str:
 
 def _read(reader: Callable[[Path], T], path: Path) -> T | None:
     """A report read through :mod:`recon_cli.runs`, or None when it cannot be read."""
-    from recon_cli.errors import ReconError
 
     try:
         return reader(Path(path))
@@ -86,7 +87,6 @@ def _read(reader: Callable[[Path], T], path: Path) -> T | None:
 
 def _pose_error(path: Path | None) -> float | None:
     """The mean final pose error [mm] of a registration report."""
-    from recon_cli.runs import register
 
     report = None if path is None else _read(register.read, path)
     mean = None if report is None else report.pose_error_mean
@@ -95,7 +95,6 @@ def _pose_error(path: Path | None) -> float | None:
 
 def measure(job: JobSpec, out: Path, wall_time: float) -> Measured:
     """What the outputs of ``job`` in ``out`` (its recon output folder) say."""
-    from recon_cli.runs import autoscan, script_run
 
     out = Path(out)
     if job.kind is JobKind.RUN:

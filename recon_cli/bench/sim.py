@@ -16,16 +16,18 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig
 from recon_cli.geometry.transforms import invert, pose_error
+from recon_cli.lazy import lazy_module
 from recon_cli.perception.charuco import detect, estimate_pose, thesis_board
 from recon_cli.planning.planner import MotionPlanner, PlanOptions
 from recon_cli.robot.ik import IKOptions
 from recon_cli.session import Mode, SessionSpec, open_session
 from recon_cli.thesis import eq_4_1_views
+
+cv2 = lazy_module("cv2")
 
 
 @dataclass(frozen=True)

@@ -19,14 +19,21 @@ Other image sizes of the same camera scale the numbers (pixel centres at integer
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from recon_cli.errors import InputError
+from recon_cli.inputs.schema import check
+from recon_cli.inputs.yamlfile import line_of, plain, read_yaml
+from recon_cli.outputs import atomic_write_text
 from recon_cli.perception.camera_model import Intrinsics
+from recon_cli.realism import BUILT_IN, REALISM_DIR, CameraSpec, parse_profile
+from recon_cli.serialization import to_jsonable
 
 CAMERA_FILE_FORMAT = 1
 CAMERA_KEYS = ("width", "height", "fx", "fy", "cx", "cy", "distortion")
@@ -84,18 +91,14 @@ class CameraCalibration:
 
     def to_camera_spec(self):
         """The realism profile's CameraSpec (recon_cli.realism) of this camera."""
-        from recon_cli.realism import CameraSpec
 
         K = self.intrinsics
         return CameraSpec(K.fx, K.fy, K.cx, K.cy, K.width, K.height, tuple(self.distortion))
 
 
 def camera_file_text(camera: CameraCalibration, calibration: dict | None = None, comment: str = "") -> str:
-    import json
 
-    import yaml
 
-    from recon_cli.serialization import to_jsonable
 
     head = "".join(f"# {line}\n" for line in comment.splitlines()) if comment else ""
     body = {"format": CAMERA_FILE_FORMAT, "camera": camera.to_mapping()}
@@ -106,15 +109,12 @@ def camera_file_text(camera: CameraCalibration, calibration: dict | None = None,
 
 def write_camera_file(path: Path, camera: CameraCalibration, calibration: dict | None = None,
                       comment: str = "") -> Path:
-    from recon_cli.outputs import atomic_write_text
 
     return atomic_write_text(Path(path), camera_file_text(camera, calibration, comment))
 
 
 def load_camera_file(path: Path) -> CameraCalibration:
     """Read a camera file (see the module docstring); errors name ``FILE: key``."""
-    from recon_cli.inputs.schema import check
-    from recon_cli.inputs.yamlfile import line_of, read_yaml
 
     path = Path(path)
     data = read_yaml(path, "camera file", hint="write one with recon calibrate intrinsics (its intrinsics.yaml)")
@@ -127,11 +127,7 @@ def write_calibrated_profile(profile: str | Path, camera: CameraCalibration, pat
     """A copy of a realism profile (built-in name or YAML file) whose ``camera.assumed`` is
     this camera: simulated sessions run with it (``--realism path``) detect and back-project
     with the calibration instead of the nominal camera."""
-    import yaml
 
-    from recon_cli.inputs.yamlfile import plain, read_yaml
-    from recon_cli.outputs import atomic_write_text
-    from recon_cli.realism import BUILT_IN, REALISM_DIR, parse_profile
 
     source = REALISM_DIR / f"{profile}.yaml" if str(profile) in BUILT_IN else Path(profile)
     data = plain(read_yaml(source, "realism profile", hint="give ideal, thesis or a profile YAML file")) or {}

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from recon_cli.errors import ReconError
+from recon_cli.robot.ik import IKOptions
 
 GANTRY_JOINTS = ("base_joint_1", "base_joint_2")
 POSTURE_JOINTS = ("arm_joint_1", "arm_joint_2", "arm_joint_3", "arm_joint_4")
@@ -110,7 +111,6 @@ def board_view_goals(cell, poses: list[np.ndarray], rng: np.random.Generator) ->
     """Goals for camera poses (world_T_camera, (4, 4) each) that keep the arm's posture: the
     reference posture is the IK solution of one of the views from which the most views are
     reached with the least change of the arm joints 1-4."""
-    from recon_cli.robot.ik import IKOptions
 
     candidates = []
     for T in poses[: min(len(poses), 4)]:

@@ -19,6 +19,7 @@ from recon_cli.calibration.handeye import BoardObservation
 from recon_cli.calibration.intrinsics import SkippedImage
 from recon_cli.errors import FileError, InputError, MetadataError
 from recon_cli.perception.charuco import BoardSpec, detect, estimate_pose
+from recon_cli.reconstruction.scan_store import ScanStore, read_scan
 
 #: the flange frame of both cells' description (the iiwa's link 7)
 FLANGE_FRAME = "arm_link_7"
@@ -59,7 +60,6 @@ def scan_observations(folder: Path, board: BoardSpec, kin, camera: CameraCalibra
                       min_corners: int = MIN_CORNERS) -> ScanObservations:
     """Board observations of every scan in a scan store (broken scans skipped with their
     reason). ``kin``: the model's Kinematics (recon_cli.robot.kinematics)."""
-    from recon_cli.reconstruction.scan_store import ScanStore, read_scan
 
     folder = Path(folder)
     if not folder.is_dir():

@@ -17,7 +17,7 @@ least_squares, from an OpenCV solution.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -103,7 +103,6 @@ def corrected(observations: list[BoardObservation], refined: RefinedSolution) ->
     residuals of a refined solution are those of the corrected chain)."""
     if refined.base_rotation is None:
         return observations
-    from dataclasses import replace
 
     H = _exp(np.concatenate([np.zeros(3), refined.base_rotation]))
     out = []

@@ -18,7 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from recon_cli.backends.station_file import load_station
 from recon_cli.errors import FileError, InputError
+from recon_cli.outputs import atomic_write, atomic_write_text
 
 _KEY = re.compile(r"^hand_eye\s*:")
 
@@ -49,8 +51,6 @@ def replace_hand_eye(text: str, block: str) -> str:
 
 def write_station_hand_eye(path: Path, flange_T_camera: np.ndarray, comment: str = "") -> Path:
     """Put flange_T_camera into a station file (see the module docstring); returns the backup."""
-    from recon_cli.backends.station_file import load_station
-    from recon_cli.outputs import atomic_write, atomic_write_text
 
     path = Path(path)
     try:

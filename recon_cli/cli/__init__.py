@@ -43,7 +43,9 @@ from recon_cli.cli import (  # noqa: F401 (registers the commands)
 )
 from recon_cli.cli.app import app, bench_app
 from recon_cli.cli.options import parse_vector
+from recon_cli.console import err_console
 from recon_cli.errors import ReconError
+from recon_cli.outputs import remove_empty_made
 
 __all__ = ["app", "bench_app", "entry", "main", "parse_vector"]
 
@@ -101,7 +103,6 @@ def main(argv: list[str] | None = None) -> int:
     """Run the app and return the exit code; user errors become one line on stderr."""
     command = typer.main.get_command(app)
     refuse_non_finite(command)
-    from recon_cli.outputs import remove_empty_made
 
     try:
         code = _main(command, argv)
@@ -114,7 +115,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(command, argv: list[str] | None) -> int:
-    from recon_cli.console import err_console
 
     try:
         result = command.main(args=argv, prog_name="recon", standalone_mode=False)

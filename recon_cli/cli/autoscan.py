@@ -33,7 +33,10 @@ from recon_cli.cli.options import (
     run_base,
 )
 from recon_cli.config import VIEWPLAN_M, VIEWPLAN_SIGMA
+from recon_cli.console import console, progress_bar
 from recon_cli.errors import InputError
+from recon_cli.session import resolve_object_name
+from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions
 
 _V = D.viewplan
 
@@ -70,9 +73,6 @@ def autoscan(
     config_file: ConfigOpt = None,
 ) -> None:
     """Scan an unknown object autonomously: the ellipsoid view planner of the thesis."""
-    from recon_cli.console import console, progress_bar
-    from recon_cli.session import resolve_object_name
-    from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions
 
     check_record(record)
     base = run_base(ctx, config_file, "autoscan")

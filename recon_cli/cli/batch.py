@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Annotated, Literal
 
 import typer
+from rich.table import Table
 
+from recon_cli.batch import BatchOptions, Overrides, load_batch, run_batch
+from recon_cli.batch.job import display_command
+from recon_cli.batch.result import measured_text
 from recon_cli.cli.app import app
+from recon_cli.cli.batch_commands import AppCommands
+from recon_cli.console import console, progress_bar, styled
+from recon_cli.interrupts import stop_signals
 
 BATCH_EPILOG = ("Exit codes: 0 every job passed; 1 error in the batch file or options (nothing ran); 2 usage error; "
                 "3 some jobs failed, timed out or could not run; 130/143 interrupted by Ctrl-C/SIGTERM "
@@ -54,13 +62,7 @@ def batch(
 ) -> None:
     """Run a batch of scans (scripts, autoscans, captures; seeds, objects) as isolated recon processes, check
     their pass criteria and write JUnit XML and summaries."""
-    import os
 
-    from recon_cli.batch import BatchOptions, Overrides, load_batch, run_batch
-    from recon_cli.batch.job import display_command
-    from recon_cli.cli.batch_commands import AppCommands
-    from recon_cli.console import console, progress_bar, styled
-    from recon_cli.interrupts import stop_signals
 
     if cluster is not None and scheduler == os.environ.get("DASK_SCHEDULER_ADDRESS"):
         scheduler = None  # an explicit --cluster wins over the environment's scheduler
@@ -101,10 +103,7 @@ def batch(
 
 
 def _print_table(result) -> None:
-    from rich.table import Table
 
-    from recon_cli.batch.result import measured_text
-    from recon_cli.console import console
 
     table = Table(title=f"batch {result.name}", title_justify="left")
     for name, justify in (("job", "left"), ("result", "left"), ("wall [s]", "right"), ("measured", "left"),

@@ -5,11 +5,19 @@ The tables are drawn by :mod:`recon_cli.bench.render`; this module parses and ca
 
 from __future__ import annotations
 
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Annotated, Literal
 
 import typer
 
+from recon_cli.bench import render
+from recon_cli.bench.ik import IKBenchConfig, run_ik_bench
+from recon_cli.bench.planners import DEFAULT_PLANNERS, run_planner_bench, thesis_times, write_results
+from recon_cli.bench.registration import run_registration_bench
+from recon_cli.bench.sequence import CASES, ecdf_png, run_sequence_bench, summarize
+from recon_cli.bench.sim import run_sim_bench
+from recon_cli.bench.viewplan import coverage_png, run_viewplan_bench
 from recon_cli.cli.app import bench_app
 from recon_cli.cli.options import (
     CellOpt,
@@ -31,7 +39,9 @@ from recon_cli.cli.options import (
     realism_profile,
     split_names,
 )
+from recon_cli.console import console, progress_bar, write_json
 from recon_cli.planning.options import PLANNERS, SIMPLIFICATIONS
+from recon_cli.robot.description import CellConfig, CellKind
 from recon_cli.viewplan.policy import Method
 
 OutOpt = Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default "
@@ -44,7 +54,6 @@ PEERS = ("none", "mplib")
 
 
 def _sequence_cases() -> tuple[str, ...]:
-    from recon_cli.bench.sequence import CASES
 
     return CASES
 
@@ -61,9 +70,6 @@ def bench_ik(
     force: ForceOpt = False,
 ) -> None:
     """IK success rate and time on random reachable camera poses around the table."""
-    from recon_cli.bench import render
-    from recon_cli.bench.ik import IKBenchConfig, run_ik_bench
-    from recon_cli.console import console, progress_bar, write_json
 
     folder = output_folder(out, "bench ik", force=force).path
     c = make_cell(cell, safety)
@@ -86,11 +92,7 @@ def bench_sim(
     force: ForceOpt = False,
 ) -> None:
     """Board detection in the 24 views of eq. 4.1, capture time, execution precision."""
-    from dataclasses import asdict
 
-    from recon_cli.bench import render
-    from recon_cli.bench.sim import run_sim_bench
-    from recon_cli.console import console, progress_bar, write_json
 
     folder = output_folder(out, "bench sim", force=force).path
     with progress_bar() as update:
@@ -114,9 +116,6 @@ def bench_registration(
     force: ForceOpt = False,
 ) -> None:
     """Thesis 4.2: ChArUco pose errors (Table 4.2) and global vs local registration accuracy."""
-    from recon_cli.bench import render
-    from recon_cli.bench.registration import run_registration_bench
-    from recon_cli.console import console, progress_bar, write_json
 
     profile = realism_profile(realism)
     folder = output_folder(out, "bench registration", force=force, inputs=(Path(realism),)).path
@@ -142,11 +141,7 @@ def bench_sequence(
     force: ForceOpt = False,
 ) -> None:
     """Thesis 4.3: total trajectory time and planning requests of the 24 views of eq. 4.1."""
-    from dataclasses import asdict
 
-    from recon_cli.bench import render
-    from recon_cli.bench.sequence import ecdf_png, run_sequence_bench, summarize
-    from recon_cli.console import console, progress_bar, write_json
 
     chosen = split_names(cases)
     folder = output_folder(out, "bench sequence", force=force).path
@@ -185,12 +180,7 @@ def bench_viewplan(
     force: ForceOpt = False,
 ) -> None:
     """Thesis 4.4: ellipsoid view planner vs evenly spread and random views, every object."""
-    from dataclasses import asdict
 
-    from recon_cli.bench import render
-    from recon_cli.bench.viewplan import coverage_png, run_viewplan_bench
-    from recon_cli.console import console, progress_bar, write_json
-    from recon_cli.robot.description import CellConfig, CellKind
 
     chosen = split_names(methods)
     profile = realism_profile(realism)
@@ -227,11 +217,7 @@ def bench_planners(
     force: ForceOpt = False,
 ) -> None:
     """The Table 4.1 planning benchmark (thesis 4.1): success, plan times, path lengths."""
-    from dataclasses import replace
 
-    from recon_cli.bench import render
-    from recon_cli.bench.planners import DEFAULT_PLANNERS, run_planner_bench, thesis_times, write_results
-    from recon_cli.console import console, progress_bar
     options = replace(D.planner, simplify=simplify, shortcut_rounds=shortcut_rounds)
     names = list(DEFAULT_PLANNERS) if planners.strip() == "default" else split_names(planners)
     if quick:

@@ -6,10 +6,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 
 from recon_cli.calibration.handeye import HandEyeMethod
 from recon_cli.calibration.intrinsics import DistortionModel
+from recon_cli.calibration.views import BoardViewOptions
 from recon_cli.cli.app import app
 from recon_cli.cli.options import (
     CellOpt,
@@ -21,8 +23,14 @@ from recon_cli.cli.options import (
     SeedOpt,
     output_folder,
     realism_option,
+    realism_profile,
 )
+from recon_cli.config import SensorConfig
+from recon_cli.console import console, progress_bar, styled
 from recon_cli.errors import InputError, UnknownNameError
+from recon_cli.perception.charuco import BoardSpec
+from recon_cli.robot.description import CellConfig, CellKind
+from recon_cli.workflows.calibrate import HandEyeOptions, IntrinsicsOptions, check_pattern, run_handeye, run_intrinsics
 
 calibrate_app = typer.Typer(help="Calibration from views of the ChArUco board: camera intrinsics and distortion, "
                                  "the hand-eye transform.", no_args_is_help=True, rich_markup_mode=None)
@@ -46,7 +54,6 @@ def parse_board(text: str | None):
         return None
     import cv2
 
-    from recon_cli.perception.charuco import BoardSpec
 
     parts = [p.strip() for p in text.split(",")]
     try:
@@ -117,14 +124,7 @@ def handeye(
     force: ForceOpt = False,
 ) -> None:
     """Hand-eye calibration: flange_T_camera (and the board in the world) from board views."""
-    import numpy as np
 
-    from recon_cli.calibration.views import BoardViewOptions
-    from recon_cli.cli.options import realism_profile
-    from recon_cli.config import SensorConfig
-    from recon_cli.console import console, progress_bar, styled
-    from recon_cli.robot.description import CellConfig, CellKind
-    from recon_cli.workflows.calibrate import HandEyeOptions, run_handeye
 
     config = D.replace(cell=CellConfig(kind=CellKind.parse(cell), safety_distance=safety),
                        sensor=SensorConfig(noise, resolution), seed=seed, realism=realism_profile(realism))
@@ -193,10 +193,7 @@ def intrinsics(
     force: ForceOpt = False,
 ) -> None:
     """Camera calibration (intrinsics and lens distortion) from images of the ChArUco board."""
-    import numpy as np
 
-    from recon_cli.console import console, styled
-    from recon_cli.workflows.calibrate import IntrinsicsOptions, check_pattern, run_intrinsics
 
     check_pattern(pattern)
     spec = parse_board(board)

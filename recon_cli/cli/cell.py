@@ -5,7 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
+from rich.table import Table
 
 from recon_cli.cli.app import app
 from recon_cli.cli.options import (
@@ -25,8 +27,12 @@ from recon_cli.cli.options import (
     make_cell,
     make_view,
 )
+from recon_cli.console import console
 from recon_cli.errors import ReconError
 from recon_cli.geometry.view import Frame
+from recon_cli.objects import available_objects, load_object
+from recon_cli.render import cell_tables, ik_table, pose_text
+from recon_cli.robot.ik import IKOptions
 
 
 @app.command()
@@ -36,8 +42,6 @@ def cell(
     urdf: Annotated[Path | None, typer.Option(help="Also write the expanded URDF to this file.")] = None,
 ) -> None:
     """Print the loaded cell: joints, limits, collision shapes, camera and marker frames."""
-    from recon_cli.console import console
-    from recon_cli.render import cell_tables
 
     c = make_cell(cell, safety)
     q_show, label = c.kin.neutral(), "q = 0"
@@ -74,11 +78,7 @@ def ik(
     seed: SeedOpt = D.seed,
 ) -> None:
     """Solve inverse kinematics for a camera view (f, r, theta, phi, alpha)."""
-    import numpy as np
 
-    from recon_cli.console import console
-    from recon_cli.render import ik_table, pose_text
-    from recon_cli.robot.ik import IKOptions
 
     view = make_view(focus, radius, theta, phi, alpha, frame)
     c = make_cell(cell, safety, object_box if object_box and object_box.lower() != "none" else None)
@@ -91,10 +91,7 @@ def ik(
 @app.command()
 def objects() -> None:
     """List the objects that can be scanned (built-in, YCB when present, or any mesh file)."""
-    from rich.table import Table
 
-    from recon_cli.console import console
-    from recon_cli.objects import available_objects, load_object
 
     table = Table(title="objects")
     for col in ("name", "size x × y × z (m)", "description"):

@@ -14,10 +14,24 @@ from typing import Annotated
 
 import typer
 
-from recon_cli.config import DEFAULTS, MAX_SCALE, RESOLUTION_RANGE, SEED_RANGE, VIEWPLAN_DC, VIEWPLAN_N, Config
+from recon_cli.config import (
+    DEFAULTS,
+    MAX_SCALE,
+    RESOLUTION_RANGE,
+    SEED_RANGE,
+    VIEWPLAN_DC,
+    VIEWPLAN_N,
+    Config,
+    read_config,
+)
 from recon_cli.errors import InputError, UnknownNameError
-from recon_cli.geometry.view import MAX_COORDINATE, MAX_RADIUS, Frame
-from recon_cli.robot.description import CellKind
+from recon_cli.geometry.view import MAX_COORDINATE, MAX_RADIUS, Frame, View
+from recon_cli.objects import BUILTIN, ycb_names
+from recon_cli.outputs import OutputMode, claim_output
+from recon_cli.realism import BUILT_IN, load_profile
+from recon_cli.robot.cell import Cell
+from recon_cli.robot.collision import ObjectBox
+from recon_cli.robot.description import CellConfig, CellKind
 
 D = DEFAULTS
 
@@ -99,7 +113,6 @@ def looks_like_file(name: str) -> bool:
 
 def object_names(auto: bool) -> tuple[str, ...]:
     """The objects recon knows by name (built-in and YCB, present here or not), and 'auto'."""
-    from recon_cli.objects import BUILTIN, ycb_names
 
     return (*BUILTIN, *ycb_names(), *(("auto",) if auto else ()))
 
@@ -123,7 +136,6 @@ def object_metavar(auto: bool) -> str:
 
 def _realism(value: str | None) -> str | None:
     """--realism: a built-in profile or a YAML file (load_profile reads it when the command runs)."""
-    from recon_cli.realism import BUILT_IN
 
     if value is None or value in BUILT_IN or Path(value).suffix.lower() in (".yaml", ".yml") or Path(value).exists():
         return value
@@ -131,7 +143,6 @@ def _realism(value: str | None) -> str | None:
 
 
 def _realism_metavar() -> str:
-    from recon_cli.realism import BUILT_IN
 
     return "<" + "|".join((*BUILT_IN, "FILE.yaml")) + ">"
 
@@ -210,7 +221,6 @@ def output_folder(out: Path | None, command: str, *, append: bool = False, force
                   append_hint: str | None = None, force_option: str = "--force", **claim):
     """Claim the output folder of a command (:func:`recon_cli.outputs.claim_output`) from its
     ``--out``, ``--append`` and ``--force``; before any planning, robot or registration work."""
-    from recon_cli.outputs import OutputMode, claim_output
 
     mode = OutputMode.of(append, force, force_option=force_option)
     return claim_output(out, mode, command=command, append=append_hint, force=force_option, **claim)
@@ -226,16 +236,12 @@ def check_record(record: bool) -> None:
 
 def realism_profile(text: str):
     """The realism profile of ``--realism`` (a built-in name or a YAML file)."""
-    from recon_cli.realism import load_profile
 
     return load_profile(text)
 
 
 def make_cell(cell: str, safety: float, object_box: str | None = None):
     """The cell of ``--cell`` / ``--safety`` with an optional box 'sx,sy,sz' on the table centre."""
-    from recon_cli.robot.cell import Cell
-    from recon_cli.robot.collision import ObjectBox
-    from recon_cli.robot.description import CellConfig, CellKind
 
     c = Cell(CellConfig(kind=CellKind.parse(cell), safety_distance=safety))
     if object_box:
@@ -252,7 +258,6 @@ def make_cell(cell: str, safety: float, object_box: str | None = None):
 
 def make_view(focus: str, radius: float, theta: float, phi: float, alpha: float, frame: str):
     """A camera view from the view options (angles in degrees)."""
-    from recon_cli.geometry.view import Frame, View
 
     try:
         ref = Frame(frame.lower())
@@ -314,7 +319,6 @@ def run_base(ctx: typer.Context, path: Path | None, command: str) -> RunBase:
                       if source is not None and source.name not in ("DEFAULT", "DEFAULT_MAP"))
     if path is None:
         return RunBase(DEFAULTS, {}, None, given)
-    from recon_cli.config import read_config
 
     config, run = read_config(path)
     written = run.get("command")

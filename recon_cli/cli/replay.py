@@ -9,9 +9,12 @@ from typing import Annotated
 
 import typer
 
+from recon_cli.backends.hardware.replay import ReplayConfig
 from recon_cli.cli.app import app
 from recon_cli.cli.options import ForceOpt, output_folder, parse_vector
+from recon_cli.console import console, progress_bar
 from recon_cli.reconstruction.options import RECORDING_SCALE
+from recon_cli.workflows.replay import ReplayOptions, run_replay
 
 
 @app.command()
@@ -32,9 +35,6 @@ def replay(
     force: ForceOpt = False,
 ) -> None:
     """Register a recording at its recorded poses; overlap residuals between frames before and after."""
-    from recon_cli.backends.hardware.replay import ReplayConfig
-    from recon_cli.console import console, progress_bar
-    from recon_cli.workflows.replay import ReplayOptions, run_replay
 
     mapping = {"source": str(source), "depth_scale": depth_scale}
     if intrinsics is not None:

@@ -2,13 +2,19 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from recon_cli.cli.app import app
+from recon_cli.console import console, styled
+from recon_cli.errors import FileError
+from recon_cli.outputs import OutputMode, claim_output
+from recon_cli.report import write_page
 from recon_cli.report.options import ReportOptions
+from recon_cli.report.page import PAGE, PAGE_FILES
 
 _R = ReportOptions()
 
@@ -25,13 +31,7 @@ def report(
 ) -> None:
     """Write the report page of a run folder (report.html, pictures in report_files/): summary, tables,
     figures, the scans with their pose sources and ICP residuals, pictures of the mesh, links to the files."""
-    from dataclasses import replace
 
-    from recon_cli.console import console, styled
-    from recon_cli.errors import FileError
-    from recon_cli.outputs import OutputMode, claim_output
-    from recon_cli.report import write_page
-    from recon_cli.report.page import PAGE, PAGE_FILES
 
     if run_folder.exists() and not run_folder.is_dir():
         raise FileError(f"{run_folder} is not a folder", hint="give the --out folder of a recon run, autoscan, "

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Literal
 
+import numpy as np
 import typer
 
 from recon_cli.cli.app import app
@@ -43,10 +44,18 @@ from recon_cli.cli.options import (
     realism_profile,
     run_base,
 )
+from recon_cli.console import console, progress_bar, styled
 from recon_cli.errors import FileError, InputError
 from recon_cli.geometry.view import Frame
 from recon_cli.planning.options import PLANNERS
+from recon_cli.reconstruction.assessment import run_evaluate
+from recon_cli.reconstruction.crop import CropBox
 from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
+from recon_cli.report import write_pages_after_register
+from recon_cli.robot.description import CellKind
+from recon_cli.session import resolve_object_name
+from recon_cli.workflows.capture import CaptureOptions, run_capture
+from recon_cli.workflows.register import register_folder
 
 #: the view sets of ``recon capture --views``
 VIEW_SETS = ("single", "eq-4.1")
@@ -91,12 +100,7 @@ def capture(
     config_file: ConfigOpt = None,
 ) -> None:
     """Move the simulated robot through views and write one scan per view into a scan store."""
-    import numpy as np
 
-    from recon_cli.console import console, progress_bar, styled
-    from recon_cli.robot.description import CellKind
-    from recon_cli.session import resolve_object_name
-    from recon_cli.workflows.capture import CaptureOptions, run_capture
 
     check_record(record)
     base = run_base(ctx, config_file, "capture")
@@ -191,12 +195,7 @@ def register(
     Scans that cannot be read, or are links out of the folder, are skipped with their reason;
     the run fails only when no scan is usable. Its config.yaml names the store and holds the
     registration settings, so that --config repeats it."""
-    import numpy as np
 
-    from recon_cli.console import console, progress_bar, styled
-    from recon_cli.reconstruction.crop import CropBox
-    from recon_cli.report import write_pages_after_register
-    from recon_cli.workflows.register import register_folder
 
     check_record(record)
     base = run_base(ctx, config_file, "register")
@@ -277,10 +276,7 @@ def evaluate(
                                                                  "reconstruction).")] = None,
 ) -> None:
     """Signed distances to a reference mesh, their statistics and histogram, and coverage."""
-    import numpy as np
 
-    from recon_cli.console import console
-    from recon_cli.reconstruction.assessment import run_evaluate
 
     target = out or reconstruction.parent
     if target.is_dir():  # beside another command's results: only its two files, never through a link

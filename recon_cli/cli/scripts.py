@@ -23,9 +23,14 @@ from recon_cli.cli.options import (
     realism_profile,
     run_base,
 )
+from recon_cli.console import console, progress_bar, styled
 from recon_cli.errors import InputError
-from recon_cli.scripts.state import SequenceMethod
+from recon_cli.interrupts import stop_signals
+from recon_cli.scripts.checks import check_backend, check_script
+from recon_cli.scripts.loader import load_script
+from recon_cli.scripts.state import RunOptions, SequenceMethod
 from recon_cli.session import Backend
+from recon_cli.workflows.script_run import ScriptRunner
 
 
 @app.command()
@@ -33,9 +38,6 @@ def validate(
     script: Annotated[Path, typer.Argument(help="Automation script (recon or thesis dialect).")],
 ) -> None:
     """Expand xacro, validate against the XSD and list the commands a script would run."""
-    from recon_cli.console import console
-    from recon_cli.scripts.checks import check_script
-    from recon_cli.scripts.loader import load_script
 
     s = load_script(script)
     check_script(s)
@@ -88,12 +90,6 @@ def run_script(
     Its config.yaml records the script and the options that override it; with --config FILE
     the script runs again on that configuration (the script's elements set what they set
     the first time)."""
-    from recon_cli.console import console, progress_bar, styled
-    from recon_cli.interrupts import stop_signals
-    from recon_cli.scripts.checks import check_backend, check_script
-    from recon_cli.scripts.loader import load_script
-    from recon_cli.scripts.state import RunOptions
-    from recon_cli.workflows.script_run import ScriptRunner
 
     base = run_base(ctx, config_file, "run")
     if script is None:

@@ -5,10 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 
+from recon_cli.backends.hardware.station import check_station, refuse_unready
+from recon_cli.backends.station_file import load_station
 from recon_cli.cli.app import app
 from recon_cli.cli.options import D
+from recon_cli.console import console
 
 station_app = typer.Typer(help="Station files: the robot and camera adapters of a real cell.", no_args_is_help=True,
                           rich_markup_mode=None)
@@ -20,11 +24,7 @@ def check(
     station: Annotated[Path, typer.Argument(help="Station file (YAML; docs/hardware.md).")],
 ) -> None:
     """Connect to the robot and the camera of a station file, print the joints and one frame's size."""
-    import numpy as np
 
-    from recon_cli.backends.hardware.station import check_station, refuse_unready
-    from recon_cli.backends.station_file import load_station
-    from recon_cli.console import console
 
     sf = load_station(station)
     console.print(f"station {sf.name!r} ({station}): robot {sf.robot_adapter}, camera {sf.camera_adapter}, "

@@ -8,6 +8,9 @@ from typing import Annotated
 import typer
 
 from recon_cli.cli.app import app
+from recon_cli.console import console
+from recon_cli.recording.readback import summarize
+from recon_cli.recording.viewer import check_bind, elsewhere, find_recording, has_display, open_viewer
 
 
 @app.command()
@@ -23,9 +26,6 @@ def view(
     summary: Annotated[bool, typer.Option("--summary", help="Only print what the recording holds.")] = False,
 ) -> None:
     """Open a run's recording in rerun's viewer (or say how to open it where there is no display)."""
-    from recon_cli.console import console
-    from recon_cli.recording.readback import summarize
-    from recon_cli.recording.viewer import check_bind, elsewhere, find_recording, has_display, open_viewer
 
     bind = check_bind(bind)
     path = find_recording(run)

@@ -20,6 +20,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from recon_cli.errors import FileError
+
 MISSING = "missing"
 """The path does not exist (at the stat)."""
 UNREADABLE = "unreadable"
@@ -91,7 +93,6 @@ def read_limited(path: Path, limit: int, refuse: Refuse, *, empty: bool = True) 
 def file_errors(path: Path, what: str, hint: str, too_large: Callable[[int], tuple[str, str]]) -> Refuse:
     """The refusals of a user's data file as FileErrors ``PATH: WHAT is ...``; ``too_large``
     gives the message tail and the hint for a file of the given size."""
-    from recon_cli.errors import FileError
 
     def refuse(r: Refusal) -> FileError:
         if r.reason == MISSING:

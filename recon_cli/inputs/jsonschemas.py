@@ -10,6 +10,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+import jsonschema
 import numpy as np
 
 from recon_cli.errors import MetadataError
@@ -21,7 +22,6 @@ RIGID_TOLERANCE = 1e-3
 
 @functools.cache
 def _validator(name: str):
-    import jsonschema
 
     schema = json.loads((SCHEMA_DIR / name).read_text())
     cls = jsonschema.validators.validator_for(schema)
@@ -31,7 +31,6 @@ def _validator(name: str):
 
 def check(data: Any, schema: str, path: Path, what: str, hint: str | None = None) -> None:
     """Raise a MetadataError naming the key of the first (most relevant) schema violation."""
-    import jsonschema
 
     if not isinstance(data, dict):
         kind = {list: "a list", str: "a string", int: "a number", float: "a number", bool: "a boolean",

@@ -17,9 +17,12 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
+import jsonschema
+
 from recon_cli.errors import InputError
 from recon_cli.inputs.numbers import range_text
 from recon_cli.inputs.yamlfile import line_of
+from recon_cli.paths import SCHEMA_DIR
 
 #: the YAML file kinds with a schema (schemas/KIND.schema.json)
 KINDS = ("station", "realism", "camera", "batch", "config")
@@ -27,14 +30,12 @@ KINDS = ("station", "realism", "camera", "batch", "config")
 
 @cache
 def load_schema(kind: str) -> dict:
-    from recon_cli.paths import SCHEMA_DIR
 
     return json.loads((SCHEMA_DIR / f"{kind}.schema.json").read_text(encoding="utf-8"))
 
 
 @cache
 def _validator(kind: str):
-    import jsonschema
 
     schema = load_schema(kind)
     cls = jsonschema.validators.validator_for(schema)
@@ -136,7 +137,6 @@ def _message(error, doc: Any, where: str) -> InputError:
 
 
 def _best(errors) -> Any:
-    import jsonschema
 
     return jsonschema.exceptions.best_match(errors)
 

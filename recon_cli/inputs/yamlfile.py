@@ -30,6 +30,8 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+import yaml
+
 from recon_cli.errors import FileError, InputError
 from recon_cli.inputs import files
 
@@ -74,7 +76,6 @@ class _Refused(Exception):
 
 def _scan_events(text: str, limits: YamlLimits, loader) -> None:
     """Walk the event stream (no values are built): aliases, tags, depth and size."""
-    import yaml
 
     depth = nodes = 0
     for event in yaml.parse(text, Loader=loader):
@@ -105,7 +106,6 @@ _FLOAT_1_2 = re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]
 
 
 def _loader_class(limits: YamlLimits):
-    import yaml
 
     base = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
@@ -176,7 +176,6 @@ def _loader_class(limits: YamlLimits):
 def parse_yaml(text: str, where: str, limits: YamlLimits = LIMITS):
     """The document of YAML ``text`` (:class:`Map` / :class:`Seq` / a scalar / None);
     ``where`` names it in errors (``where:line: problem``)."""
-    import yaml
 
     if len(text) > limits.max_bytes:
         raise InputError(f"{where}: {len(text):,} characters, more than a recon YAML file may hold "

@@ -11,12 +11,14 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from recon_cli.inputs.yamlfile import read_yaml
+from recon_cli.lazy import lazy_module
 from recon_cli.paths import ROBOT_DIR
 from recon_cli.perception.camera_model import Intrinsics
+
+cv2 = lazy_module("cv2")
 
 
 @dataclass(frozen=True)

@@ -16,10 +16,13 @@ import numpy as np
 from recon_cli.errors import FileError
 from recon_cli.geometry.transforms import pose_error
 from recon_cli.inputs.meshes import CLOUD_SUFFIXES, MESH_SUFFIXES, read_cloud, read_mesh
+from recon_cli.perception.sensor import motioncam_3d_m
 from recon_cli.randomness import open3d_draws
 from recon_cli.reconstruction.evaluation import CameraView, Evaluation, evaluate, histogram_png, signed_distances
 from recon_cli.reconstruction.options import SurfaceOptions
 from recon_cli.reconstruction.scan_store import ScanStore
+from recon_cli.runs import evaluation as evaluation_file
+from recon_cli.runs.codec import from_json, plain
 
 _SURFACE = SurfaceOptions()  # its voxel and normal radius serve the ICP alignment to a reference
 
@@ -56,7 +59,6 @@ def load_mesh(path: Path):
 def camera_views(folder: Path) -> list[CameraView]:
     """Camera poses of a scan store (forward kinematics of the measured joints) with the
     sensor's depth range."""
-    from recon_cli.perception.sensor import motioncam_3d_m
 
     store = ScanStore(folder)
     if not store.indices():
@@ -87,8 +89,6 @@ def run_evaluate(reconstruction: Path, reference: Path, tolerance: float = 0.001
                  align: str = "none", samples: int = 200_000, out: Path | None = None,
                  seed: int = 0) -> EvaluateResult:
     """``seed``: of every sampling (the reconstruction when it is a mesh, the reference)."""
-    from recon_cli.runs import evaluation as evaluation_file
-    from recon_cli.runs.codec import from_json, plain
 
     points = load_points(reconstruction, seed=seed)
     mesh = load_mesh(reference)

@@ -43,6 +43,8 @@ from recon_cli.reconstruction.surface import (
     write_cloud,
     write_mesh,
 )
+from recon_cli.runs import register as reg_file
+from recon_cli.runs.codec import from_json, matrix, plain
 
 Progress = Callable[[str, int, int], None]
 
@@ -198,8 +200,6 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
     it is made, and what ``--force`` removes is removed, only when there is something to
     write). Scans that cannot be read, or that are links out of the store, are skipped with
     their reason. ``seed``: the run's seed (Config.seed), of the ``perturb`` directions."""
-    from recon_cli.runs import register as reg_file
-    from recon_cli.runs.codec import from_json, matrix, plain
 
     t0 = time.perf_counter()
     step = progress or (lambda *a: None)

@@ -36,8 +36,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.sparse.csgraph import minimum_spanning_tree
 
+from recon_cli.geometry.transforms import pose
 from recon_cli.reconstruction.options import MultiwayOptions  # noqa: F401 (re-exported)
 
 if TYPE_CHECKING:
@@ -143,7 +143,6 @@ def regularized_icp(source: IcpCloud, target: IcpCloud, options: MultiwayOptions
     found a partner then."""
     import cv2
 
-    from recon_cli.geometry.transforms import pose
 
     sigma_t, sigma_r = options.prior_sigma
     prior = np.diag([1.0 / (2.0 * np.radians(sigma_r) ** 2)] * 3 + [1.0 / (2.0 * sigma_t**2)] * 3)
@@ -220,6 +219,8 @@ def maximum_spanning_tree(weights: np.ndarray) -> list[tuple[int, int]]:
     w = np.triu(np.asarray(weights, dtype=float), 1)
     top = w.max() + 1.0 if w.size else 1.0
     inverted = np.where(w > 0, top - w, 0.0)  # scipy: zero entries are missing edges
+    from scipy.sparse.csgraph import minimum_spanning_tree
+
     tree = minimum_spanning_tree(inverted).tocoo()
     return sorted((int(min(i, j)), int(max(i, j))) for i, j in zip(tree.row, tree.col, strict=True))
 

@@ -25,14 +25,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from recon_cli.errors import FileError, MetadataError
 from recon_cli.geometry.transforms import transform_points
 from recon_cli.inputs.images import COLOR, DEPTH, read_image
+from recon_cli.lazy import lazy_module
 from recon_cli.outputs import atomic_write, remove_inside
-from recon_cli.perception.camera_model import Intrinsics, backproject
+from recon_cli.perception.camera_model import Intrinsics, backproject, undistort_color, undistort_depth
 from recon_cli.reconstruction.metadata import (
     MAX_METADATA_BYTES,
     SCAN_FORMAT,
@@ -43,6 +43,8 @@ from recon_cli.reconstruction.metadata import (
     read_session,
 )
 from recon_cli.serialization import to_jsonable
+
+cv2 = lazy_module("cv2")
 
 SCAN_DIR = re.compile(r"^scan_(\d{4,})$")
 FORMAT_VERSION = SCAN_FORMAT
@@ -69,7 +71,6 @@ class Scan:
         scan has a lens distortion; depth resampled nearest, never blended across edges)."""
         if self.distortion is None:
             return self.color, self.depth
-        from recon_cli.perception.camera_model import undistort_color, undistort_depth
 
         color = None if self.color is None else undistort_color(self.color, self.intrinsics, self.distortion)
         return color, undistort_depth(self.depth, self.intrinsics, self.distortion)

@@ -12,10 +12,11 @@ the ground truth as colours. ``recon view RUN_FOLDER`` opens it.
 rerun-sdk is an optional extra (``pip install 'recon-scan[viz]'``), pinned to one version
 because its API moves between releases; :func:`require_rerun` says how to install it.
 
-Modules: ``recorder`` (the recording stream, its clock and what each event logs),
-``station`` (a station whose robot reports its motions to the recorder), ``scene``
-(geometry helpers: camera paths, clouds from depth, colours), ``readback`` (what a
-recording holds, read with rerun's own reader), ``viewer`` (opening a recording).
+Modules: ``sdk`` (the pinned rerun release, :func:`require_rerun`), ``recorder`` (the
+recording stream, its clock and what each event logs), ``station`` (a station whose robot
+reports its motions to the recorder), ``scene`` (geometry helpers: camera paths, clouds from
+depth, colours), ``readback`` (what a recording holds, read with rerun's own reader),
+``viewer`` (opening a recording).
 """
 
 from __future__ import annotations
@@ -24,35 +25,18 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from recon_cli.errors import OptionalPackageMissing
-
-#: the rerun-sdk release recon's recordings are written with (``recon-scan[viz]`` pins it)
-RERUN_VERSION = "0.41.0"
-#: the recording's file name inside a run folder
-RECORDING_FILE = "recording.rrd"
-EXTRA = "viz"
-
-
-def require_rerun():
-    """The ``rerun`` module of the pinned release, or a one-line error saying how to get it."""
-    try:
-        import rerun
-    except ImportError:
-        raise OptionalPackageMissing("rerun-sdk", EXTRA, "recordings (--record, recon view)") from None
-    if rerun.__version__.split(".")[:2] != RERUN_VERSION.split(".")[:2]:
-        raise OptionalPackageMissing("rerun-sdk", EXTRA, "recordings (--record, recon view)",
-                                     found=rerun.__version__, wanted=RERUN_VERSION)
-    return rerun
-
-
-def recording_path(folder: Path) -> Path:
-    """Where a run folder keeps its recording."""
-    return Path(folder) / RECORDING_FILE
+from recon_cli.recording.recorder import Recorder
+from recon_cli.recording.sdk import (  # noqa: F401 (the package's names)
+    EXTRA,
+    RECORDING_FILE,
+    RERUN_VERSION,
+    recording_path,
+    require_rerun,
+)
 
 
 def open_recorder(folder: Path, name: str):
     """A :class:`~recon_cli.recording.recorder.Recorder` writing ``folder/recording.rrd``."""
-    from recon_cli.recording.recorder import Recorder
 
     return Recorder(recording_path(folder), name)
 

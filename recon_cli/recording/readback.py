@@ -11,8 +11,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from recon_cli.errors import FileError
-from recon_cli.recording import require_rerun
+from recon_cli.inputs.images import native_output_captured
 from recon_cli.recording.recorder import TIMELINE
+from recon_cli.recording.sdk import require_rerun
 
 
 @dataclass
@@ -61,7 +62,6 @@ def summarize(path: Path) -> RecordingSummary:
         raise FileError(f"{path} is not a regular file", hint=_HINT)
     from pyarrow import ArrowException  # rerun's chunks are Arrow record batches
 
-    from recon_cli.inputs.images import native_output_captured
 
     failure: BaseException | None = None
     with native_output_captured((1, 2), opencv=False) as log, warnings.catch_warnings():

@@ -30,8 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from recon_cli.recording import require_rerun
+from recon_cli.perception.charuco import thesis_board
 from recon_cli.recording import scene as S
+from recon_cli.recording.sdk import require_rerun
 
 TIMELINE = "robot_time"
 
@@ -97,7 +98,6 @@ class Recorder:
     def cell(self, cell, start: np.ndarray | None = None, object_box=None, truth_mesh=None) -> None:
         """The cell from the URDF the run uses, the marker frame and board, the object box,
         the simulated object, and the robot at ``start``."""
-        from recon_cli.perception.charuco import thesis_board
 
         rr = self.rr
         with tempfile.TemporaryDirectory() as tmp:

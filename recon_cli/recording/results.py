@@ -15,9 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from recon_cli.errors import FileError
+from recon_cli.errors import FileError, MetadataError
 from recon_cli.inputs.meshes import read_cloud, read_mesh
-from recon_cli.reconstruction.scan_store import ScanStore
+from recon_cli.perception.charuco import detect, thesis_board
+from recon_cli.reconstruction.global_registration import PoseSource
+from recon_cli.reconstruction.scan_store import ScanStore, read_scan
+from recon_cli.robot.cell import Cell
+from recon_cli.robot.collision import ObjectBox
+from recon_cli.robot.description import CellConfig, CellKind
 
 
 def record_registration(recorder, result, store_root: Path,
@@ -25,9 +30,6 @@ def record_registration(recorder, result, store_root: Path,
     """Board detections, clouds before/after registration, mesh, signed distances (the
     fused cloud's points and their distances when the caller has them, else computed
     against the store's simulated object)."""
-    from recon_cli.perception.charuco import detect, thesis_board
-    from recon_cli.reconstruction.global_registration import PoseSource
-    from recon_cli.reconstruction.scan_store import read_scan
 
     spec = thesis_board()
     for rec in result.used:
@@ -79,11 +81,6 @@ def record_store(recorder, store_root: Path) -> int:
     """The cell of a scan store's session and each readable scan at its joint readings;
     returns the number of scans recorded (unreadable scans are left out, as registration
     leaves them out)."""
-    from recon_cli.errors import MetadataError
-    from recon_cli.reconstruction.scan_store import read_scan
-    from recon_cli.robot.cell import Cell
-    from recon_cli.robot.collision import ObjectBox
-    from recon_cli.robot.description import CellConfig, CellKind
 
     store = ScanStore(store_root)
     info = store.session()

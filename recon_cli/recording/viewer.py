@@ -26,7 +26,7 @@ from urllib.parse import quote
 
 from recon_cli.errors import FileError, InputError, ReconError
 from recon_cli.interrupts import signal_name, stop_signals
-from recon_cli.recording import RECORDING_FILE, RERUN_VERSION, require_rerun
+from recon_cli.recording.sdk import RECORDING_FILE, RERUN_VERSION, require_rerun
 
 #: where the web viewer listens unless ``--bind`` says otherwise: this machine only
 DEFAULT_BIND = "127.0.0.1"

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from recon_cli.errors import ReconError
+from recon_cli.inputs.images import read_color, read_depth
 from recon_cli.report.model import Edge, Evaluation, Move, Scan
 
 _BLUE, _ORANGE, _GREEN, _GREY = "#1f77b4", "#ff7f0e", "#2ca02c", "#7f7f7f"
@@ -151,8 +153,6 @@ def thumbnail(path: Path, scan: Scan, width: int) -> Path | None:
     None when neither can be read."""
     import cv2
 
-    from recon_cli.errors import ReconError
-    from recon_cli.inputs.images import read_color, read_depth
 
     image = depth = None
     if scan.color is not None:

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from recon_cli.errors import FileError
+from recon_cli.inputs.meshes import read_mesh
 from recon_cli.report.options import MESH_VIEWS
 
 BACKGROUND = 255  # white
@@ -134,8 +136,6 @@ def render_mesh(mesh_path: Path, out_dir: Path, views: tuple[str, ...] = tuple(M
     import cv2
     import open3d as o3d
 
-    from recon_cli.errors import FileError
-    from recon_cli.inputs.meshes import read_mesh
 
     if not Path(mesh_path).is_file():
         raise FileError(f"{mesh_path} holds no triangles (there is no such file)",

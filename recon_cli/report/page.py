@@ -16,11 +16,14 @@ from pathlib import Path
 
 from recon_cli.config import DEFAULTS
 from recon_cli.errors import FileError, ReconError
-from recon_cli.report.mesh_view import MeshView
+from recon_cli.outputs import atomic_write_text, inside
+from recon_cli.report import figures
+from recon_cli.report.markup import GENERATOR, page
+from recon_cli.report.mesh_view import MeshView, render_mesh
 from recon_cli.report.model import RunFolder, RunKind
 from recon_cli.report.options import ReportOptions
 from recon_cli.report.read import PAGE_FILES, read_run_folder
-from recon_cli.report.sections import Assets, Picture
+from recon_cli.report.sections import Assets, Picture, body
 
 PAGE = "report.html"
 MARKER = ".recon-report"  # inside report_files/: the folder is the page's own (and may be replaced)
@@ -47,8 +50,6 @@ def mesh_file(run: RunFolder) -> Path | None:
 
 def _draw(run: RunFolder, options: ReportOptions, out: Path) -> Assets:
     """Every picture of the page in ``out`` (paths inside ``out``)."""
-    from recon_cli.report import figures
-    from recon_cli.report.mesh_view import render_mesh
 
     mesh = mesh_file(run)
     views: tuple[MeshView, ...] = ()
@@ -96,7 +97,6 @@ def _moved(assets: Assets, tmp: Path, final: Path) -> Assets:
 def _refuse_foreign(folder: Path, final: Path) -> None:
     """Never replace a report.html or report_files/ that recon did not write (a script may
     export files under any name)."""
-    from recon_cli.report.markup import GENERATOR
 
     page = folder / PAGE
     if page.is_file() and f'content="{GENERATOR}"' not in page.read_text(encoding="utf-8", errors="replace")[:2000]:
@@ -110,9 +110,6 @@ def _refuse_foreign(folder: Path, final: Path) -> None:
 def write_page(folder: Path, options: ReportOptions = ReportOptions()) -> ReportPage:  # noqa: B008
     """(Re)write the page of a run folder; a FileError when it is no run folder or cannot be
     written."""
-    from recon_cli.outputs import atomic_write_text, inside
-    from recon_cli.report.markup import page
-    from recon_cli.report.sections import body
 
     folder = Path(folder)
     run = read_run_folder(folder)

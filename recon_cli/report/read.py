@@ -18,6 +18,7 @@ from typing import Any, TypeVar
 from recon_cli.errors import FileError, MetadataError
 from recon_cli.inputs.jsonfile import load_json
 from recon_cli.reconstruction.metadata import SessionInfo, read_session
+from recon_cli.reconstruction.scan_store import ScanStore
 from recon_cli.report.model import (
     Edge,
     Evaluation,
@@ -85,7 +86,6 @@ class _Notes:
 
 # ----------------------------------------------------------------------------- the kind of folder
 def _scan_folders(store: Path) -> list[tuple[int, Path]]:
-    from recon_cli.reconstruction.scan_store import ScanStore
 
     return ScanStore(store).scan_folders()
 

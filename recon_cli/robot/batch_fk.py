@@ -13,7 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-import pinocchio as pin
+
+from recon_cli.lazy import lazy_module
+
+pin = lazy_module("pinocchio")
+
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}
 

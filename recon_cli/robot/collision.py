@@ -26,14 +26,13 @@ import itertools
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
-import fcl
 import numpy as np
 import numpy.typing as npt
-import pinocchio as pin
 from lxml import etree
 
 from recon_cli.geometry.transforms import pose_from_xyz_rpy
 from recon_cli.inputs.yamlfile import read_yaml
+from recon_cli.lazy import lazy_module
 from recon_cli.paths import ROBOT_DIR
 from recon_cli.robot.batch_fk import BatchFK
 from recon_cli.robot.kinematics import Kinematics
@@ -41,6 +40,9 @@ from recon_cli.robot.motion_check import BatchChecker
 from recon_cli.robot.pair_field import PairField
 from recon_cli.robot.shapes import CollisionShape
 from recon_cli.robot.urdf import attribute, child
+
+fcl = lazy_module("fcl")
+pin = lazy_module("pinocchio")
 
 OBJECT_LINK = "object"
 _FIELD_CACHE: dict[tuple[str, str, str], PairField] = {}

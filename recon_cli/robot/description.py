@@ -16,6 +16,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import StrEnum
 
+import numpy as np
+
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.paths import ROBOT_DIR
 
@@ -135,7 +137,6 @@ def _rigid(values: Iterable[float], what: str) -> tuple[float, ...]:
     """16 numbers of a rigid 4 x 4 transform (row by row), or a one-line InputError. A
     rotation orthonormal within :data:`RIGID_TOLERANCE` is replaced by the nearest rotation
     (polar decomposition), so that a matrix written with 5 decimals is accepted."""
-    import numpy as np
 
     m = [float(v) for v in values]
     ok = len(m) == 16 and all(math.isfinite(v) for v in m) and m[12:] == [0.0, 0.0, 0.0, 1.0]

@@ -16,10 +16,12 @@ from enum import StrEnum
 
 import numpy as np
 import numpy.typing as npt
-import pinocchio as pin
 
+from recon_cli.lazy import lazy_module
 from recon_cli.robot.collision import CollisionModel
 from recon_cli.robot.kinematics import Kinematics
+
+pin = lazy_module("pinocchio")
 
 #: [m] a goal farther than this from the world origin (or not finite) is out of reach of any
 #: cell without a descent

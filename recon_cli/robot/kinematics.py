@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-import pinocchio as pin
 
+from recon_cli.lazy import lazy_module
 from recon_cli.robot.limits import JointLimits, limits_from_urdf
+
+pin = lazy_module("pinocchio")
 
 CAMERA_FRAME = "camera"
 MARKER_FRAME = "marker"

@@ -26,10 +26,14 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-import coal
 import numpy as np
 import numpy.typing as npt
-import pinocchio as pin
+
+from recon_cli.lazy import lazy_module
+
+pin = lazy_module("pinocchio")
+coal = lazy_module("coal")
+
 
 if TYPE_CHECKING:
     from recon_cli.robot.pair_field import PairField

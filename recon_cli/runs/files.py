@@ -10,6 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from recon_cli.inputs.jsonfile import MAX_JSON_BYTES, load_json
+from recon_cli.inputs.jsonschemas import check
+from recon_cli.outputs import atomic_write_text
 from recon_cli.runs.codec import dumps, from_json
 
 
@@ -21,7 +23,6 @@ def target(folder_or_path: Path, name: str) -> Path:
 
 def write_model(path: Path, model) -> Path:
     """``model`` as the JSON file ``path`` (atomically)."""
-    from recon_cli.outputs import atomic_write_text
 
     return atomic_write_text(Path(path), dumps(model))
 
@@ -29,7 +30,6 @@ def write_model(path: Path, model) -> Path:
 def read_document(path: Path, schema: str, what: str) -> dict:
     """The checked JSON object of ``path`` (a MetadataError when it cannot be read or does
     not match ``schemas/<schema>``)."""
-    from recon_cli.inputs.jsonschemas import check
 
     path = Path(path)
     data = load_json(path, what, MAX_JSON_BYTES)

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from recon_cli.errors import MetadataError
+from recon_cli.inputs.jsonfile import load_json
 from recon_cli.runs.codec import OMIT_NONE, JsonValue, Matrix, key
 from recon_cli.runs.files import read_model, target, write_model
 
@@ -170,7 +171,6 @@ def read(folder_or_path: Path) -> RegisterReport:
 def is_registration(path: Path) -> bool:
     """Whether ``path`` is a registration's report.json (it lists its scans); a file that
     cannot be read counts, so that its folder's page can say why."""
-    from recon_cli.inputs.jsonfile import load_json
 
     path = Path(path)
     try:

@@ -21,8 +21,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+from lxml import etree
 
+from recon_cli.backends.base import Backend
 from recon_cli.errors import JointLimitError, ReconError, ScriptError
+from recon_cli.objects import BUILTIN, available_objects, ycb_names
+from recon_cli.realism import BUILT_IN, load_profile
+from recon_cli.robot.description import CellConfig, CellKind, expand_urdf
+from recon_cli.robot.limits import limits_from_urdf
+from recon_cli.robot.urdf import attribute
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.readable import readable
 
@@ -49,7 +56,6 @@ def readable_file(script: C.Script, name: str, src: C.Source, what: str) -> Path
 def script_realism(script: C.Script, cmd: C.SetCell) -> str | Path:
     """The realism profile of a ``<cell>``: a built-in name, or the profile file it names
     (a readable file, see :func:`readable_file`)."""
-    from recon_cli.realism import BUILT_IN
 
     if cmd.realism in BUILT_IN:
         return cmd.realism
@@ -61,7 +67,6 @@ def script_realism(script: C.Script, cmd: C.SetCell) -> str | Path:
 
 
 def _check_realism(script: C.Script, cmd: C.SetCell) -> None:
-    from recon_cli.realism import load_profile
 
     try:
         load_profile(script_realism(script, cmd))
@@ -78,12 +83,8 @@ def is_file_name(name: str) -> bool:
 
 @functools.lru_cache(maxsize=4)
 def _joint_limits(kind: str) -> JointLimits:
-    from recon_cli.robot.description import CellConfig, CellKind, expand_urdf
-    from recon_cli.robot.limits import limits_from_urdf
-    from recon_cli.robot.urdf import attribute
 
     urdf = expand_urdf(CellConfig(kind=CellKind.parse(kind)))
-    from lxml import etree
 
     names = [attribute(j, "name") for j in etree.fromstring(urdf.encode()).iter("joint")
              if j.get("type") in ("revolute", "prismatic", "continuous")]
@@ -109,7 +110,6 @@ def _check_joints(cmd: C.MoveJoints, kind: str) -> None:
 
 
 def _check_object(script: C.Script, cmd: C.SetObject) -> None:
-    from recon_cli.objects import BUILTIN, available_objects, ycb_names
 
     if cmd.name == "auto" or cmd.name in BUILTIN:
         return
@@ -209,7 +209,6 @@ def check_script(script: C.Script, *, object_override: str | None = None) -> Non
 
 def check_backend(script: C.Script, backend: str | None, station: Path | None, dry_run: bool = False) -> None:
     """A run on the hardware backend needs a station file; refuse before anything is written."""
-    from recon_cli.backends.base import Backend
 
     cells = [c for c in script.commands if isinstance(c, C.SetCell)]
     wanted = Backend(backend or (cells[-1].backend if cells else Backend.SIM))

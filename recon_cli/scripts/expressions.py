@@ -13,6 +13,7 @@ scripts_xml/. :mod:`recon_cli.scripts.sandbox` installs all this into xacro.
 from __future__ import annotations
 
 import ast
+import builtins
 import math
 import operator
 import threading
@@ -21,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from recon_cli.errors import LimitError, ScriptError
+from recon_cli.scripts.readable import readable
 
 
 @dataclass(frozen=True)
@@ -319,7 +321,6 @@ class _CallableSet:
 
 def symbol_table(script_dir: Path) -> dict:
     """xacro's global symbols, restricted: pure builtins, math, and a confined load_yaml."""
-    import builtins
 
     import xacro
 
@@ -365,7 +366,6 @@ def _confined_load_yaml(script_dir: Path):
     def load_yaml(filename):
         import xacro
 
-        from recon_cli.scripts.readable import readable
 
         name = str(filename)
         if any(ch in name for ch in "$(){}"):

@@ -16,8 +16,14 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from recon_cli.errors import ReconError
+from recon_cli.planning.lower_bound import duration_lower_bound
+from recon_cli.planning.planner import MotionPlanner
+from recon_cli.robot.ik import IKOptions
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.state import RunState, SequenceMethod, SequenceReport
+from recon_cli.sequence.graph import ViewGraph
+from recon_cli.sequence.optimize import local_search_sequence, optimize_graph
+from recon_cli.sequence.tsp import lazy_mst_sequence
 
 if TYPE_CHECKING:
     from recon_cli.planning.trajectory import Trajectory
@@ -74,12 +80,6 @@ class Tour:
 
 def plan_tour(state: RunState, group: list[tuple[C.Move, list[C.Command]]]) -> Tour:
     """Order a group's moves with the sequence optimizer, starting where the robot is."""
-    from recon_cli.planning.lower_bound import duration_lower_bound
-    from recon_cli.planning.planner import MotionPlanner
-    from recon_cli.robot.ik import IKOptions
-    from recon_cli.sequence.graph import ViewGraph
-    from recon_cli.sequence.optimize import local_search_sequence, optimize_graph
-    from recon_cli.sequence.tsp import lazy_mst_sequence
 
     state.ensure_session()
     cell, rng, plan = state.cell, state.rng, state.config.planner

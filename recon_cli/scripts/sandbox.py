@@ -24,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import io
 import threading
+import xml.dom
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -79,7 +80,6 @@ class Frames:
 
 
 def _source_of_call(node) -> str | None:
-    import xml.dom
 
     prev = node.previousSibling
     while prev is not None and (prev.nodeType == xml.dom.Node.COMMENT_NODE

@@ -21,10 +21,15 @@ from typing import Any
 
 import numpy as np
 
+from recon_cli.backends.hardware.station import preflight
+from recon_cli.backends.station_file import load_station
 from recon_cli.config import DEFAULTS, Config
 from recon_cli.errors import FileError
 from recon_cli.geometry.view import Frame
+from recon_cli.outputs import inside
 from recon_cli.realism import RealismProfile
+from recon_cli.robot.cell import Cell
+from recon_cli.robot.collision import ObjectBox
 from recon_cli.scripts import commands as C
 from recon_cli.session import Backend, Mode, Session, SessionSpec, open_session
 
@@ -187,8 +192,6 @@ class RunState:
         moves nothing and opens no station)."""
         if self.options.station is None or self.dry_run:
             return
-        from recon_cli.backends.hardware.station import preflight
-        from recon_cli.backends.station_file import load_station
 
         preflight(load_station(self.options.station), self.config.seed)
         self.station_checked = True
@@ -205,7 +208,6 @@ class RunState:
 
     def object_box(self):
         """The collision box of the object: the <box>, or the object's box grown by its margin."""
-        from recon_cli.robot.collision import ObjectBox
 
         explicit = self._explicit_box()
         if explicit is not None:
@@ -213,7 +215,6 @@ class RunState:
         return None if self.scene_object is None else self.scene_object.bounding_box(self.config.scene.box_margin)
 
     def world_T_marker(self) -> np.ndarray:
-        from recon_cli.robot.cell import Cell
 
         return (self.cell or Cell(self.config.cell)).world_T_marker
 
@@ -243,7 +244,6 @@ class RunState:
         """Where an export goes: inside the output folder after resolving links, else refused.
         An absolute path (thesis dialect only; the loader refuses it in recon's) is written
         into the output folder under its file name, and the report says so."""
-        from recon_cli.outputs import inside
 
         if Path(name).is_absolute():
             report.message = f"absolute path {name} written into the output folder as {Path(name).name}"

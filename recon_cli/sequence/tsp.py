@@ -11,7 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse.csgraph import minimum_spanning_tree as _scipy_mst
 
 from recon_cli.sequence.graph import EdgePlanner, ViewGraph
 
@@ -24,7 +23,9 @@ def minimum_spanning_tree(cost: np.ndarray) -> list[tuple[int, int]]:
     big = (c[finite].max() if finite.any() else 1.0) * 10.0 * len(c) + 1.0
     w = np.where(finite, c, big) + 1e-9  # scipy treats zeros as missing edges
     np.fill_diagonal(w, 0.0)
-    tree = _scipy_mst(np.triu(w)).tocoo()
+    from scipy.sparse.csgraph import minimum_spanning_tree as scipy_mst
+
+    tree = scipy_mst(np.triu(w)).tocoo()
     return sorted((int(min(i, j)), int(max(i, j))) for i, j in zip(tree.row, tree.col, strict=True))
 
 

@@ -16,6 +16,8 @@ from enum import StrEnum
 import numpy as np
 
 from recon_cli.errors import ReconError
+from recon_cli.geometry.view import look_at_pose
+from recon_cli.robot.ik import IKOptions
 
 
 class Method(StrEnum):
@@ -46,7 +48,6 @@ class Feasibility:
 
     def __call__(self, world_T_camera: np.ndarray, seed: np.ndarray) -> np.ndarray | None:
         """An IK solution of the camera pose (collision-free, soft limits), or None."""
-        from recon_cli.robot.ik import IKOptions
 
         if (self.marker_T_world @ world_T_camera)[2, 3] < self.min_height:
             return None  # the thesis' rule: the camera stays above the board
@@ -65,7 +66,6 @@ def lifted(T: np.ndarray, target: np.ndarray, q: np.ndarray,
     the first feasible one as (pose, configuration), else (T, None). A region next to the
     table is then seen from above instead of being left out (the thesis marks such samples
     infeasible, and they repel later samples)."""
-    from recon_cli.geometry.view import look_at_pose
 
     d = T[:3, 3] - target
     dist = float(np.linalg.norm(d))
@@ -86,7 +86,6 @@ def baseline_views(method: Method, center: np.ndarray, radius: float, need: int,
                    feasible: Callable[[np.ndarray, np.ndarray], np.ndarray | None], rng: np.random.Generator):
     """Baselines: ``need`` feasible views at ``radius`` around ``center``, evenly spread
     (sphere) or random; returns (feasible [(pose, configuration)], infeasible [pose])."""
-    from recon_cli.geometry.view import look_at_pose
 
     dirs = None
     if method is Method.SPHERE:  # Fibonacci spiral over the upper hemisphere

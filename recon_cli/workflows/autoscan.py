@@ -22,12 +22,25 @@ from pathlib import Path
 
 import numpy as np
 
+from recon_cli.acquisition import view_record
 from recon_cli.config import DEFAULTS, Config
 from recon_cli.errors import ReconError
 from recon_cli.geometry.view import View
+from recon_cli.perception.charuco import thesis_board
+from recon_cli.planning.lower_bound import duration_lower_bound
+from recon_cli.planning.planner import MotionPlanner
+from recon_cli.reconstruction.crop import CropBox
+from recon_cli.reconstruction.global_registration import global_pose
+from recon_cli.reconstruction.pipeline import scan_cloud
+from recon_cli.runs import autoscan as autoscan_file
 from recon_cli.runs.autoscan import Accuracy
+from recon_cli.runs.codec import matrix
+from recon_cli.sequence.view_selection import select_view
 from recon_cli.session import Backend, Mode, SessionSpec, open_session
+from recon_cli.viewplan.ellipsoid import Ellipsoid
+from recon_cli.viewplan.picture import iteration_png
 from recon_cli.viewplan.policy import Feasibility, Method, Status, baseline_views, lifted
+from recon_cli.viewplan.views import camera_pose, next_sample
 
 METHODS = tuple(m.value for m in Method)
 
@@ -94,9 +107,6 @@ class Autoscan:
 
     # ------------------------------------------------------------------ set-up
     def _setup(self) -> None:
-        from recon_cli.planning.lower_bound import duration_lower_bound
-        from recon_cli.planning.planner import MotionPlanner
-        from recon_cli.reconstruction.crop import CropBox
 
         opt, cfg = self.opt, self.opt.config
         if opt.record:
@@ -131,10 +141,6 @@ class Autoscan:
 
     def _scan(self, view_T: np.ndarray) -> None:
         """Scan where the robot is; add the registered, cropped points to the partial object."""
-        from recon_cli.acquisition import view_record
-        from recon_cli.perception.charuco import thesis_board
-        from recon_cli.reconstruction.global_registration import global_pose
-        from recon_cli.reconstruction.pipeline import scan_cloud
 
         scan = self.acq.scan(view_record(None, view_T))
         pose = global_pose(scan, thesis_board(), self.cell.world_T_marker)
@@ -162,7 +168,6 @@ class Autoscan:
 
     # ------------------------------------------------------------------ candidates
     def _ellipsoid_candidates(self, ell, views: list[ViewRecord], needed: int, q: np.ndarray, it: int):
-        from recon_cli.viewplan.views import camera_pose, next_sample
 
         A = [ell.nearest_point(ell.to_local(v.world_T_camera[:3, 3])) for v in views
              if v.status in (Status.COMPLETED, Status.INFEASIBLE)]
@@ -194,8 +199,6 @@ class Autoscan:
 
     # ------------------------------------------------------------------ run
     def run(self) -> AutoscanResult:
-        from recon_cli.sequence.view_selection import select_view
-        from recon_cli.viewplan.ellipsoid import Ellipsoid
 
         opt, vp, ellipsoid = self.opt, self.vp, self.method is Method.ELLIPSOID
         t0 = time.perf_counter()
@@ -321,8 +324,6 @@ class Autoscan:
                 record_registration(self.recorder, reg, opt.out)
         seconds_total = time.perf_counter() - t0
         infeasible = sum(v.status is Status.INFEASIBLE for v in views)
-        from recon_cli.runs import autoscan as autoscan_file
-        from recon_cli.runs.codec import matrix
 
         report = autoscan_file.write(opt.out, autoscan_file.AutoscanReport(
             method=self.method.value, object=self.obj.name, cell=cfg.cell.kind.value, n=vp.n, d_c=vp.d_c, m=vp.m,
@@ -339,7 +340,6 @@ class Autoscan:
                               seconds_total, coverage, accuracy, cloud, mesh, report, pictures, interrupted), error
 
     def _picture(self, it: int, ell, views: list[ViewRecord], planned: list[np.ndarray], active: np.ndarray) -> Path:
-        from recon_cli.viewplan.picture import iteration_png
 
         path = self.opt.out / "iterations" / f"iteration_{it:02d}.png"
         iteration_png(path, it, self._partial_points(), ell, views, planned, active, self.opt.config.seed)

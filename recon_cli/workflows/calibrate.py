@@ -22,12 +22,16 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from pathlib import Path, PurePath
 
 import numpy as np
 
+from recon_cli.acquisition import view_record
+from recon_cli.backends.base import Backend
+from recon_cli.calibration.camera_file import load_camera_file, write_camera_file
+from recon_cli.calibration.goals import board_view_goals
 from recon_cli.calibration.handeye import (
     Diversity,
     HandEyeMethod,
@@ -37,13 +41,29 @@ from recon_cli.calibration.handeye import (
     solve_hand_eye,
     view_residuals,
 )
-from recon_cli.calibration.intrinsics import DistortionModel, IntrinsicsResult, SkippedImage
+from recon_cli.calibration.intrinsics import (
+    DistortionModel,
+    IntrinsicsResult,
+    SkippedImage,
+    calibrate_intrinsics,
+    find_boards,
+    plot_reprojection,
+)
+from recon_cli.calibration.observations import FLANGE_FRAME, scan_observations
+from recon_cli.calibration.refine import corrected, refine_hand_eye
+from recon_cli.calibration.station_update import hand_eye_block, write_station_hand_eye
 from recon_cli.calibration.views import BoardViewOptions, board_views
 from recon_cli.config import DEFAULTS, Config
+from recon_cli.console import write_json
 from recon_cli.errors import FileError, InputError, ReconError
 from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.inputs.images import read_color
+from recon_cli.outputs import atomic_write, atomic_write_text
 from recon_cli.perception.charuco import BoardSpec, thesis_board
+from recon_cli.reconstruction.metadata import read_session
+from recon_cli.robot.description import CellKind, expand_urdf
+from recon_cli.robot.kinematics import Kinematics
+from recon_cli.session import Mode, SessionSpec, open_session
 
 Progress = Callable[[str, int, int], None]
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -64,9 +84,6 @@ def record_board_views(out: Path, config: Config = DEFAULTS, views: BoardViewOpt
                        progress: Progress | None = None) -> BoardViewsResult:
     """Move through the generated board views (nothing on the table but the board) and
     write one scan per reachable view into the scan store ``out``."""
-    from recon_cli.acquisition import view_record
-    from recon_cli.calibration.goals import board_view_goals
-    from recon_cli.session import Mode, SessionSpec, open_session
 
     t0 = time.perf_counter()
     view_list = board_views(board or thesis_board(), views)
@@ -199,11 +216,7 @@ class HandEyeResult:
 def _model_kinematics(scans: Path, station_file, config: Config):
     """The model the scans' joints are read with: the station file's cell, else the cell
     recorded in session.json, else the configuration's."""
-    from dataclasses import replace
 
-    from recon_cli.reconstruction.metadata import read_session
-    from recon_cli.robot.description import CellKind, expand_urdf
-    from recon_cli.robot.kinematics import Kinematics
 
     if station_file is not None:
         cell = station_file.cell
@@ -220,8 +233,6 @@ def _truth_flange_T_camera(scans: Path, model: np.ndarray) -> np.ndarray | None:
     """Simulation only: the true camera mount (ground_truth/realism.json; without a realism
     profile the simulated camera is where the model says)."""
 
-    from recon_cli.backends.base import Backend
-    from recon_cli.reconstruction.metadata import read_session
 
     info = read_session(scans)
     if info.backend != Backend.SIM:
@@ -239,12 +250,6 @@ def _truth_flange_T_camera(scans: Path, model: np.ndarray) -> np.ndarray | None:
 
 def run_handeye(opt: HandEyeOptions, progress: Progress | None = None) -> HandEyeResult:
     """Record board views (unless given), calibrate, report, write (see the module docstring)."""
-    from recon_cli.calibration.camera_file import load_camera_file
-    from recon_cli.calibration.observations import FLANGE_FRAME, scan_observations
-    from recon_cli.calibration.refine import corrected, refine_hand_eye
-    from recon_cli.calibration.station_update import hand_eye_block, write_station_hand_eye
-    from recon_cli.console import write_json
-    from recon_cli.outputs import atomic_write, atomic_write_text
 
     t0 = time.perf_counter()
     out = Path(opt.out)
@@ -421,10 +426,6 @@ class IntrinsicsRun:
 
 def run_intrinsics(opt: IntrinsicsOptions) -> IntrinsicsRun:
     """Find the board in every image, calibrate, write intrinsics.yaml, its report and figure."""
-    from recon_cli.calibration.camera_file import write_camera_file
-    from recon_cli.calibration.intrinsics import calibrate_intrinsics, find_boards, plot_reprojection
-    from recon_cli.console import write_json
-    from recon_cli.outputs import atomic_write
 
     t0 = time.perf_counter()
     out = Path(opt.out)

@@ -26,6 +26,7 @@ from recon_cli.geometry.view import View
 from recon_cli.objects import SceneObject
 from recon_cli.reconstruction.scan_store import Scan
 from recon_cli.recording import closing, open_recorder
+from recon_cli.runs import capture as capture_file
 from recon_cli.runs.capture import CAPTURE_REPORT, ViewFailure
 from recon_cli.session import Backend, Mode, SessionSpec, open_session
 
@@ -122,7 +123,6 @@ def run_capture(opt: CaptureOptions, progress: Callable[[str, int, int], None] |
 def _write_report(opt: CaptureOptions, status: CaptureStatus, scans: int, failures: list[ViewFailure],
                   seconds: float, error: str | None) -> tuple[Path, Path | None]:
     """capture_report.json and (when asked) the report page."""
-    from recon_cli.runs import capture as capture_file
 
     report = capture_file.write(opt.out, capture_file.CaptureReport(
         status=status.value, views=len(opt.views), scans=scans, seconds=seconds, error=error,

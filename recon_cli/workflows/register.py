@@ -13,6 +13,8 @@ from pathlib import Path
 from recon_cli.config import Config, write_config
 from recon_cli.outputs import OutputFolder
 from recon_cli.reconstruction.pipeline import RegisterResult, run_register
+from recon_cli.recording import closing, open_recorder
+from recon_cli.recording.results import record_registration, record_store
 
 
 def register_folder(folder: Path, out: Path | OutputFolder, config: Config, record: bool = False,
@@ -31,8 +33,6 @@ def _register(folder: Path, out: Path | OutputFolder, config: Config, record: bo
     options, seed = config.registration, config.seed
     if not record or not folder.is_dir():  # without a folder: the pipeline's one-line error
         return run_register(folder, out, options, progress, seed=seed)
-    from recon_cli.recording import closing, open_recorder
-    from recon_cli.recording.results import record_registration, record_store
 
     if isinstance(out, OutputFolder):
         out = out.make()

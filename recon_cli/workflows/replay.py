@@ -29,8 +29,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from recon_cli.backends.hardware.replay import ImportedRecording, ReplayConfig, import_recording
+from recon_cli.geometry.transforms import invert, pose_error
+from recon_cli.inputs.meshes import read_cloud
+from recon_cli.outputs import atomic_write, atomic_write_text
 from recon_cli.reconstruction.consistency import PairResidual, cloud_png, overlap_residuals, summary
+from recon_cli.reconstruction.crop import CropBox
 from recon_cli.reconstruction.options import RECORDING_SCALE, MultiwayOptions, RegisterOptions, SurfaceOptions
+from recon_cli.reconstruction.pipeline import run_register
 
 if TYPE_CHECKING:
     from recon_cli.reconstruction.pipeline import RegisterResult
@@ -83,7 +88,6 @@ def register_options(voxel: float, prior: tuple[float, float], local: bool = Tru
 
 def camera_correction(record) -> dict:
     """How far the pose graph moved a scan's camera from its recorded pose [mm, deg]."""
-    from recon_cli.geometry.transforms import pose_error
 
     dp, dr = pose_error(record.final_marker_T_camera, record.pose.marker_T_camera)
     return {"scan": record.index, "translation_mm": dp * 1e3, "rotation_deg": float(np.degrees(dr))}
@@ -93,10 +97,6 @@ def run_replay(opt: ReplayOptions, progress: Callable[[str, int, int], None] | N
     """Import, register and measure a recording (see the module docstring)."""
     import open3d as o3d
 
-    from recon_cli.geometry.transforms import invert
-    from recon_cli.outputs import atomic_write, atomic_write_text
-    from recon_cli.reconstruction.crop import CropBox
-    from recon_cli.reconstruction.pipeline import run_register
 
     out = Path(opt.out)
     imported = import_recording(opt.source, out / "store", crop_box=opt.crop_box)
@@ -120,7 +120,6 @@ def run_replay(opt: ReplayOptions, progress: Callable[[str, int, int], None] | N
     res_before = overlap_residuals(before, gate, voxel=residual_voxel)
     res_after = res_before if before is after else overlap_residuals(after, gate, voxel=residual_voxel)
     first = result.used[0].final_marker_T_camera
-    from recon_cli.inputs.meshes import read_cloud
 
     fused = read_cloud(result.cloud, "fused cloud")
     title = (f"{Path(str(opt.source.source)).name}: {len(result.used)} recorded frames, "

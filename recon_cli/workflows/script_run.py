@@ -21,6 +21,8 @@ import numpy as np
 
 from recon_cli.errors import ReconError, RobotFault, RunInterrupted, ScriptAborted
 from recon_cli.interrupts import exit_code, signal_name
+from recon_cli.outputs import atomic_write_text, keep_earlier, refuse_links
+from recon_cli.runs import script_run as run_file
 from recon_cli.runs.codec import from_json, plain
 from recon_cli.runs.script_run import RUN_REPORT, Interruption
 from recon_cli.scripts import commands as C
@@ -91,7 +93,6 @@ class ScriptRunner:
 
     # ------------------------------------------------------------------ run
     def run(self) -> RunResult:
-        from recon_cli.outputs import atomic_write_text, refuse_links
 
         t0 = time.perf_counter()
         self.state.check_station()  # before anything moves or is written
@@ -138,7 +139,6 @@ class ScriptRunner:
 
     def _keep_earlier(self, *names: str) -> None:
         """--append: an earlier run's report, script and configuration stay, as NAME-1, NAME-2, ..."""
-        from recon_cli.outputs import keep_earlier
 
         keep_earlier(self.out, *names)
 
@@ -215,7 +215,6 @@ class ScriptRunner:
             self.page = None if page is None else page.path
 
     def _write_report(self, seconds: float, aborted: str, interrupted: Interruption | None) -> None:
-        from recon_cli.runs import script_run as run_file
 
         failed = any(r.status is CommandStatus.FAILED for r in self.reports)
         if interrupted is not None:

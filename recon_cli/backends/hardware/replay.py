@@ -45,8 +45,13 @@ from recon_cli.backends.hardware.camera_config import (
     text,
 )
 from recon_cli.errors import CameraFault, FileError, InputError
+from recon_cli.geometry.transforms import transform_points
 from recon_cli.inputs.images import read_color, read_depth
-from recon_cli.perception.camera_model import Intrinsics
+from recon_cli.inputs.jsonfile import MAX_METADATA_BYTES, load_json, read_bytes
+from recon_cli.inputs.numbers import in_range
+from recon_cli.perception.camera_model import Intrinsics, backproject
+from recon_cli.reconstruction.metadata import read_scan_meta
+from recon_cli.reconstruction.scan_store import Scan, ScanStore
 
 log = logging.getLogger(__name__)
 
@@ -161,7 +166,6 @@ FOCAL_RANGE, CENTRE_RANGE = (1.0, 1e5), (-1e5, 1e5)
 def _read_text(path: Path, what: str, max_bytes: int) -> str:
     """The UTF-8 text of a recording's file: a regular file (checked before it is opened) of
     at most ``max_bytes`` bytes (checked before it is read), or a one-line FileError."""
-    from recon_cli.inputs.jsonfile import read_bytes
 
     try:
         data = read_bytes(path, what, max_bytes)
@@ -226,7 +230,6 @@ def read_poses(path: Path) -> list[np.ndarray]:
 
 def _check_focal(values: tuple[float, float, float, float], where: str) -> tuple[float, float, float, float]:
     """fx, fy, cx, cy inside FOCAL_RANGE and CENTRE_RANGE (one-line InputError)."""
-    from recon_cli.inputs.numbers import in_range
 
     names, ranges = ("fx", "fy", "cx", "cy"), (FOCAL_RANGE, FOCAL_RANGE, CENTRE_RANGE, CENTRE_RANGE)
     fx, fy, cx, cy = (in_range(v, f"{where}.{name}" if where != "--intrinsics" else f"--intrinsics {name}", lo, hi,
@@ -238,7 +241,6 @@ def _check_focal(values: tuple[float, float, float, float], where: str) -> tuple
 def _intrinsics_file(folder: Path) -> tuple[float, float, float, float] | None:
     """fx, fy, cx, cy of the recording's ``intrinsics.json``, None when there is none; read by
     the scan store's JSON reader (regular file, size, nesting, finite numbers)."""
-    from recon_cli.inputs.jsonfile import MAX_METADATA_BYTES, load_json
 
     path = folder / "intrinsics.json"
     if not (path.exists() or path.is_symlink()):
@@ -285,8 +287,6 @@ def image_frames(cfg: ReplayConfig, folder: Path) -> list[RecordedFrame]:
 
 def store_frames(folder: Path) -> list[RecordedFrame]:
     """The scans of a recon scan store (each read and checked when played)."""
-    from recon_cli.reconstruction.metadata import read_scan_meta
-    from recon_cli.reconstruction.scan_store import ScanStore
 
     frames = []
     for _, scan_folder in ScanStore(folder).scan_folders():
@@ -305,7 +305,6 @@ def store_frames(folder: Path) -> list[RecordedFrame]:
 
 
 def is_scan_store(folder: Path) -> bool:
-    from recon_cli.reconstruction.scan_store import ScanStore
 
     return (folder / "session.json").exists() or bool(ScanStore(folder).scan_folders())
 
@@ -429,8 +428,6 @@ def data_crop_box(frames: list[tuple[RGBDFrame, np.ndarray]], quantile: float = 
     """An axis-aligned box (centre, size) [m] around what the frames saw, in the world frame:
     per axis the ``quantile`` .. 1 - ``quantile`` range of every ``stride``-th pixel's point,
     widened by ``margin`` of its size on each side."""
-    from recon_cli.geometry.transforms import transform_points
-    from recon_cli.perception.camera_model import backproject
 
     pts = np.vstack([transform_points(T, backproject(f.depth[::stride, ::stride], _strided(f.intrinsics, stride)))
                      for f, T in frames])
@@ -460,7 +457,6 @@ def import_recording(source: ReplayConfig | str | Path, store: Path, *, crop_box
     the recording's frame, or None (register needs --crop-box then). Frames without a recorded
     pose are refused (InputError). ``store`` must not hold scans yet.
     """
-    from recon_cli.reconstruction.scan_store import Scan, ScanStore
 
     cfg = source if isinstance(source, ReplayConfig) else ReplayConfig(str(source))
     frames = recording_frames(cfg)

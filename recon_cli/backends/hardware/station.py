@@ -21,10 +21,12 @@ import numpy as np
 
 from recon_cli.backends.adapters import CAMERA_ADAPTERS, ROBOT_ADAPTERS, CameraPart, RobotPart, Surroundings
 from recon_cli.backends.base import Backend, Capabilities, Station
+from recon_cli.backends.sim.station import simulation_truth
 from recon_cli.backends.station_file import StationFile
 from recon_cli.errors import ReconError, RobotFault
 from recon_cli.objects import SceneObject
 from recon_cli.robot.cell import Cell
+from recon_cli.robot.poses import named_configuration
 
 
 class AdapterStation(Station):
@@ -51,7 +53,6 @@ class AdapterStation(Station):
         cell does not know it."""
         if not self.capabilities.ground_truth:
             return None
-        from recon_cli.backends.sim.station import simulation_truth
 
         return simulation_truth(self.robot, self.camera.world_T_camera_truth(), self.scene_object)
 
@@ -108,7 +109,6 @@ def check_station(station: StationFile, seed: int) -> StationCheck:
     in the file is."""
     t0 = time.perf_counter()
     cell = Cell(station.cell)
-    from recon_cli.robot.poses import named_configuration
 
     start = named_configuration(station.cell.kind, "home", cell.joint_names)
     try:

@@ -15,13 +15,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import pinocchio as pin
 
 from recon_cli.backends.base import ExecutionReport
 from recon_cli.backends.sim.scene import SimScene, drives, mujoco
 from recon_cli.backends.sim.truth import JointSensor
+from recon_cli.lazy import lazy_module
 from recon_cli.planning.trajectory import Trajectory
 from recon_cli.robot.kinematics import Kinematics
+
+pin = lazy_module("pinocchio")
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,8 @@ import numpy as np
 from lxml import etree
 
 from recon_cli.errors import InputError
+from recon_cli.inputs.yamlfile import read_yaml
+from recon_cli.lazy import lazy_module
 from recon_cli.objects import SceneObject
 from recon_cli.paths import ROBOT_DIR
 from recon_cli.perception.charuco import BoardSpec, thesis_board
@@ -26,11 +28,8 @@ from recon_cli.perception.sensor import SensorModel, motioncam_3d_m
 from recon_cli.robot.description import CellConfig, expand_urdf
 from recon_cli.robot.limits import limits_from_urdf
 
-os.environ.setdefault("MUJOCO_GL", "egl")
-
-import mujoco  # noqa: E402  (MUJOCO_GL must be set before the import)
-
-from recon_cli.inputs.yamlfile import read_yaml
+os.environ.setdefault("MUJOCO_GL", "egl")  # read when MuJoCo is first used
+mujoco = lazy_module("mujoco")
 
 CAMERA_NAME = "depth_camera"
 BOARD_PRINT_NAME = "charuco_print"

@@ -22,14 +22,16 @@ import functools
 from dataclasses import dataclass, replace
 
 import numpy as np
-import pinocchio as pin
 from lxml import etree
 
 from recon_cli.errors import InputError
-from recon_cli.geometry.transforms import invert
+from recon_cli.geometry.transforms import invert, rpy_to_matrix
+from recon_cli.lazy import lazy_module
 from recon_cli.realism import KinematicErrors, PoseError
 from recon_cli.robot.cell import Cell
-from recon_cli.robot.description import CellConfig, expand_urdf
+from recon_cli.robot.description import CellConfig, CellKind, expand_urdf
+
+pin = lazy_module("pinocchio")
 
 FLANGE_FRAME = "arm_link_7"
 
@@ -72,7 +74,6 @@ def random_pose_error(error: PoseError, rng: np.random.Generator) -> np.ndarray:
 @functools.lru_cache(maxsize=4)
 def _joint_origin(urdf: str, joint: str) -> np.ndarray:
     """The origin of a joint of a URDF as a 4 x 4 transform (parent link -> child link)."""
-    from recon_cli.geometry.transforms import rpy_to_matrix
 
     root = etree.fromstring(urdf.encode())
     origin = root.find(f"joint[@name='{joint}']/origin")
@@ -87,7 +88,6 @@ def _joint_origin(urdf: str, joint: str) -> np.ndarray:
 @functools.lru_cache(maxsize=1)
 def _all_joint_names() -> frozenset[str]:
     """Movable joints of either cell (a profile may name joints of the other cell)."""
-    from recon_cli.robot.description import CellKind
 
     names = set()
     for kind in CellKind:

@@ -8,6 +8,8 @@ import ctypes
 import io
 import re
 
+from recon_cli.inputs.images import native_output_captured
+
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
@@ -19,7 +21,6 @@ def _open3d_quiet():
     receives the captured text afterwards)."""
     import open3d as o3d
 
-    from recon_cli.inputs.images import native_output_captured
 
     texts: list[str] = []
     python = io.StringIO()

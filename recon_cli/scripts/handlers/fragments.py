@@ -11,6 +11,14 @@ import numpy as np
 from recon_cli.errors import FileError, ReconError
 from recon_cli.inputs.images import read_color, read_depth
 from recon_cli.inputs.meshes import read_cloud
+from recon_cli.perception.charuco import thesis_board
+from recon_cli.perception.rgbd import rgbd_cloud
+from recon_cli.perception.sensor import motioncam_3d_m
+from recon_cli.reconstruction.global_registration import global_pose
+from recon_cli.reconstruction.options import pair_voxel
+from recon_cli.reconstruction.pipeline import crop_box_marker, scan_cloud
+from recon_cli.reconstruction.pose_graph import MultiwayOptions, pairwise_icp, prepare, register_multiway
+from recon_cli.reconstruction.surface import poisson_mesh, write_cloud, write_mesh
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.checks import readable_file
 from recon_cli.scripts.handlers import handles
@@ -22,9 +30,6 @@ _ICP_METHODS = {"point_to_point_icp": "point_to_point", "point_to_plane_icp": "p
 
 def make_fragment(state: RunState, name: str, scan, report: CommandReport) -> None:
     """A scan as a fragment: placed by its global pose (board, else kinematics), cropped."""
-    from recon_cli.perception.charuco import thesis_board
-    from recon_cli.reconstruction.global_registration import global_pose
-    from recon_cli.reconstruction.pipeline import crop_box_marker, scan_cloud
 
     if state.fragment_box is None:
         state.fragment_box = crop_box_marker(state.config.registration, state.store.session())
@@ -45,8 +50,6 @@ def _fragment(state: RunState, name: str, cmd: C.Command):
 
 
 def _icp_options(method: str, threshold: float):
-    from recon_cli.reconstruction.options import pair_voxel
-    from recon_cli.reconstruction.pose_graph import MultiwayOptions
 
     return MultiwayOptions(max_correspondence=threshold, scales=(1.0,), method=_ICP_METHODS[method],
                            voxel=pair_voxel(threshold))
@@ -54,7 +57,6 @@ def _icp_options(method: str, threshold: float):
 
 @handles(C.PairRegister)
 def pair_register(state: RunState, cmd: C.PairRegister, report: CommandReport) -> None:
-    from recon_cli.reconstruction.pose_graph import pairwise_icp, prepare
 
     if state.skipped_in_dry_run(report):
         return
@@ -67,7 +69,6 @@ def pair_register(state: RunState, cmd: C.PairRegister, report: CommandReport) -
 
 @handles(C.Multiway)
 def multiway(state: RunState, cmd: C.Multiway, report: CommandReport) -> None:
-    from recon_cli.reconstruction.pose_graph import register_multiway
 
     if state.skipped_in_dry_run(report):
         return
@@ -122,8 +123,6 @@ def delete(state: RunState, cmd: C.DeleteFragment, report: CommandReport) -> Non
 def load(state: RunState, cmd: C.LoadFragment, report: CommandReport) -> None:
     import cv2
 
-    from recon_cli.perception.rgbd import rgbd_cloud
-    from recon_cli.perception.sensor import motioncam_3d_m
 
     if state.skipped_in_dry_run(report):
         return
@@ -159,7 +158,6 @@ def _guarded(cmd, reader, path, what: str, **kw):
 def export(state: RunState, cmd: C.ExportFragment, report: CommandReport) -> None:
     import open3d as o3d
 
-    from recon_cli.reconstruction.surface import poisson_mesh, write_cloud, write_mesh
 
     if state.skipped_in_dry_run(report):
         return

@@ -11,7 +11,10 @@ import time
 
 import numpy as np
 
+from recon_cli.acquisition import view_record
 from recon_cli.errors import PlanningError, ScriptError
+from recon_cli.planning.planner import MotionPlanner
+from recon_cli.robot.poses import named_configuration
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.handlers import handles
 from recon_cli.scripts.state import CommandReport, CommandStatus, RunState
@@ -24,7 +27,6 @@ def _move_report(report: CommandReport, plan) -> None:
 
 @handles(C.MoveView, C.MovePose)
 def move_to_pose(state: RunState, cmd: C.Move, report: CommandReport) -> None:
-    from recon_cli.planning.planner import MotionPlanner
 
     state.ensure_session()
     state.move_failed = False
@@ -45,7 +47,6 @@ def move_to_pose(state: RunState, cmd: C.Move, report: CommandReport) -> None:
 
 @handles(C.MoveJoints)
 def move_joints(state: RunState, cmd: C.MoveJoints, report: CommandReport) -> None:
-    from recon_cli.planning.planner import MotionPlanner
 
     state.ensure_session()
     state.move_failed = False
@@ -72,7 +73,6 @@ def move_joints(state: RunState, cmd: C.MoveJoints, report: CommandReport) -> No
 
 @handles(C.MoveHome)
 def move_home(state: RunState, cmd: C.MoveHome, report: CommandReport) -> None:
-    from recon_cli.robot.poses import named_configuration
 
     state.ensure_session()
     home = named_configuration(state.config.cell.kind, "home", state.cell.joint_names)
@@ -101,7 +101,6 @@ def execute_planned(state: RunState, cmd: C.Move, traj, report: CommandReport) -
 
 @handles(C.Scan)
 def scan(state: RunState, cmd: C.Scan, report: CommandReport) -> None:
-    from recon_cli.acquisition import view_record
 
     if state.move_failed:
         report.status, report.message = CommandStatus.SKIPPED, "the move before it failed"

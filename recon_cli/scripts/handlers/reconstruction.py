@@ -8,6 +8,10 @@ from dataclasses import replace
 from pathlib import Path
 
 from recon_cli.errors import ReconError
+from recon_cli.outputs import atomic_write
+from recon_cli.reconstruction.assessment import run_evaluate
+from recon_cli.reconstruction.pipeline import run_register
+from recon_cli.reconstruction.surface import SurfaceOptions, fuse, poisson_mesh, write_cloud, write_mesh
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.checks import readable_file
 from recon_cli.scripts.handlers import handles
@@ -24,7 +28,6 @@ def _need_scans(state: RunState, cmd: C.Command) -> None:
 
 
 def register_scans(state: RunState, local=True, board=True, loop_closures="icp", mesh=False, surface=None):
-    from recon_cli.reconstruction.pipeline import run_register
 
     opts = replace(state.config.registration, local=local, use_board=board, mesh=mesh)
     opts = replace(opts, multiway=replace(opts.multiway, loop_closure_init=loop_closures))
@@ -53,7 +56,6 @@ def register(state: RunState, cmd: C.Register, report: CommandReport) -> None:
 
 @handles(C.Reconstruct)
 def reconstruct(state: RunState, cmd: C.Reconstruct, report: CommandReport) -> None:
-    from recon_cli.reconstruction.surface import SurfaceOptions, fuse, poisson_mesh, write_cloud, write_mesh
 
     if state.skipped_in_dry_run(report):
         return
@@ -77,7 +79,6 @@ def reconstruct(state: RunState, cmd: C.Reconstruct, report: CommandReport) -> N
 
 @handles(C.Export)
 def export(state: RunState, cmd: C.Export, report: CommandReport) -> None:
-    from recon_cli.outputs import atomic_write
 
     if state.skipped_in_dry_run(report):
         return
@@ -94,7 +95,6 @@ def export(state: RunState, cmd: C.Export, report: CommandReport) -> None:
 
 @handles(C.Evaluate)
 def evaluate(state: RunState, cmd: C.Evaluate, report: CommandReport) -> None:
-    from recon_cli.reconstruction.assessment import run_evaluate
 
     if state.skipped_in_dry_run(report):
         return

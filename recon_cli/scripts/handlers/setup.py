@@ -5,6 +5,10 @@ from __future__ import annotations
 from dataclasses import replace
 
 from recon_cli.config import SceneConfig, SensorConfig
+from recon_cli.objects import load_object
+from recon_cli.planning.planner import MotionPlanner
+from recon_cli.realism import load_profile
+from recon_cli.robot.description import CellConfig, CellKind
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.checks import is_file_name, readable_file, script_realism
 from recon_cli.scripts.handlers import handles
@@ -14,8 +18,6 @@ from recon_cli.session import Backend
 
 @handles(C.SetCell)
 def set_cell(state: RunState, cmd: C.SetCell, report: CommandReport) -> None:
-    from recon_cli.realism import load_profile
-    from recon_cli.robot.description import CellConfig, CellKind
 
     realism = state.options.realism or load_profile(script_realism(state.script, cmd))
     state.set_config(cell=CellConfig(kind=CellKind.parse(cmd.kind), safety_distance=cmd.safety_distance),
@@ -25,7 +27,6 @@ def set_cell(state: RunState, cmd: C.SetCell, report: CommandReport) -> None:
 
 @handles(C.SetObject)
 def set_object(state: RunState, cmd: C.SetObject, report: CommandReport) -> None:
-    from recon_cli.objects import load_object
 
     if state.options.object_name is not None:
         return
@@ -47,7 +48,6 @@ def set_box(state: RunState, cmd: C.SetBox, report: CommandReport) -> None:
 
 @handles(C.SetPlanner)
 def set_planner(state: RunState, cmd: C.SetPlanner, report: CommandReport) -> None:
-    from recon_cli.planning.planner import MotionPlanner
 
     state.set_config(planner=replace(state.config.planner, planner=cmd.name, time_limit=cmd.time,
                                      velocity_scale=cmd.velocity_scale, acceleration_scale=cmd.acceleration_scale))

@@ -59,7 +59,7 @@ class Acquisition:
     def __init__(self, cell: Cell, robot: RobotBackend, camera: CameraBackend, store: ScanStore,
                  rng: np.random.Generator, plan_options: PlanOptions = PlanOptions(),  # noqa: B008
                  depth_scale: float = 20000.0,
-                 ground_truth: Callable[[], dict] | None = None,
+                 ground_truth: Callable[[], dict | None] | None = None,
                  on_scan: Callable[[Scan], None] | None = None) -> None:
         self.cell = cell
         self.robot = robot
@@ -82,14 +82,15 @@ class Acquisition:
         return self._execute(self.planner.plan_to_joints(q0, goals, seed=int(self.rng.integers(1 << 30))), what)
 
     def _execute(self, plan: PlanResult, what: str) -> MoveReport:
-        if not plan.ok:
+        trajectory = plan.trajectory  # a solved plan has one
+        if not plan.ok or trajectory is None:
             raise PlanningError(f"cannot move to the {what}: {plan.status.value} ({plan.message})",
                                 hint="try another view, a longer planning time or another planner", status=plan.status)
-        execution = self.robot.execute(plan.trajectory)
+        execution = self.robot.execute(trajectory)
         if not execution.settled:
             raise self._not_settled(execution, what)
         q = self.robot.measured_joints()
-        dp, dr = pose_error(self.cell.kin.world_T_camera(q), self.cell.kin.world_T_camera(plan.trajectory.goal))
+        dp, dr = pose_error(self.cell.kin.world_T_camera(q), self.cell.kin.world_T_camera(trajectory.goal))
         return MoveReport(plan, execution, dp, dr)
 
     def _not_settled(self, execution: ExecutionReport, what: str) -> RobotFault:

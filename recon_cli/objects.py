@@ -96,13 +96,14 @@ class SceneObject:
         lo, hi = lo - margin, hi + margin
         return ObjectBox(tuple((lo + hi) / 2.0), tuple(hi - lo))
 
-    def crop_box(self, margin: float = 0.01) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    def crop_box(self, margin: float = 0.01) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """(centre, size) of the box that crops scans to the object: the world bounding box
         grown by ``margin`` sideways and upward, its bottom on the object's support plane."""
         lo, hi = self.world_aabb()
         lo = np.array([lo[0] - margin, lo[1] - margin, lo[2]])
         hi = hi + margin
-        return tuple(float(v) for v in (lo + hi) / 2.0), tuple(float(v) for v in hi - lo)
+        c, s = (lo + hi) / 2.0, hi - lo
+        return (float(c[0]), float(c[1]), float(c[2])), (float(s[0]), float(s[1]), float(s[2]))
 
     def mesh_world(self):
         import open3d as o3d

@@ -102,7 +102,9 @@ class Session:
         self.object_box = None if spec.board_only else self._object_box()
         self.cell = Cell(cfg.cell, object_box=self.object_box)
         self.start = named_configuration(cfg.cell.kind, "home", self.cell.joint_names)
-        self.station = self.store = self.acquisition = None
+        self.station: Station | None = None  # these three once the session is open (not with plan_only)
+        self.store: ScanStore | None = None
+        self.acquisition: Acquisition | None = None
         self.capabilities: Capabilities | None = None  # the station's, once it is open
         self.info: SessionInfo | None = None
         if plan_only:
@@ -124,13 +126,13 @@ class Session:
         spec, cfg = self.spec, self.spec.config
         sensor = motioncam_3d_m()
         box, obj = self.object_box, self.scene_object
-        if box is None:
+        if box is None or obj is None:
             crop = None
         elif spec.box is not None:
             crop = BoxInfo(tuple(box.center), tuple(box.size))
         else:
             c, s = obj.crop_box(cfg.scene.box_margin)
-            crop = BoxInfo(tuple(c), tuple(s))
+            crop = BoxInfo(c, s)
         self.station = open_station(spec.backend, self.cell, self.scene_object, self.start, self.rng, cfg,
                                     self.station_file)
         caps = self.capabilities = self.station.capabilities
@@ -142,7 +144,7 @@ class Session:
             object_box=None if box is None else BoxInfo(tuple(box.center), tuple(box.size)), crop_box=crop,
             world_T_marker=self.cell.world_T_marker, script=spec.script,
             realism=cfg.realism.summary() if caps.realism else None)
-        self.store = self._open_store()
+        self.store = self._open_store(self.info)
         if spec.recorder is not None:
             from recon_cli.recording.station import RecordedStation
 
@@ -162,13 +164,13 @@ class Session:
                                        ground_truth=self.station.ground_truth,
                                        on_scan=None if spec.recorder is None else spec.recorder.scan)
 
-    def _open_store(self):
+    def _open_store(self, info: SessionInfo) -> ScanStore:
 
         root = Path(self.spec.out)
         if not (self.spec.append and (root / "session.json").exists()):
-            return ScanStore.create(root, self.info.to_dict())
+            return ScanStore.create(root, info.to_dict())
         store = ScanStore(root)
-        old, mine = store.session(), self.info
+        old, mine = store.session(), info
         for label, get in (("backend", lambda s: s.backend), ("cell", lambda s: s.cell_kind),
                            ("object", lambda s: s.object_name)):
             if get(mine) != get(old):
@@ -250,4 +252,4 @@ def write_ground_truth_mesh(folder: Path, obj) -> Path:
     gt = Path(folder) / "ground_truth"
     gt.mkdir(exist_ok=True)
     return atomic_write(gt / f"{obj.name}.ply",
-                        lambda tmp: o3d.io.write_triangle_mesh(str(tmp), obj.mesh_world(), write_ascii=False))
+                        lambda tmp: o3d.io.write_triangle_mesh(str(tmp), obj.mesh_world(), write_ascii=False))  # type: ignore[arg-type]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol, TypeAlias
+from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeAlias, TypeVar
 
 import numpy as np
 
@@ -35,6 +35,9 @@ if TYPE_CHECKING:
 #: the typed section of a station file's ``robot:`` / ``camera:`` (one class per adapter)
 RobotConfig: TypeAlias = "AdsConfig | SimRobotConfig"
 CameraConfig: TypeAlias = "SimCameraConfig | GenICamConfig | RealSenseConfig | ReplayConfig"
+#: the config class of one robot / camera adapter
+RobotConfigT = TypeVar("RobotConfigT", bound=RobotConfig)
+CameraConfigT = TypeVar("CameraConfigT", bound=CameraConfig)
 
 
 class RobotPart(RobotBackend, Protocol):
@@ -59,30 +62,30 @@ class Surroundings:
 
 
 @dataclass(frozen=True)
-class RobotAdapter:
+class RobotAdapter(Generic[RobotConfigT]):
     """simulated: the part is a simulation; physical: it moves in real time (waits are real)."""
 
     name: str
     simulated: bool
     physical: bool
-    read: Callable[[dict, str], RobotConfig]
-    open: Callable[[RobotConfig, Surroundings], RobotPart]
+    read: Callable[[dict, str], RobotConfigT]
+    open: Callable[[RobotConfigT, Surroundings], RobotPart]
 
 
 @dataclass(frozen=True)
-class CameraAdapter:
+class CameraAdapter(Generic[CameraConfigT]):
     """As :class:`RobotAdapter`; cover_board: the part can lay a sheet over the printed board
     it sees (``cover_board(covered)``)."""
 
     name: str
     simulated: bool
     physical: bool
-    read: Callable[[dict, str], CameraConfig]
-    open: Callable[[CameraConfig, Surroundings, RobotBackend], CameraPart]
+    read: Callable[[dict, str], CameraConfigT]
+    open: Callable[[CameraConfigT, Surroundings, RobotBackend], CameraPart]
     cover_board: bool = False
 
 
-def station_capabilities(robot: RobotAdapter, camera: CameraAdapter) -> Capabilities:
+def station_capabilities(robot: RobotAdapter[Any], camera: CameraAdapter[Any]) -> Capabilities:
     """What a station of these two adapters can do: simulated (and knowing the ground truth)
     when both parts are; real waits when either part is physical."""
     simulated = robot.simulated and camera.simulated
@@ -138,12 +141,12 @@ def _driver_camera(module: str, config_class: str) -> tuple[Callable, Callable]:
     return read, open_camera
 
 
-ROBOT_ADAPTERS: dict[str, RobotAdapter] = {
+ROBOT_ADAPTERS: dict[str, RobotAdapter[Any]] = {
     "ads": RobotAdapter("ads", simulated=False, physical=True, read=_read_ads, open=_open_ads),
     "sim": RobotAdapter("sim", simulated=True, physical=False, read=_read_sim_robot, open=_open_sim_robot),
 }
 
-CAMERA_ADAPTERS: dict[str, CameraAdapter] = {
+CAMERA_ADAPTERS: dict[str, CameraAdapter[Any]] = {
     "sim": CameraAdapter("sim", simulated=True, physical=False, read=_read_sim_camera, open=_open_sim_camera,
                          cover_board=True),
     "genicam": CameraAdapter("genicam", False, True,

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,7 +19,10 @@ from recon_cli.lazy import lazy_module
 from recon_cli.paths import ROBOT_DIR
 from recon_cli.perception.camera_model import Intrinsics
 
-cv2 = lazy_module("cv2")
+if TYPE_CHECKING:
+    import cv2
+else:
+    cv2 = lazy_module("cv2")
 
 
 @dataclass(frozen=True)

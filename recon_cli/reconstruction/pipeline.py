@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -62,6 +63,13 @@ class ScanRecord:
 
     gauge: dict[str, np.ndarray] = field(default_factory=dict)  # see _set_gauges
 
+    @property
+    def placed_pose(self) -> GlobalPose:
+        """The global pose of a scan that has one (every scan that is not skipped)."""
+        if self.pose is None:
+            raise ValueError(f"scan {self.index} has no global pose")
+        return self.pose
+
     def pose_errors(self) -> dict[str, tuple[float, float]]:
         """[m, rad] against the truth (simulation only) of the global and the final pose, and
         of both relative to the first registered scan ("global_relative", "final_relative":
@@ -97,9 +105,9 @@ class ScanRecord:
 
 def _set_gauges(used: list[ScanRecord]) -> None:
     ref = used[0]
-    if ref.true_marker_T_camera is None:
+    if ref.true_marker_T_camera is None or ref.final_marker_T_camera is None:
         return
-    gauge = {"global": ref.true_marker_T_camera @ invert(ref.pose.marker_T_camera),
+    gauge = {"global": ref.true_marker_T_camera @ invert(ref.placed_pose.marker_T_camera),
              "final": ref.true_marker_T_camera @ invert(ref.final_marker_T_camera)}
     for r in used:
         r.gauge = gauge
@@ -130,7 +138,7 @@ class RegisterResult:
 
 
 def pose_source_counts(records: list[ScanRecord]) -> dict[str, int]:
-    return {s.value: sum(1 for r in records if r.pose.source is s) for s in PoseSource}
+    return {s.value: sum(1 for r in records if r.placed_pose.source is s) for s in PoseSource}
 
 
 def perturbed(T: np.ndarray, translation: float, rotation: float, rng: np.random.Generator) -> np.ndarray:
@@ -154,7 +162,7 @@ def _crop_box(options: RegisterOptions, session: SessionInfo, world_T_marker: np
             raise InputError("the session has no crop box", hint="pass --crop-box cx,cy,cz,sx,sy,sz")
         T = np.eye(4)
         T[:3, 3] = spec.center
-        box, frame = CropBox(T, tuple(spec.size)), spec.frame
+        box, frame = CropBox(T, spec.size), spec.frame
     if frame == "marker":
         return box
     if world_T_marker is None:
@@ -220,10 +228,10 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
 
     # 1. global registration, cropping, oriented normals (per scan)
     records: list[ScanRecord] = []
-    cloud_of: dict[int, object] = {}  # record position -> its cropped, oriented cloud
+    cloud_of: dict[int, Any] = {}  # record position -> its cropped, oriented cloud
 
     def add_cloud(pos: int, rec: ScanRecord, scan) -> None:
-        cloud = scan_cloud(scan, rec.pose, box, options.surface)
+        cloud = scan_cloud(scan, rec.placed_pose, box, options.surface)
         rec.points = len(cloud.points)
         if rec.points < 100:
             rec.skipped = f"{rec.points} points inside the crop box"
@@ -257,7 +265,7 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
                 rec.true_marker_T_camera = truth
                 if pose.source is PoseSource.CHARUCO:  # the board's own pose (thesis Table 4.2)
                     rec.charuco_error = pose_error(pose.source_pose, truth)
-            if correct:
+            if correct and world_T_marker is not None:
                 fk[len(records) - 1] = invert(world_T_marker) @ scan.world_T_camera_fk
             if correct and pose.source is PoseSource.KINEMATICS:
                 deferred.append((len(records) - 1, scan_folder))
@@ -266,13 +274,13 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
         step("global registration", k + 1, len(scan_folders))
     correction = None
     if deferred:
-        pairs = [(records[i].pose.source_pose, fk[i]) for i in fk
-                 if records[i].pose.source is PoseSource.CHARUCO and not records[i].skipped]
+        pairs = [(records[i].placed_pose.source_pose, fk[i]) for i in fk
+                 if records[i].placed_pose.source is PoseSource.CHARUCO and not records[i].skipped]
         correction = kinematic_correction([b for b, _ in pairs], [f for _, f in pairs])
         for i, scan_folder in deferred:
             rec, scan = records[i], read_scan(scan_folder)
             if correction is not None:
-                rec.pose = corrected_pose(scan, rec.pose, correction.apply(fk[i]), board, options.board_plane)
+                rec.pose = corrected_pose(scan, rec.placed_pose, correction.apply(fk[i]), board, options.board_plane)
             add_cloud(i, rec, scan)
     clouds = [cloud_of[i] for i, r in enumerate(records) if not r.skipped]
     used = [r for r in records if not r.skipped]
@@ -299,10 +307,10 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
         for c, T in zip(clouds, multiway.poses, strict=True):
             c.transform(T)
         for rec, T in zip(used, multiway.poses, strict=True):
-            rec.final_marker_T_camera = T @ rec.pose.marker_T_camera
+            rec.final_marker_T_camera = T @ rec.placed_pose.marker_T_camera
     else:
         for rec in used:
-            rec.final_marker_T_camera = rec.pose.marker_T_camera
+            rec.final_marker_T_camera = rec.placed_pose.marker_T_camera
     _set_gauges(used)
     t_local = time.perf_counter()
 

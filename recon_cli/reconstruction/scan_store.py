@@ -23,7 +23,7 @@ import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -44,7 +44,10 @@ from recon_cli.reconstruction.metadata import (
 )
 from recon_cli.serialization import to_jsonable
 
-cv2 = lazy_module("cv2")
+if TYPE_CHECKING:
+    import cv2
+else:
+    cv2 = lazy_module("cv2")
 
 SCAN_DIR = re.compile(r"^scan_(\d{4,})$")
 FORMAT_VERSION = SCAN_FORMAT

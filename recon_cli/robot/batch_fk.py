@@ -11,12 +11,17 @@ tests/robot/test_batch_fk.py checks it against pinocchio to 1e-12.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import numpy.typing as npt
 
 from recon_cli.lazy import lazy_module
 
-pin = lazy_module("pinocchio")
+if TYPE_CHECKING:
+    import pinocchio as pin
+else:
+    pin = lazy_module("pinocchio")
 
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}

@@ -25,6 +25,7 @@ import functools
 import itertools
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -41,8 +42,12 @@ from recon_cli.robot.pair_field import PairField
 from recon_cli.robot.shapes import CollisionShape
 from recon_cli.robot.urdf import attribute, child
 
-fcl = lazy_module("fcl")
-pin = lazy_module("pinocchio")
+if TYPE_CHECKING:
+    import fcl
+    import pinocchio as pin
+else:
+    fcl = lazy_module("fcl")
+    pin = lazy_module("pinocchio")
 
 OBJECT_LINK = "object"
 _FIELD_CACHE: dict[tuple[str, str, str], PairField] = {}

@@ -13,6 +13,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from enum import StrEnum
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -21,7 +22,10 @@ from recon_cli.lazy import lazy_module
 from recon_cli.robot.collision import CollisionModel
 from recon_cli.robot.kinematics import Kinematics
 
-pin = lazy_module("pinocchio")
+if TYPE_CHECKING:
+    import pinocchio as pin
+else:
+    pin = lazy_module("pinocchio")
 
 #: [m] a goal farther than this from the world origin (or not finite) is out of reach of any
 #: cell without a descent

@@ -8,13 +8,18 @@ which is the thesis order: base_joint_1, base_joint_2, arm_joint_1 ... arm_joint
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import numpy.typing as npt
 
 from recon_cli.lazy import lazy_module
 from recon_cli.robot.limits import JointLimits, limits_from_urdf
 
-pin = lazy_module("pinocchio")
+if TYPE_CHECKING:
+    import pinocchio as pin
+else:
+    pin = lazy_module("pinocchio")
 
 CAMERA_FRAME = "camera"
 MARKER_FRAME = "marker"

@@ -31,8 +31,12 @@ import numpy.typing as npt
 
 from recon_cli.lazy import lazy_module
 
-pin = lazy_module("pinocchio")
-coal = lazy_module("coal")
+if TYPE_CHECKING:
+    import coal
+    import pinocchio as pin
+else:
+    pin = lazy_module("pinocchio")
+    coal = lazy_module("coal")
 
 
 if TYPE_CHECKING:

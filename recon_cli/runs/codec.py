@@ -23,17 +23,23 @@ import typing
 from collections.abc import Mapping
 from functools import cache
 from pathlib import Path
-from typing import Any, Union
+from typing import TYPE_CHECKING, Any, TypeVar, Union, overload
 
 import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 #: a 4 x 4 homogeneous transform (rows), as a report file holds it
 Matrix = tuple[tuple[float, ...], ...]
 #: any JSON value (None, bool, number, text, list, object)
 JsonValue = Any
+#: a model class
+ModelT = TypeVar("ModelT", bound="DataclassInstance")
 
 
-def key(name: str) -> dict:
+def key(name: str) -> dict[str, str]:
     """Field metadata: the field is the file's key ``name``."""
     return {"key": name}
 
@@ -42,14 +48,22 @@ OMIT_NONE = {"omit_none": True}
 REST = {"rest": True}
 
 
-def matrix(value) -> Matrix | None:
+@overload
+def matrix(value: None) -> None: ...
+
+
+@overload
+def matrix(value: npt.ArrayLike) -> Matrix: ...
+
+
+def matrix(value: npt.ArrayLike | None) -> Matrix | None:
     """A pose (numpy array or nested lists) as a Matrix; None stays None."""
     if value is None:
         return None
     return tuple(tuple(float(x) for x in row) for row in np.asarray(value, dtype=float).tolist())
 
 
-def plain(value) -> JsonValue:
+def plain(value: Any) -> JsonValue:
     """``value`` with numpy scalars and arrays, paths, tuples, values with ``to_dict`` and
     dataclasses (models) turned into plain JSON values."""
     if value is None or isinstance(value, bool | str):
@@ -75,10 +89,10 @@ def plain(value) -> JsonValue:
     raise TypeError(f"not a JSON value: {type(value).__name__}")
 
 
-def to_json(model) -> dict[str, JsonValue]:
+def to_json(model: DataclassInstance) -> dict[str, JsonValue]:
     """The JSON object of a model (see the module docstring)."""
     out: dict[str, JsonValue] = {}
-    rest: Mapping = {}
+    rest: Mapping[Any, Any] = {}
     for f in dataclasses.fields(model):
         value = getattr(model, f.name)
         if f.metadata.get("rest"):
@@ -93,18 +107,18 @@ def to_json(model) -> dict[str, JsonValue]:
 
 
 @cache
-def _hints(cls) -> dict[str, Any]:
+def _hints(cls: type[DataclassInstance]) -> dict[str, Any]:
     return typing.get_type_hints(cls)
 
 
-def _convert(value: JsonValue, hint) -> Any:
+def _convert(value: JsonValue, hint: Any) -> Any:
     if hint is Any or value is None:
         return value
     origin = typing.get_origin(hint)
     if origin in (Union, types.UnionType):
-        args = [a for a in typing.get_args(hint) if a is not type(None)]
-        return _convert(value, args[0]) if len(args) == 1 else value
-    if dataclasses.is_dataclass(hint):
+        members = [a for a in typing.get_args(hint) if a is not type(None)]
+        return _convert(value, members[0]) if len(members) == 1 else value
+    if isinstance(hint, type) and dataclasses.is_dataclass(hint):
         return from_json(hint, value)
     if origin is tuple:
         args = typing.get_args(hint)
@@ -121,11 +135,11 @@ def _convert(value: JsonValue, hint) -> Any:
     return value
 
 
-def from_json(cls, data: Mapping[str, JsonValue]):
+def from_json(cls: type[ModelT], data: Mapping[str, JsonValue]) -> ModelT:
     """The model ``cls`` of a JSON object (missing keys take the field's default)."""
     hints = _hints(cls)
     kwargs: dict[str, Any] = {}
-    named = set()
+    named: set[str] = set()
     rest_field = None
     for f in dataclasses.fields(cls):
         if f.metadata.get("rest"):
@@ -140,6 +154,6 @@ def from_json(cls, data: Mapping[str, JsonValue]):
     return cls(**kwargs)
 
 
-def dumps(model) -> str:
+def dumps(model: DataclassInstance) -> str:
     """The text of a report file: the model's JSON, indented, with a final line break."""
     return json.dumps(to_json(model), indent=2) + "\n"

@@ -8,11 +8,15 @@ bounded nesting and integers, no duplicate keys) and checked against its schema 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from recon_cli.inputs.jsonfile import MAX_JSON_BYTES, load_json
 from recon_cli.inputs.jsonschemas import check
 from recon_cli.outputs import atomic_write_text
-from recon_cli.runs.codec import dumps, from_json
+from recon_cli.runs.codec import ModelT, dumps, from_json
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 
 def target(folder_or_path: Path, name: str) -> Path:
@@ -21,22 +25,22 @@ def target(folder_or_path: Path, name: str) -> Path:
     return p / name if p.is_dir() else p
 
 
-def write_model(path: Path, model) -> Path:
+def write_model(path: Path, model: DataclassInstance) -> Path:
     """``model`` as the JSON file ``path`` (atomically)."""
 
     return atomic_write_text(Path(path), dumps(model))
 
 
-def read_document(path: Path, schema: str, what: str) -> dict:
+def read_document(path: Path, schema: str, what: str) -> dict[str, Any]:
     """The checked JSON object of ``path`` (a MetadataError when it cannot be read or does
     not match ``schemas/<schema>``)."""
 
     path = Path(path)
-    data = load_json(path, what, MAX_JSON_BYTES)
+    data: dict[str, Any] = load_json(path, what, MAX_JSON_BYTES)
     check(data, schema, path, what)
     return data
 
 
-def read_model(path: Path, cls, schema: str, what: str):
+def read_model(path: Path, cls: type[ModelT], schema: str, what: str) -> ModelT:
     """The model ``cls`` of the report file ``path`` (see :func:`read_document`)."""
     return from_json(cls, read_document(path, schema, what))

@@ -21,6 +21,8 @@ import numpy as np
 
 from recon_cli.backends.adapters import CAMERA_ADAPTERS, ROBOT_ADAPTERS, CameraPart, RobotPart, Surroundings
 from recon_cli.backends.base import Backend, Capabilities, Station
+from recon_cli.backends.sim.rendered import RenderedCamera
+from recon_cli.backends.sim.robot import SimRobot
 from recon_cli.backends.sim.station import simulation_truth
 from recon_cli.backends.station_file import StationFile
 from recon_cli.errors import ReconError, RobotFault
@@ -38,12 +40,14 @@ class AdapterStation(Station):
         self.cell = cell
         self.scene_object = scene_object
         self.capabilities: Capabilities = station.capabilities
-        self.robot: RobotPart | None = None
-        self.camera: CameraPart | None = None
+        self._open_robot: RobotPart | None = None  # the parts close() has to release
+        self._open_camera: CameraPart | None = None
         around = Surroundings(cell, scene_object, start, rng)
         try:
-            self.robot = ROBOT_ADAPTERS[station.robot_adapter].open(station.robot, around)
-            self.camera = CAMERA_ADAPTERS[station.camera_adapter].open(station.camera, around, self.robot)
+            self.robot: RobotPart = ROBOT_ADAPTERS[station.robot_adapter].open(station.robot, around)
+            self._open_robot = self.robot
+            self.camera: CameraPart = CAMERA_ADAPTERS[station.camera_adapter].open(station.camera, around, self.robot)
+            self._open_camera = self.camera
         except BaseException:
             self.close()
             raise
@@ -53,18 +57,22 @@ class AdapterStation(Station):
         cell does not know it."""
         if not self.capabilities.ground_truth:
             return None
-
-        return simulation_truth(self.robot, self.camera.world_T_camera_truth(), self.scene_object)
+        robot, camera = self.robot, self.camera
+        # the parts of the sim adapters, the only simulated ones
+        assert isinstance(robot, SimRobot) and isinstance(camera, RenderedCamera)
+        return simulation_truth(robot, camera.world_T_camera_truth(), self.scene_object)
 
     def cover_board(self, covered: bool) -> None:
         if not self.capabilities.cover_board:
             super().cover_board(covered)
-        self.camera.cover_board(covered)
+        camera = self.camera
+        assert isinstance(camera, RenderedCamera)  # the sim adapter's, the only one that covers the board
+        camera.cover_board(covered)
 
     def close(self) -> None:
         """Stop the robot, then release robot and camera (idempotent)."""
-        robot, camera = self.robot, self.camera
-        self.robot = self.camera = None
+        robot, camera = self._open_robot, self._open_camera
+        self._open_robot = self._open_camera = None
         try:
             if robot is not None:
                 robot.close()

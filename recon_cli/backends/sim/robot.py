@@ -13,6 +13,7 @@ joint slower than ``velocity``, for ``hold`` seconds.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,7 +24,10 @@ from recon_cli.lazy import lazy_module
 from recon_cli.planning.trajectory import Trajectory
 from recon_cli.robot.kinematics import Kinematics
 
-pin = lazy_module("pinocchio")
+if TYPE_CHECKING:
+    import pinocchio as pin
+else:
+    pin = lazy_module("pinocchio")
 
 
 @dataclass(frozen=True)

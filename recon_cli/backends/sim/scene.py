@@ -14,6 +14,7 @@ import dataclasses
 import functools
 import os
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from lxml import etree
@@ -29,7 +30,10 @@ from recon_cli.robot.description import CellConfig, expand_urdf
 from recon_cli.robot.limits import limits_from_urdf
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # read when MuJoCo is first used
-mujoco = lazy_module("mujoco")
+if TYPE_CHECKING:
+    import mujoco
+else:
+    mujoco = lazy_module("mujoco")
 
 CAMERA_NAME = "depth_camera"
 BOARD_PRINT_NAME = "charuco_print"

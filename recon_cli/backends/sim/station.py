@@ -38,6 +38,8 @@ class SimStation(Station):
     as a context manager) to free the offscreen renderer."""
 
     capabilities = Capabilities(simulated=True, ground_truth=True, cover_board=True, realism=True)
+    robot: SimRobot
+    camera: SimCamera
 
     def __init__(self, cell: Cell, scene_object: SceneObject | None, start: np.ndarray,
                  rng: np.random.Generator, noise: bool = DEFAULTS.sensor.noise,

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from lxml import etree
@@ -31,7 +32,10 @@ from recon_cli.realism import KinematicErrors, PoseError
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.description import CellConfig, CellKind, expand_urdf
 
-pin = lazy_module("pinocchio")
+if TYPE_CHECKING:
+    import pinocchio as pin
+else:
+    pin = lazy_module("pinocchio")
 
 FLANGE_FRAME = "arm_link_7"
 

@@ -5,6 +5,13 @@ import stands, yet loads the library only when one of its attributes is first re
 command's ``--help``, shell completion and the commands that never compute kinematics, render
 or detect a board start without loading pinocchio, MuJoCo, FCL or OpenCV. Lighter libraries
 (numpy, typer, lxml, yaml) and recon's own modules are imported as usual.
+
+The type checker sees the plain import, so that the library's classes can annotate::
+
+    if TYPE_CHECKING:
+        import pinocchio as pin
+    else:
+        pin = lazy_module("pinocchio")
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ same table), so that no value can switch a safety check off."""
 from __future__ import annotations
 
 import re
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import dataclass, field, fields
 
 from recon_cli.errors import InputError
 from recon_cli.inputs.numbers import in_range, integer, range_text, real
@@ -228,6 +228,6 @@ class AdsConfig:
             if key not in known:
                 raise InputError(f"{where}.{key} is not a known key", hint=f"known keys: {', '.join(sorted(known))}")
         kw = {key: _field(key, value, _at(d, key, where)) for key, value in d.items()}
-        values = {f.name: f.default_factory() if f.default is MISSING else f.default for f in fields(cls)}
+        values = {f.name: f.default_factory() if callable(f.default_factory) else f.default for f in fields(cls)}
         _together({**values, **kw}, lambda key: _at(d, key, where))
         return cls(**kw)

@@ -417,7 +417,7 @@ class GenICamCamera:
             if str(name) not in DISTANCE_UNITS:
                 log.warning("Scan3dDistanceUnit of the device is %s: range data taken as millimetres "
                             "(set camera.genicam.depth_unit)", "missing" if name is None else repr(name))
-        return Coordinates(tuple(scale), tuple(offset), invalid, float(unit))
+        return Coordinates((scale[0], scale[1], scale[2]), (offset[0], offset[1], offset[2]), invalid, float(unit))
 
     def _setup_trigger(self) -> str:
         nm = self._nm
@@ -467,13 +467,14 @@ class GenICamCamera:
 
     def _grab(self) -> RGBDFrame:
         """Drop ``skip_frames`` frames, convert the next one (each triggered in software mode)."""
-        frame = None
+        frame: RGBDFrame | None = None
         for k in range(self.cfg.skip_frames + 1):
             if self.trigger == "software":
                 self._nm.TriggerSoftware.execute()
             with self._ia.fetch(timeout=self.cfg.timeout) as buffer:
                 if k == self.cfg.skip_frames:
                     frame = self._frame(buffer)
+        assert frame is not None  # the last pass converted one
         return frame
 
     def _drain(self, limit: int = 64) -> None:
@@ -485,7 +486,8 @@ class GenICamCamera:
             stale.queue()
 
     def _frame(self, buffer) -> RGBDFrame:
-        ranges, textures = [], []
+        ranges: list[tuple[str, np.ndarray, int, int]] = []
+        textures: list[tuple[str, np.ndarray, int, int]] = []
         for comp in buffer.payload.components:
             fmt = str(comp.data_format)
             item = (fmt, np.array(comp.data, copy=True), int(comp.width), int(comp.height))

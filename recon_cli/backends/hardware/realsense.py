@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -149,7 +150,7 @@ class RealSenseCamera:
                                   adapter=ADAPTER, hint="leave camera.realsense.depth_units out") from None
         self.depth_units = float(depth_sensor.get_option(rs.option.depth_units)) \
             if depth_sensor.supports(rs.option.depth_units) else 0.001
-        profiles = {}
+        profiles: dict[int, tuple[Any, list[Any]]] = {}  # id -> the sensor and its stream profiles
         for sensor, profile in ((depth_sensor, depth_profile), (color_sensor, color_profile)):
             profiles.setdefault(id(sensor), (sensor, []))[1].append(profile)
         self._sensors = []

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import logging
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -278,7 +279,7 @@ def image_frames(cfg: ReplayConfig, folder: Path) -> list[RecordedFrame]:
     if poses is not None and len(poses) != len(depth_files):
         raise FileError(f"{poses_path}: {len(poses)} poses for {len(depth_files)} frames",
                         hint="one pose line per frame, in the frames' order")
-    frames = []
+    frames: list[RecordedFrame] = []
     for k, (c, d) in enumerate(zip(color_files, depth_files, strict=True)):
         frames.append(RecordedFrame(k, d.stem, c, d, None, cfg.distortion, None if poses is None else poses[k],
                                     cfg.depth_scale, focal=values))
@@ -288,7 +289,7 @@ def image_frames(cfg: ReplayConfig, folder: Path) -> list[RecordedFrame]:
 def store_frames(folder: Path) -> list[RecordedFrame]:
     """The scans of a recon scan store (each read and checked when played)."""
 
-    frames = []
+    frames: list[RecordedFrame] = []
     for _, scan_folder in ScanStore(folder).scan_folders():
         if not (scan_folder / "scan.json").exists():
             continue
@@ -339,7 +340,6 @@ def load_frame(frame: RecordedFrame) -> RGBDFrame:
         depth = np.where(np.isfinite(raw), raw, 0.0).astype(np.float64)
     depth[depth < 0] = 0.0
     h, w = depth.shape
-    color = None
     if frame.color_path is not None:
         bgr = _read_image(read_color, frame.color_path, "colour image")
         if bgr.shape[:2] != (h, w):
@@ -349,7 +349,10 @@ def load_frame(frame: RecordedFrame) -> RGBDFrame:
         color = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
     else:
         color = np.zeros((h, w, 3), np.uint8)
-    K = frame.intrinsics or Intrinsics(w, h, *frame.focal)
+    K = frame.intrinsics
+    if K is None:
+        assert frame.focal is not None  # a frame of an image folder has the configured values
+        K = Intrinsics(w, h, *frame.focal)
     return RGBDFrame(color, depth, K, _stamp(frame), frame.distortion)
 
 
@@ -437,7 +440,12 @@ def data_crop_box(frames: list[tuple[RGBDFrame, np.ndarray]], quantile: float = 
     lo, hi = np.quantile(pts, quantile, axis=0), np.quantile(pts, 1.0 - quantile, axis=0)
     pad = (hi - lo) * margin
     lo, hi = lo - pad, hi + pad
-    return tuple(map(float, (lo + hi) / 2)), tuple(map(float, np.maximum(hi - lo, 1e-3)))
+    return _xyz((lo + hi) / 2), _xyz(np.maximum(hi - lo, 1e-3))
+
+
+def _xyz(values: Iterable[float]) -> tuple[float, float, float]:
+    x, y, z = map(float, values)
+    return x, y, z
 
 
 def _strided(K: Intrinsics, s: int) -> Intrinsics:
@@ -467,15 +475,15 @@ def import_recording(source: ReplayConfig | str | Path, store: Path, *, crop_box
     store = Path(store)
     if store.exists() and ScanStore(store).scan_folders():
         raise FileError(f"{store} already holds scans", hint="import into a new folder")
-    loaded = [(load_frame(f), f.world_T_camera) for f in frames]
-    box = None
+    loaded = [(load_frame(f), T) for f in frames if (T := f.world_T_camera) is not None]  # all (checked above)
+    box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     if isinstance(crop_box, str):
         if crop_box != "auto":
             raise InputError(f"crop_box = {crop_box!r}", hint="'auto', (centre, size) or None")
         box = data_crop_box(loaded)
     elif crop_box is not None:
         center, size = crop_box
-        box = (tuple(map(float, center)), tuple(map(float, size)))
+        box = (_xyz(center), _xyz(size))
     session = {"backend": "hardware", "sensor": "replay", "world_T_marker": np.eye(4).tolist(),
                "recording": {"source": str(cfg.source), "frames": len(frames), "name": name or Path(cfg.source).name}}
     if box is not None:

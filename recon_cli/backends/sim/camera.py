@@ -69,13 +69,15 @@ def resample_rgbd(color: np.ndarray, depth: np.ndarray, map_x: np.ndarray, map_y
     smooth (spans < SMOOTH_DEPTH_RANGE) and nearest elsewhere; 0 outside the render."""
     import cv2
 
-    border = {"borderMode": cv2.BORDER_CONSTANT, "borderValue": 0}
-    color_out = cv2.remap(color, map_x, map_y, cv2.INTER_LINEAR, **border)
+    def remap(image: np.ndarray, interpolation: int) -> np.ndarray:
+        return cv2.remap(image, map_x, map_y, interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+    color_out = remap(color, cv2.INTER_LINEAR)
     kernel = np.ones((3, 3), np.uint8)
     span = cv2.dilate(depth, kernel) - cv2.erode(np.where(depth > 0, depth, np.inf), kernel)
-    smooth = cv2.remap((span < SMOOTH_DEPTH_RANGE).astype(np.uint8), map_x, map_y, cv2.INTER_NEAREST, **border)
-    near = cv2.remap(depth, map_x, map_y, cv2.INTER_NEAREST, **border)
-    linear = cv2.remap(depth, map_x, map_y, cv2.INTER_LINEAR, **border)
+    smooth = remap((span < SMOOTH_DEPTH_RANGE).astype(np.uint8), cv2.INTER_NEAREST)
+    near = remap(depth, cv2.INTER_NEAREST)
+    linear = remap(depth, cv2.INTER_LINEAR)
     return color_out, np.where(smooth > 0, linear, near)
 
 

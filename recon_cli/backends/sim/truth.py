@@ -31,6 +31,7 @@ from recon_cli.lazy import lazy_module
 from recon_cli.realism import KinematicErrors, PoseError
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.description import CellConfig, CellKind, expand_urdf
+from recon_cli.robot.urdf import attribute, child
 
 if TYPE_CHECKING:
     import pinocchio as pin
@@ -80,7 +81,7 @@ def _joint_origin(urdf: str, joint: str) -> np.ndarray:
     """The origin of a joint of a URDF as a 4 x 4 transform (parent link -> child link)."""
 
     root = etree.fromstring(urdf.encode())
-    origin = root.find(f"joint[@name='{joint}']/origin")
+    origin = child(root, f"joint[@name='{joint}']/origin")
     xyz = [float(v) for v in (origin.get("xyz") or "0 0 0").split()]
     rpy = [float(v) for v in (origin.get("rpy") or "0 0 0").split()]
     T = np.eye(4)
@@ -93,10 +94,10 @@ def _joint_origin(urdf: str, joint: str) -> np.ndarray:
 def _all_joint_names() -> frozenset[str]:
     """Movable joints of either cell (a profile may name joints of the other cell)."""
 
-    names = set()
+    names: set[str] = set()
     for kind in CellKind:
         root = etree.fromstring(expand_urdf(CellConfig(kind=kind)).encode())
-        names |= {j.get("name") for j in root.iter("joint") if j.get("type") != "fixed"}
+        names |= {attribute(j, "name") for j in root.iter("joint") if j.get("type") != "fixed"}
     return frozenset(names)
 
 

@@ -7,6 +7,8 @@ import contextlib
 import ctypes
 import io
 import re
+from collections.abc import Iterator
+from types import ModuleType
 
 from recon_cli.inputs.images import native_output_captured
 
@@ -14,7 +16,7 @@ _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
 @contextlib.contextmanager
-def _open3d_quiet():
+def _open3d_quiet() -> Iterator[tuple[ModuleType, list[str]]]:
     """Open3D with its logging at warnings (it raises its errors) and its messages captured:
     the process's stdout and stderr (rply prints its read errors there directly) and
     Python's (Open3D's logger prints through Python); yields (open3d, a list that

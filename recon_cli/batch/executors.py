@@ -22,12 +22,16 @@ import uuid
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from recon_cli import install_hint
 from recon_cli.batch.job import lost_job, run_job, stop_all
 from recon_cli.batch.result import JobResult
 from recon_cli.batch.spec import JobSpec
 from recon_cli.errors import InputError, ReconError, UnknownNameError
+
+if TYPE_CHECKING:
+    from distributed import Future
 
 INSTALL_HINT = install_hint("cluster")
 
@@ -122,7 +126,7 @@ class DaskExecutor(Executor):
         self.workers = sum(nthreads) or 0
         self.dashboard = getattr(self._client, "dashboard_link", None)
         self.description = f"{where}, {len(nthreads)} workers, {self.workers} threads"
-        self._futures = []
+        self._futures: list[Future] = []
 
     def results(self, tasks):
         distributed = _import_distributed()

@@ -199,7 +199,7 @@ def run_job(job: JobSpec, folder: Path) -> JobResult:
         tries = f" ({len(attempts)} attempts)" if len(attempts) > 1 else ""
         status, reason = JobStatus.ERROR, f"{last.infrastructure}{tries}"
     elif last.exit_code != 0:
-        meaning = EXIT_MEANING.get(last.exit_code, "")
+        meaning = "" if last.exit_code is None else EXIT_MEANING.get(last.exit_code, "")
         detail = _last_error(tail)
         status = JobStatus.FAILED
         reason = f"exit code {last.exit_code}" + (f" ({meaning})" if meaning else "") + (f": {detail}" if detail

@@ -35,7 +35,7 @@ def _details(r: JobResult) -> str:
     return "\n".join(lines)
 
 
-def junit_xml(batch: BatchResult) -> ET.ElementTree:
+def junit_xml(batch: BatchResult) -> ET.ElementTree[ET.Element]:
     """The JUnit XML of a batch."""
     counts = batch.counts
     failures = counts["failed"] + counts["timeout"]
@@ -113,7 +113,8 @@ def write_reports(batch: BatchResult, extra: dict[str, Path | None]) -> dict[str
     names = {"junit": "junit.xml", "json": "summary.json", "markdown": "summary.md"}
     written: dict[str, Path] = {}
     for key, name in names.items():
-        targets = [batch.folder / name] + ([Path(extra[key])] if extra.get(key) else [])
+        copy = extra.get(key)
+        targets = [batch.folder / name] + ([Path(copy)] if copy else [])
         for target in targets:
             target.parent.mkdir(parents=True, exist_ok=True)
             if key == "json":

@@ -60,11 +60,14 @@ def _folder(options: BatchOptions) -> Path:
         raise FileError("--resume needs the folder of the batch to resume", hint="give it with --out")
     if out is not None and options.resume and not (out / "batch.json").is_file():
         raise FileError(f"{out} holds no batch to resume (no batch.json)", hint="run it without --resume first")
-    claim = dict(command="batch", append="--resume to finish the batch in it")
+
+    def claim() -> Path:
+        return claim_output(out, mode, command="batch", append="--resume to finish the batch in it").path
+
     if mode is OutputMode.FORCE and out is not None and out.is_dir() and not (out / ".lock").is_symlink():
         with _Lock(out):  # not while another batch runs in it
-            return claim_output(out, mode, **claim).path
-    return claim_output(out, mode, **claim).path
+            return claim()
+    return claim()
 
 
 class _Lock:

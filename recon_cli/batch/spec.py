@@ -34,7 +34,7 @@ import itertools
 import math
 import re
 import sys
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
@@ -111,6 +111,10 @@ class Expectations:
     def merged(self, over: Expectations) -> Expectations:
         """These expectations with every bound ``over`` sets replaced."""
         return dataclasses.replace(self, **{k: v for k, v in dataclasses.asdict(over).items() if v is not None})
+
+    def only(self, keys: Collection[str]) -> Expectations:
+        """These expectations without the bounds whose names are not in ``keys``."""
+        return dataclasses.replace(self, **{k: None for k in dataclasses.asdict(self) if k not in keys})
 
     def items(self) -> list[tuple[str, float]]:
         return [(k, v) for k, v in dataclasses.asdict(self).items() if v is not None]
@@ -266,7 +270,7 @@ def _known_keys(mapping, keys, loc: Loc) -> None:
             raise InputError(f"{loc.at(mapping, k)}: unknown key", hint="known keys: " + ", ".join(keys))
 
 
-def _mapping(value, loc: Loc, what: str) -> Map:
+def _mapping(value, loc: Loc, what: str) -> dict:
     if value is None:
         return Map()
     if not isinstance(value, dict):
@@ -274,26 +278,52 @@ def _mapping(value, loc: Loc, what: str) -> Map:
     return value
 
 
-def _number(value, loc: Loc, *, integer: bool = False, positive: bool = False) -> float:
+def _check_number(value, loc: Loc, *, integer: bool, positive: bool) -> None:
     ok = isinstance(value, int | float) and not isinstance(value, bool) and value == value
     if ok and integer and not float(value).is_integer():
         ok = False
     if not ok or value < 0 or (positive and value == 0) or value == float("inf"):
         kind = "a whole number" if integer else "a number"
         raise InputError(f"{loc}: {value!r} is not {kind} {'> 0' if positive else '>= 0'}")
-    return int(value) if integer else float(value)
+
+
+def _number(value, loc: Loc, *, positive: bool = False) -> float:
+    _check_number(value, loc, integer=False, positive=positive)
+    return float(value)
+
+
+def _whole(value, loc: Loc) -> int:
+    _check_number(value, loc, integer=True, positive=False)
+    return int(value)
 
 
 def _expectations(value, loc: Loc, kind: JobKind | None) -> Expectations:
     m = _mapping(value, loc, "expect")
     _known_keys(m, tuple(METRICS), loc)
-    bounds = {}
+    bounds: dict[str, float] = {}
+    failures: int | None = None
     for key, bound in m.items():
         if kind is not None and key not in MEASURES[kind]:
             raise InputError(f"{loc.at(m, key)}: a {kind.value} job does not measure this",
                              hint=f"a {kind.value} job can expect: {', '.join(sorted(MEASURES[kind]))}")
-        bounds[key] = _number(bound, loc.at(m, key), integer=key == "max_planning_failures")
-    return Expectations(**bounds)
+        if key == "max_planning_failures":
+            failures = _whole(bound, loc.at(m, key))
+        else:
+            bounds[key] = _number(bound, loc.at(m, key))
+    return Expectations(min_coverage_pct=bounds.get("min_coverage_pct"), max_std_mm=bounds.get("max_std_mm"),
+                        max_pose_error_mm=bounds.get("max_pose_error_mm"), max_planning_failures=failures,
+                        max_wall_time_s=bounds.get("max_wall_time_s"))
+
+
+@dataclass(frozen=True)
+class _Defaults:
+    """A batch file's ``defaults:`` (None: not set there)."""
+
+    expect: Expectations = Expectations()
+    env: tuple[tuple[str, str], ...] = ()
+    options: dict = field(default_factory=dict)
+    timeout_s: float | None = None
+    retries: int | None = None
 
 
 #: environment variables a job may not set: they choose which code the interpreter, the
@@ -364,7 +394,7 @@ def _uses(text, key: str) -> bool:
     return isinstance(text, str) and f"{{{key}}}" in text
 
 
-def _expand(path: Path, entry: Map, loc: Loc, defaults: dict, overrides: Overrides,
+def _expand(path: Path, entry: dict, loc: Loc, defaults: _Defaults, overrides: Overrides,
             commands: Commands) -> list[JobSpec]:
     """The jobs of one entry of ``jobs:`` (one per matrix combination)."""
     base = path.parent.resolve()
@@ -428,16 +458,17 @@ def _expand(path: Path, entry: Map, loc: Loc, defaults: dict, overrides: Overrid
     if "timeout_s" in entry:
         timeout = _number(entry["timeout_s"], loc.at(entry, "timeout_s"), positive=True)
     else:
-        timeout = overrides.timeout_s or defaults.get("timeout_s", DEFAULT_TIMEOUT_S)
+        timeout = overrides.timeout_s or (DEFAULT_TIMEOUT_S if defaults.timeout_s is None else defaults.timeout_s)
     if "retries" in entry:
-        retries = _number(entry["retries"], loc.at(entry, "retries"), integer=True)
+        retries = _whole(entry["retries"], loc.at(entry, "retries"))
+    elif overrides.retries is not None:
+        retries = overrides.retries
     else:
-        retries = overrides.retries if overrides.retries is not None else defaults.get("retries", DEFAULT_RETRIES)
+        retries = DEFAULT_RETRIES if defaults.retries is None else defaults.retries
     own = _expectations(entry.get("expect"), loc.at(entry, "expect"), kind)
-    inherited = Expectations(**{k: v for k, v in defaults["expect"].items() if k in MEASURES[kind]})
-    expect = inherited.merged(own)
-    env = defaults["env"] + _env(entry.get("env"), loc.at(entry, "env"))
-    default_options = {k: v for k, v in defaults["options"].items()
+    expect = defaults.expect.only(MEASURES[kind]).merged(own)
+    env = defaults.env + _env(entry.get("env"), loc.at(entry, "env"))
+    default_options = {k: v for k, v in defaults.options.items()
                        if k in command_keys and k not in options and k not in matrix}
     name_template = entry.get("name")
     if name_template is not None and not isinstance(name_template, str):
@@ -488,16 +519,14 @@ def load_batch_file(path: Path, commands: Commands, overrides: Overrides = Overr
     d_loc = top.at(data, "defaults")
     d = _mapping(data.get("defaults"), d_loc, "defaults")
     _known_keys(d, _DEFAULT_KEYS, d_loc)
-    defaults = {"expect": _expectations(d.get("expect"), d_loc.at(d, "expect"), None),
-                "env": _env(d.get("env"), d_loc.at(d, "env")),
-                "options": _mapping(d.get("options"), d_loc.at(d, "options"), "options")}
-    if "timeout_s" in d:
-        defaults["timeout_s"] = _number(d["timeout_s"], d_loc.at(d, "timeout_s"), positive=True)
-    if "retries" in d:
-        defaults["retries"] = _number(d["retries"], d_loc.at(d, "retries"), integer=True)
-    for key in defaults["options"]:
+    defaults = _Defaults(
+        _expectations(d.get("expect"), d_loc.at(d, "expect"), None), _env(d.get("env"), d_loc.at(d, "env")),
+        _mapping(d.get("options"), d_loc.at(d, "options"), "options"),
+        _number(d["timeout_s"], d_loc.at(d, "timeout_s"), positive=True) if "timeout_s" in d else None,
+        _whole(d["retries"], d_loc.at(d, "retries")) if "retries" in d else None)
+    for key in defaults.options:
         if key in RESERVED or not any(key in commands.options(k) for k in JobKind):
-            raise InputError(f"{d_loc.at(d, 'options').at(defaults['options'], key)}: no job command has this "
+            raise InputError(f"{d_loc.at(d, 'options').at(defaults.options, key)}: no job command has this "
                              "option, or a batch sets it itself")
     entries = data.get("jobs")
     if not isinstance(entries, list) or not entries:

@@ -84,12 +84,13 @@ def run_planner_bench(planners: list[str], n: int, time_limit: float, seed: int,
         for k, request_seed in enumerate(seeds):
             t0 = time.perf_counter()
             r = planner.plan_to_joints(TABLE_4_1_START, TABLE_4_1_GOAL, seed=request_seed)
+            trajectory = r.trajectory if r.ok else None
             total = time.perf_counter() - t0
             plan_time = r.plan_time + r.simplify_time
             rows.append(RequestRow(
                 name, k, r.ok, r.status.value, plan_time, r.plan_time, r.simplify_time,
                 max(total - plan_time, 0.0) if r.ok else 0.0, r.path_length if r.ok else float("nan"),
-                r.trajectory.duration if r.ok else float("nan"), request_seed))
+                float("nan") if trajectory is None else trajectory.duration, request_seed))
             if progress:
                 progress(name, k + 1, n)
     return rows
@@ -130,7 +131,9 @@ def _box_plot(path: Path, rows: list[RequestRow], thesis: dict[str, np.ndarray],
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    labels, data, colors = [], [], []
+    labels: list[str] = []
+    data: list[list[float] | np.ndarray] = []
+    colors: list[str] = []
     for name in dict.fromkeys(r.planner for r in rows):
         t = [r.plan_time for r in rows if r.planner == name and r.solved]
         if t:
@@ -141,9 +144,9 @@ def _box_plot(path: Path, rows: list[RequestRow], thesis: dict[str, np.ndarray],
         labels.append("RRTConnect\n(mplib)")
         data.append(peer["times"])
         colors.append("#3a9e4f")
-    for name, t in thesis.items():
+    for name, times in thesis.items():
         labels.append(f"{name}\n(thesis, MoveIt)")
-        data.append(t)
+        data.append(times)
         colors.append("#c0504d")
     fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(labels)), 4.5))
     box = ax.boxplot(data, patch_artist=True, showfliers=True)

@@ -50,7 +50,7 @@ class CaseRow:
     mean_mm: float
     std_mm: float
     within_half_mm: float
-    coverage_visible: float
+    coverage_visible: float | None  # None without camera views
     coverage: float
     pose_error_mm: float  # mean final camera pose error vs truth
     pose_error_deg: float
@@ -104,7 +104,7 @@ def run_registration_bench(out: Path, object_name: str = "auto", seed: int = DEF
             progress("registration cases", k + 1, len(cases))
     first: RegisterResult = results[CASES[0][0]]
     kinematic = _kinematic_errors(scans)
-    table_4_2 = [{"scan": r.index + 1, "source": r.pose.source.value, "corners": r.pose.corners,
+    table_4_2 = [{"scan": r.index + 1, "source": r.placed_pose.source.value, "corners": r.placed_pose.corners,
                   "translation_mm": None if r.charuco_error is None else r.charuco_error[0] * 1e3,
                   "rotation_deg": None if r.charuco_error is None else float(np.degrees(r.charuco_error[1])),
                   "kinematics_translation_mm": kinematic.get(r.index, (None, None))[0],
@@ -125,7 +125,7 @@ def run_registration_bench(out: Path, object_name: str = "auto", seed: int = DEF
         "object": capture.scene_object.name, "views": len(capture.scans), "resolution": resolution,
         "realism": realism.summary(),
         "covered_views": sorted(COVERED_VIEWS), "capture_s": capture.total_seconds,
-        "noise_sigma_at_0.6m_mm": float(motioncam_3d_m().sigma(0.6) * 1e3),
+        "noise_sigma_at_0.6m_mm": float(motioncam_3d_m().sigma(np.asarray(0.6)) * 1e3),
         "table_4_2": table_4_2,
         "charuco_mean": {"translation_mm": float(np.mean([t["translation_mm"] for t in found])),
                          "rotation_deg": float(np.mean([t["rotation_deg"] for t in found]))},

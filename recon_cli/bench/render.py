@@ -6,12 +6,13 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import numpy as np
+from rich.console import JustifyMethod
 from rich.table import Table
 
 THESIS_TABLE_4_2 = "thesis Table 4.2: 1.532 mm, 0.0853°"
 
 
-def _table(title: str, columns: tuple[str, ...], justify: str = "right") -> Table:
+def _table(title: str, columns: tuple[str, ...], justify: JustifyMethod = "right") -> Table:
     table = Table(title=title)
     for col in columns:
         table.add_column(col, justify=justify)
@@ -68,8 +69,9 @@ def registration_report(data: dict) -> Iterator:
     table = _table(f"fused cloud vs ground truth (noise sigma at 0.6 m: {data['noise_sigma_at_0.6m_mm']:.3f} mm)",
                    ("case", "mean", "std", "±0.5 mm", "coverage (visible)", "pose error", "relative", "time"))
     for r in data["cases"]:
-        table.add_row(r.case, f"{r.mean_mm:+.3f} mm", f"{r.std_mm:.3f} mm", f"{r.within_half_mm * 100:.1f} %",
-                      f"{r.coverage_visible * 100:.2f} %", f"{r.pose_error_mm:.3f} mm / {r.pose_error_deg:.4f}°",
+        visible = "-" if r.coverage_visible is None else f"{r.coverage_visible * 100:.2f} %"
+        table.add_row(r.case, f"{r.mean_mm:+.3f} mm", f"{r.std_mm:.3f} mm", f"{r.within_half_mm * 100:.1f} %", visible,
+                      f"{r.pose_error_mm:.3f} mm / {r.pose_error_deg:.4f}°",
                       f"{r.relative_error_mm:.3f} mm / {r.relative_error_deg:.4f}°", f"{r.seconds:.1f} s")
     yield table
 

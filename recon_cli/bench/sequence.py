@@ -88,9 +88,10 @@ class SequenceProblem:
         # previous vertex's joints (script order), re-samples from random seeds
         configs = [self.start]
         for k in range(1, len(self.poses) + 1):
-            configs.append(self.ik(k, rng, configs[-1]))
-            if configs[-1] is None:
+            q = self.ik(k, rng, configs[-1])
+            if q is None:
                 raise RuntimeError(f"view {k} of eq. 4.1 has no IK solution")
+            configs.append(q)
         return ViewGraph(configs, self.lower_bound)
 
 
@@ -102,12 +103,13 @@ def run_case(problem: SequenceProblem, case: str, seed: int, beta: float = 1.5, 
         for T in problem.poses:
             r = problem.planner.plan_to_pose(q, T, rng)
             requests += r.attempts
-            if not r.ok:
+            trajectory = r.trajectory if r.ok else None
+            if trajectory is None:
                 total = np.inf
                 break
-            total += r.trajectory.duration
-            ratios.append(r.trajectory.duration / max(problem.lower_bound(q, r.trajectory.goal), 1e-9))
-            q = r.trajectory.goal
+            total += trajectory.duration
+            ratios.append(trajectory.duration / max(problem.lower_bound(q, trajectory.goal), 1e-9))
+            q = trajectory.goal
         order = list(range(len(problem.poses) + 1))
         return RunRow(case, seed, float(total), requests, time.perf_counter() - t0, order,
                       float(np.mean(ratios)) if ratios else float("nan"))

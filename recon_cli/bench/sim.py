@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from recon_cli.backends.sim.station import SimStation
 from recon_cli.config import DEFAULTS, SceneConfig, SensorConfig
 from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.lazy import lazy_module
@@ -63,6 +64,7 @@ def run_sim_bench(out: Path, object_name: str = "drill", seed: int = 0,
     config = DEFAULTS.replace(scene=SceneConfig(object_name), sensor=SensorConfig(noise=True), seed=seed)
     with open_session(SessionSpec(out / "scans", config, Mode.BENCHMARK, run={"command": "bench sim"}), rng) as s:
         station, cell, obj, home = s.station, s.cell, s.scene_object, s.start
+        assert isinstance(station, SimStation) and obj is not None  # an open simulation session of an object
         views = eq_4_1_views()
         for i, view in enumerate(views, start=1):
             ik = cell.solve_view(view, rng, options=IKOptions(max_solutions=1))
@@ -89,11 +91,12 @@ def run_sim_bench(out: Path, object_name: str = "drill", seed: int = 0,
         planner = MotionPlanner(cell, PlanOptions())
         plan = planner.plan_to_pose(home, cell.view_pose(views[0]), rng)
         move: dict = {"plan_status": plan.status.value, "plan_total_s": plan.total_time}
-        if plan.ok:
-            report = station.robot.execute(plan.trajectory)
+        trajectory = plan.trajectory if plan.ok else None
+        if trajectory is not None:
+            report = station.robot.execute(trajectory)
             q = station.robot.measured_joints()
-            dp, dr = pose_error(cell.kin.world_T_camera(q), cell.kin.world_T_camera(plan.trajectory.goal))
-            move.update(trajectory_s=plan.trajectory.duration, settled=report.settled,
+            dp, dr = pose_error(cell.kin.world_T_camera(q), cell.kin.world_T_camera(trajectory.goal))
+            move.update(trajectory_s=trajectory.duration, settled=report.settled,
                         settle_s=report.settle_time,
                         max_tracking_error=float(np.max(report.max_tracking_error)),
                         max_tracking_error_joint=cell.joint_names[int(np.argmax(report.max_tracking_error))],

@@ -114,7 +114,7 @@ def autoscan(
     console.print(f"{result.scans} scans of the {object_name} ({result.infeasible} infeasible views sampled, "
                   f"{result.requests} planning requests, {result.trajectory_s:.1f} s of trajectories) "
                   f"in {result.seconds:.1f} s")
-    if result.coverage is not None:
+    if result.coverage is not None and result.accuracy is not None:
         console.print(f"ground truth: coverage {result.coverage * 100:.2f} % of the surface (1 mm), signed distance "
                       f"mean {result.accuracy.mean_mm:+.3f} mm, std {result.accuracy.std_mm:.3f} mm")
     console.print(f"mesh: {result.mesh}\ncloud: {result.cloud}\nreport: {result.report}")

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import typer
+from rich.console import JustifyMethod
 from rich.table import Table
 
 from recon_cli.batch import BatchOptions, Overrides, load_batch, run_batch
@@ -106,8 +107,9 @@ def _print_table(result) -> None:
 
 
     table = Table(title=f"batch {result.name}", title_justify="left")
-    for name, justify in (("job", "left"), ("result", "left"), ("wall [s]", "right"), ("measured", "left"),
-                          ("reason", "left")):
+    columns: tuple[tuple[str, JustifyMethod], ...] = (("job", "left"), ("result", "left"), ("wall [s]", "right"),
+                                                      ("measured", "left"), ("reason", "left"))
+    for name, justify in columns:
         table.add_column(name, justify=justify)
     for r in result.jobs:
         table.add_row(r.name, r.status.value + (" (resumed)" if r.resumed else ""), f"{r.wall_s:.1f}",

@@ -14,7 +14,7 @@ from recon_cli.cli.app import app
 
 @cache
 def _command(name: str):
-    return typer.main.get_command(app).get_command(None, name)
+    return typer.main.get_group(app).commands[name]
 
 
 @cache

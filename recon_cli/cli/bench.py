@@ -30,6 +30,7 @@ from recon_cli.cli.options import (
     SafetyOpt,
     ScansOpt,
     SeedOpt,
+    SimplificationName,
     make_cell,
     name_list,
     object_metavar,
@@ -40,7 +41,7 @@ from recon_cli.cli.options import (
     split_names,
 )
 from recon_cli.console import console, progress_bar, write_json
-from recon_cli.planning.options import PLANNERS, SIMPLIFICATIONS
+from recon_cli.planning.options import PLANNERS
 from recon_cli.robot.description import CellConfig, CellKind
 from recon_cli.viewplan.policy import Method
 
@@ -50,7 +51,7 @@ OutOpt = Annotated[Path | None, typer.Option("--out", "-o", help="Output folder 
 #: which loads the planner, when a command line is parsed)
 SEQUENCE_CASES = ("A", "B", "C", "D", "A0")
 #: the peers ``recon bench planners`` can compare with
-PEERS = ("none", "mplib")
+Peer = Literal["none", "mplib"]
 
 
 def _sequence_cases() -> tuple[str, ...]:
@@ -205,11 +206,11 @@ def bench_planners(
                                                "table in docs/benchmarks.md).")] = "default",
     time_limit: PlanningTimeOpt = D.planner.time_limit,
     quick: Annotated[bool, typer.Option("--quick", help="CI mode: 10 requests of RRTConnect and RRT.")] = False,
-    peer: Annotated[Literal[PEERS], typer.Option(help="Also run a peer on the same problem: 'mplib' or 'none'.")]
+    peer: Annotated[Peer, typer.Option(help="Also run a peer on the same problem: 'mplib' or 'none'.")]
     = "none",
     peer_n: Annotated[int, typer.Option("--peer-requests", min=1, max=10_000,
                                         help="Requests for the peer (per RRT range tried).")] = 200,
-    simplify: Annotated[Literal[SIMPLIFICATIONS], typer.Option(help="Path simplification.")] = D.planner.simplify,
+    simplify: Annotated[SimplificationName, typer.Option(help="Path simplification.")] = D.planner.simplify,
     shortcut_rounds: Annotated[int, typer.Option(min=1, max=100, help="Rounds of per-joint shortcuts (shortcut).")]
     = D.planner.shortcut_rounds,
     seed: SeedOpt = D.seed,

@@ -10,7 +10,7 @@ import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
 
@@ -28,12 +28,20 @@ from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.geometry.view import MAX_COORDINATE, MAX_RADIUS, Frame, View
 from recon_cli.objects import BUILTIN, ycb_names
 from recon_cli.outputs import OutputMode, claim_output
+from recon_cli.planning.options import PLANNERS, SIMPLIFICATIONS
 from recon_cli.realism import BUILT_IN, load_profile
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.collision import ObjectBox
 from recon_cli.robot.description import CellConfig, CellKind
 
 D = DEFAULTS
+
+if TYPE_CHECKING:  # a checker sees the option's value, a name; typer takes the choices from the Literal
+    PlannerName = str
+    SimplificationName = str
+else:
+    PlannerName = Literal[PLANNERS]  # one of PLANNERS
+    SimplificationName = Literal[SIMPLIFICATIONS]  # one of SIMPLIFICATIONS
 
 #: bounds of the view options, the same as a script's (README "limits"; the scripts' XSD and
 #: recon_cli.scripts.build.ANGLE_BOUNDS_DEG): focus coordinates within ±MAX_COORDINATE [m]

@@ -4,7 +4,7 @@ the assessment of what came out."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
 
 import numpy as np
 import typer
@@ -24,6 +24,7 @@ from recon_cli.cli.options import (
     ForceOpt,
     FrameOpt,
     PhiOpt,
+    PlannerName,
     PlanningTimeOpt,
     RadiusOpt,
     RealismOpt,
@@ -46,8 +47,7 @@ from recon_cli.cli.options import (
 )
 from recon_cli.console import console, progress_bar, styled
 from recon_cli.errors import FileError, InputError
-from recon_cli.geometry.view import Frame
-from recon_cli.planning.options import PLANNERS
+from recon_cli.geometry.view import Frame, View
 from recon_cli.reconstruction.assessment import run_evaluate
 from recon_cli.reconstruction.crop import CropBox
 from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
@@ -58,7 +58,13 @@ from recon_cli.workflows.capture import CaptureOptions, run_capture
 from recon_cli.workflows.register import register_folder
 
 #: the view sets of ``recon capture --views``
-VIEW_SETS = ("single", "eq-4.1")
+ViewSet = Literal["single", "eq-4.1"]
+#: how ``recon register`` initializes loop closures (a checker sees the value of the configuration's
+#: field; typer takes the choices from the Literal)
+if TYPE_CHECKING:
+    LoopClosureInit = str
+else:
+    LoopClosureInit = Literal["icp", "global"]
 
 
 @app.command()
@@ -79,12 +85,12 @@ def capture(
     = None,
     noise: Annotated[bool, typer.Option("--noise/--no-noise", help="Depth noise model on or off.")] = D.sensor.noise,
     resolution: ResolutionOpt = D.sensor.resolution,
-    planner: Annotated[Literal[PLANNERS], typer.Option(help="OMPL planner.")] = D.planner.planner,
+    planner: Annotated[PlannerName, typer.Option(help="OMPL planner.")] = D.planner.planner,
     planning_time: PlanningTimeOpt = D.planner.time_limit,
     cell: CellOpt = D.cell.kind,
     safety: SafetyOpt = D.cell.safety_distance,
     seed: SeedOpt = D.seed,
-    views: Annotated[Literal[VIEW_SETS], typer.Option(help="'single' (the view given by --focus ... --alpha) or "
+    views: Annotated[ViewSet, typer.Option(help="'single' (the view given by --focus ... --alpha) or "
                                                            "'eq-4.1' (the thesis' 24 views around f = (0, 0, 0.78) "
                                                            "m, r = 0.6 m).")] = "single",
     cover_board: Annotated[str, typer.Option(help="Views (1-based, comma-separated) with a sheet over the "
@@ -118,6 +124,7 @@ def capture(
         object_name = resolve_object_name(object_name)
     else:
         object_name = base.config.scene.object_name
+    view_list: tuple[View, ...]
     if views == "single":
         view_list = (make_view(focus, radius, theta, phi, alpha, frame),)
     else:
@@ -143,8 +150,9 @@ def capture(
         result = run_capture(options, update)
     for m, scan, n_points, t_cap in zip(result.moves, result.scans, result.points, result.capture_seconds,
                                         strict=True):
+        waypoints = "-" if m.plan.path is None else len(m.plan.path)
         console.print(f"scan {scan.index}: planned with {m.plan.planner} in {m.plan.total_time:.2f} s "
-                      f"({len(m.plan.path)} waypoints), trajectory {m.execution.duration:.2f} s, settled after "
+                      f"({waypoints} waypoints), trajectory {m.execution.duration:.2f} s, settled after "
                       f"{m.execution.settle_time:.3f} s (camera pose error from tracking "
                       f"{m.camera_position_error * 1e3:.4f} mm / {np.degrees(m.camera_rotation_error):.5f}°); "
                       f"{n_points} points in {t_cap:.2f} s")
@@ -178,7 +186,7 @@ def register(
                                                                    "for every scan).")] = _R.use_board,
     local: Annotated[bool, typer.Option("--local/--global-only", help="Pose-graph local registration.")]
     = _R.local,
-    loop_closures: Annotated[Literal["icp", "global"], typer.Option(help="Initialize loop closures by 'icp' or "
+    loop_closures: Annotated[LoopClosureInit, typer.Option(help="Initialize loop closures by 'icp' or "
                                                                          "with the 'global' alignment (the "
                                                                          "thesis).")]
     = _R.multiway.loop_closure_init,
@@ -215,7 +223,7 @@ def register(
                              f"be at most {MAX_BOX_EDGE:g} m", hint="cx,cy,cz,sx,sy,sz in metres")
         T = np.eye(4)
         T[:3, 3] = v[:3]
-        crop = CropBox(T, tuple(v[3:]))
+        crop = CropBox(T, (v[3], v[4], v[5]))
     config = base.config.with_values(base.picked(
         crop_box=("registration.box", crop), crop_frame=("registration.box_frame", crop_frame.value),
         board=("registration.use_board", board), local=("registration.local", local),
@@ -237,8 +245,8 @@ def register(
     for r in result.scans:
         if r.skipped:
             console.print(styled(f"{r.name} skipped:", "yellow", f" {r.skipped}"))
-        elif r.pose.source.value == "kinematics":
-            console.print(f"{r.name}: kinematics ({r.pose.reason})")
+        elif r.placed_pose.source.value == "kinematics":
+            console.print(f"{r.name}: kinematics ({r.placed_pose.reason})")
     errors = [r.charuco_error for r in result.scans if r.charuco_error is not None]
     if errors:
         console.print(f"ChArUco pose error vs ground truth: mean {np.mean([e[0] for e in errors]) * 1e3:.3f} mm / "
@@ -257,7 +265,7 @@ def register(
 
 
 #: how ``recon evaluate`` aligns the reconstruction to the reference
-ALIGNMENTS = ("none", "icp")
+Alignment = Literal["none", "icp"]
 
 
 @app.command()
@@ -268,7 +276,7 @@ def evaluate(
     = COVERAGE_TOLERANCE,
     scan_store: Annotated[Path | None, typer.Option(help="Scan store whose camera poses define the visible "
                                                          "surface (coverage of what could be seen).")] = None,
-    align: Annotated[Literal[ALIGNMENTS], typer.Option(help="'none' (frames agree) or 'icp' (register the "
+    align: Annotated[Alignment, typer.Option(help="'none' (frames agree) or 'icp' (register the "
                                                             "reconstruction to the reference first, reported).")]
     = "none",
     samples: Annotated[int, typer.Option(min=1000, max=5_000_000, help="Reference surface samples.")] = 200_000,
@@ -290,7 +298,7 @@ def evaluate(
     console.print(f"{e.points} points: signed distance mean {e.mean * 1e3:+.4f} mm, std {e.std * 1e3:.4f} mm, "
                   f"RMS {e.rms * 1e3:.4f} mm; " + ", ".join(f"{k}: {v * 100:.1f} %" for k, v in e.within.items()))
     line = f"coverage (tolerance {e.tolerance * 1e3:g} mm): {e.coverage * 100:.2f} % of the reference surface"
-    if e.coverage_visible is not None:
+    if e.coverage_visible is not None and e.visible_share is not None:
         line += (f", {e.coverage_visible * 100:.2f} % of the part the cameras could see "
                  f"({e.visible_share * 100:.1f} % of the surface)")
     console.print(line)

@@ -27,12 +27,16 @@ from __future__ import annotations
 
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from recon_cli.perception.charuco import thesis_board
 from recon_cli.recording import scene as S
 from recon_cli.recording.sdk import require_rerun
+
+if TYPE_CHECKING:
+    from rerun.urdf import UrdfJoint
 
 TIMELINE = "robot_time"
 
@@ -50,7 +54,7 @@ class Recorder:
         self.rec.send_recording_name(name)
         self.clock = 0.0  # [s] robot time
         self.moves = 0
-        self.joints: dict[str, object] = {}  # recon joint name -> rerun UrdfJoint
+        self.joints: dict[str, UrdfJoint | None] = {}  # recon joint name -> its joint in the URDF tree
         self.kin = None
         self.depth_scale = 20000.0
         self.scans: list[int] = []  # indices of the scans recorded

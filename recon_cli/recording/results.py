@@ -84,11 +84,12 @@ def record_store(recorder, store_root: Path) -> int:
 
     store = ScanStore(store_root)
     info = store.session()
-    box = None if info.object_box is None else ObjectBox(tuple(info.object_box.center), tuple(info.object_box.size))
+    box = None if info.object_box is None else ObjectBox(info.object_box.center, info.object_box.size)
     cell = None
     if info.cell_kind is not None:  # stores replayed from other cameras have no cell
-        cfg = CellConfig(kind=CellKind.parse(info.cell_kind), table_lift=info.table_lift or 0.0,
-                         **({} if info.safety_distance is None else {"safety_distance": info.safety_distance}))
+        kind, lift = CellKind.parse(info.cell_kind), info.table_lift or 0.0
+        cfg = CellConfig(kind=kind, table_lift=lift) if info.safety_distance is None else \
+            CellConfig(kind=kind, table_lift=lift, safety_distance=info.safety_distance)
         cell = Cell(cfg, object_box=box)
         recorder.cell(cell, None, box, _truth_mesh(store_root))
     count = 0

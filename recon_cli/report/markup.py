@@ -32,11 +32,11 @@ def join(parts: Iterable[Content], sep: str = "") -> Html:
     return Html(sep.join(esc(p) for p in parts))
 
 
-def tag(name: str, content: Content | Iterable[Content] = None, **attrs: str | None) -> Html:
+def tag(name: str, content: Content | Sequence[Content] = None, **attrs: str | None) -> Html:
     """``<name attrs>content</name>``; attribute names: a trailing ``_`` is dropped (``class_``)."""
     text = "".join(f' {k.rstrip("_").replace("_", "-")}="{html.escape(str(v), quote=True)}"'
                    for k, v in attrs.items() if v is not None)
-    body = join(content) if isinstance(content, (list, tuple)) else esc(content)
+    body = esc(content) if content is None or isinstance(content, str) else join(content)
     return Html(f"<{name}{text}>{body}</{name}>")
 
 
@@ -100,7 +100,7 @@ def pct(share: float | None, digits: int = 1) -> str | None:
     return None if share is None else f"{100 * share:.{digits}f} %"
 
 
-def size(n_bytes: int) -> str:
+def size(n_bytes: float) -> str:
     for unit in ("B", "kB", "MB", "GB"):
         if n_bytes < 1000 or unit == "GB":
             return f"{n_bytes:.0f} {unit}" if unit == "B" else f"{n_bytes:.1f} {unit}"

@@ -89,7 +89,7 @@ def shade(mesh, eye: np.ndarray, center: np.ndarray, up: np.ndarray, width: int,
         dirs = forward + uu[..., None] * right - vv[..., None] * cam_up
         dirs /= np.linalg.norm(dirs, axis=2, keepdims=True)
         rays = np.concatenate([np.broadcast_to(eye, dirs.shape), dirs], axis=2).astype(np.float32)
-        hit = scene.cast_rays(o3d.core.Tensor(rays))
+        hit = scene.cast_rays(o3d.core.Tensor.from_numpy(rays))
         found = np.isfinite(hit["t_hit"].numpy())
         normals = hit["primitive_normals"].numpy().astype(float)
         if vertex_normals is not None:  # smooth: the vertex normals interpolated at the hit

@@ -32,7 +32,7 @@ class RunKind(StrEnum):
     REGISTER = "register"  # recon register's output folder: report.json
 
     @property
-    def title(self) -> str:
+    def label(self) -> str:
         return {RunKind.RUN: "recon run", RunKind.AUTOSCAN: "recon autoscan",
                 RunKind.SCANS: "scan store (recon capture)", RunKind.REGISTER: "recon register"}[self]
 
@@ -173,7 +173,7 @@ class RunFolder:
     @property
     def title(self) -> str:
         if self.script_run is not None:
-            return f"{self.kind.title}: {self.script_run.name}"
+            return f"{self.kind.label}: {self.script_run.name}"
         obj = (self.autoscan.object if self.autoscan else None) or (
             self.session.object_name if self.session else None)
-        return f"{self.kind.title}" + (f": {obj}" if obj else "")
+        return f"{self.kind.label}" + (f": {obj}" if obj else "")

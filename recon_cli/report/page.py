@@ -126,7 +126,7 @@ def write_page(folder: Path, options: ReportOptions = ReportOptions()) -> Report
         tmp.rename(final)
         assets = _moved(assets, tmp, final)
         nav, sections = body(run, assets)
-        subtitle = f"{run.kind.title} in {folder.absolute()}; status {run.status}"
+        subtitle = f"{run.kind.label} in {folder.absolute()}; status {run.status}"
         path = atomic_write_text(folder / PAGE, page(run.title, subtitle, nav, sections))
     except OSError as exc:
         raise FileError(f"cannot write the report page in {folder} ({exc.strerror or exc})",

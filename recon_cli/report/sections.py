@@ -26,6 +26,7 @@ from recon_cli.report.markup import (
 from recon_cli.report.mesh_view import MeshView
 from recon_cli.report.model import Edge, RunFolder, RunKind, Scan
 from recon_cli.runs.register import PoseError
+from recon_cli.runs.script_run import ScriptRunReport
 
 
 @dataclass(frozen=True)
@@ -55,7 +56,7 @@ def _when(stamp: float | None) -> str | None:
 
 # ----------------------------------------------------------------------------- summary
 def summary(run: RunFolder) -> Html:
-    rows: list[tuple[str, Content]] = [("kind", run.kind.title), ("status", status(run.status)),
+    rows: list[tuple[str, Content]] = [("kind", run.kind.label), ("status", status(run.status)),
                                        ("folder", str(run.folder.absolute()))]
     s, r, a, c = run.session, run.script_run, run.autoscan, run.capture
     if r is not None:
@@ -119,21 +120,21 @@ def figures(run: RunFolder, assets: Assets) -> Html:
 
 
 # ----------------------------------------------------------------------------- tables
-def commands(run: RunFolder) -> Html:
-    r = run.script_run
-    rows = [(c.source, c.command, status(c.status), f"{c.seconds:.2f}", c.message) for c in r.commands]
+def commands(script_run: ScriptRunReport) -> Html:
+    rows = [(c.source, c.command, status(c.status), f"{c.seconds:.2f}", c.message) for c in script_run.commands]
     return section("commands", "Commands",
                    table(("source", "command", "status", "time [s]", "message"), rows, numeric=(3,)))
 
 
 def _icp(edges: tuple[Edge, ...]) -> str | None:
-    good = [e for e in edges if not e.rejected and e.fitness is not None and e.rmse_mm is not None]
+    good = [(e.fitness, e.rmse_mm) for e in edges if not e.rejected and e.fitness is not None and e.rmse_mm is not None]
     if not edges:
         return None
     text = f"{len(edges)} edge" + ("s" if len(edges) != 1 else "")
     if good:
-        text += (f": fitness {min(e.fitness for e in good):.2f}...{max(e.fitness for e in good):.2f}, "
-                 f"RMSE ≤ {max(e.rmse_mm for e in good):.3f} mm")
+        fitness, rmse_mm = [f for f, _ in good], [r for _, r in good]
+        text += (f": fitness {min(fitness):.2f}...{max(fitness):.2f}, "
+                 f"RMSE ≤ {max(rmse_mm):.3f} mm")
     rejected = sum(e.rejected for e in edges)
     return text + (f", {rejected} rejected" if rejected else "")
 
@@ -246,7 +247,7 @@ def body(run: RunFolder, assets: Assets) -> tuple[list[tuple[str, str]], list[Ht
     parts = [("summary", "Summary", summary(run)), ("mesh", "Mesh", mesh(run, assets)),
              ("figures", "Figures", figures(run, assets))]
     if run.script_run is not None:
-        parts.append(("commands", "Commands", commands(run)))
+        parts.append(("commands", "Commands", commands(run.script_run)))
     parts.append(("scans", "Scans", scans(run, assets)))
     if run.registration is not None or run.scans:
         parts.append(("registration", "Registration", registration(run)))

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from recon_cli.backends.base import Capabilities
 from recon_cli.backends.hardware.station import preflight
 from recon_cli.backends.station_file import load_station
 from recon_cli.config import DEFAULTS, Config
@@ -161,15 +162,20 @@ class RunState:
     def scene_object(self):
         return None if self.session is None else self.session.scene_object
 
+    @property
+    def capabilities(self) -> Capabilities | None:
+        """The station's (None before the session is open, and in a dry run)."""
+        return None if self.session is None else self.session.capabilities
+
     def scan_count(self) -> int:
         return 0 if self.store is None else len(self.store)
 
     # ------------------------------------------------------------------ session
-    def ensure_session(self) -> None:
+    def ensure_session(self) -> Session:
         """Open the session at the first command that needs the cell or the robot (a dry
-        run opens the cell only)."""
+        run opens the cell only); the open session."""
         if self.session is not None:
-            return
+            return self.session
         spec = SessionSpec(self.out / "scans", self.config, Mode.SCRIPT, self.backend, box=self._explicit_box(),
                            script=self.script.path, append=self.options.append, run_folder=self.out,
                            run={"command": "run", "dialect": self.script.dialect, **self.options.run},
@@ -179,6 +185,7 @@ class RunState:
         self.backend = self.session.spec.backend  # a station file's adapters decide
         self.cell = self.session.cell
         self.q_planned = self.session.start
+        return self.session
 
     def planned_start(self) -> np.ndarray:
         """Dry run: where the previous planned move ended (the session's start before any)."""

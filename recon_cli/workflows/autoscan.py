@@ -116,14 +116,16 @@ class Autoscan:
         spec = SessionSpec(opt.out, cfg, Mode.AUTOSCAN, opt.backend, run={"method": self.method.value, **opt.run},
                            station=opt.station, recorder=self.recorder)
         self.session = open_session(spec, self.rng)
-        self.obj, self.cell, self.store = self.session.scene_object, self.session.cell, self.session.store
-        self.station, self.acq = self.session.station, self.session.acquisition
+        obj, store, station, acq = (self.session.scene_object, self.session.store, self.session.station,
+                                    self.session.acquisition)
+        assert obj is not None and store is not None and station is not None and acq is not None  # an open session
+        self.obj, self.cell, self.store, self.station, self.acq = obj, self.session.cell, store, station, acq
         center, size = self.obj.crop_box(cfg.scene.box_margin)
         T = np.eye(4)
         T[:3, 3] = center
         self.feasible = Feasibility(self.cell, self.rng, self.vp.min_height)
         self.marker_T_world = self.feasible.marker_T_world
-        self.crop_marker = CropBox(self.marker_T_world @ T, tuple(size))
+        self.crop_marker = CropBox(self.marker_T_world @ T, size)
         self.motion = MotionPlanner(self.cell, cfg.planner)
         lim, plan = self.cell.limits, cfg.planner
         self.lower = lambda a, b: duration_lower_bound(a, b, lim.velocity, lim.acceleration,
@@ -144,6 +146,7 @@ class Autoscan:
 
         scan = self.acq.scan(view_record(None, view_T))
         pose = global_pose(scan, thesis_board(), self.cell.world_T_marker)
+        assert pose is not None  # the kinematics place every scan (world_T_marker is known)
         cloud = scan_cloud(scan, pose, self.crop_marker, self.opt.config.registration.surface)
         cloud.transform(self.cell.world_T_marker)
         pts = np.asarray(cloud.voxel_down_sample(self.vp.partial_voxel).points)
@@ -171,7 +174,7 @@ class Autoscan:
 
         A = [ell.nearest_point(ell.to_local(v.world_T_camera[:3, 3])) for v in views
              if v.status in (Status.COMPLETED, Status.INFEASIBLE)]
-        planned = []
+        planned: list[tuple[np.ndarray, np.ndarray]] = []
         tries = 0
         while len(planned) < needed and tries < 20 * needed + 50:
             tries += 1
@@ -236,7 +239,7 @@ class Autoscan:
                 t_select = time.perf_counter()
                 sel = select_view(q, [c for _, c in planned], self.lower, self._plan_edge)
                 planning = time.perf_counter() - t_select
-                if sel.index is None:  # nothing reachable: those views are infeasible
+                if sel.index is None or sel.trajectory is None:  # nothing reachable: those views are infeasible
                     views.extend(ViewRecord(T, Status.INFEASIBLE, it) for T, _ in planned)
                     stuck += 1
                     if not ellipsoid:
@@ -305,10 +308,11 @@ class Autoscan:
                 error = exc
             else:
                 cloud, mesh = reg.cloud, reg.mesh
-            if error is None and self.session.capabilities.ground_truth:  # the true surface is known
+            if error is None and self.station.capabilities.ground_truth:  # the true surface is known
                 from recon_cli.inputs.meshes import read_cloud
 
-                pts = np.asarray(read_cloud(cloud, "fused cloud", points=False).points)
+                fused = reg.cloud
+                pts = np.asarray(read_cloud(fused, "fused cloud", points=False).points)
                 coverage = surface_coverage(self.obj, pts, COVERAGE_TOLERANCE, np.random.default_rng(cfg.seed))
                 d = signed_distances(pts, self.obj.mesh_world())
                 if self.recorder is not None:
@@ -316,8 +320,8 @@ class Autoscan:
 
                     record_registration(self.recorder, reg, opt.out, distances=(pts, d))
                 accuracy = Accuracy(float(d.mean() * 1e3), float(d.std() * 1e3), len(pts), within_shares(d))
-                histogram_png(cloud.parent / f"{cloud.stem}_distances.png", {cloud.stem: d},
-                              f"{cloud.name} vs the true {self.obj.name}")
+                histogram_png(fused.parent / f"{fused.stem}_distances.png", {fused.stem: d},
+                              f"{fused.name} vs the true {self.obj.name}")
             elif error is None and self.recorder is not None:
                 from recon_cli.recording.results import record_registration
 

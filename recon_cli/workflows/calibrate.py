@@ -93,6 +93,7 @@ def record_board_views(out: Path, config: Config = DEFAULTS, views: BoardViewOpt
                        run={"command": "calibrate", "views": n})
     with open_session(spec) as session:
         cell, acq = session.cell, session.acquisition
+        assert acq is not None  # open_session opens the acquisition
         poses = [cell.view_pose(v) for v in view_list]
         goals = board_view_goals(cell, poses, session.rng)  # keeping the arm's posture
         for k, (view, T, goal) in enumerate(zip(view_list, poses, goals, strict=True), start=1):

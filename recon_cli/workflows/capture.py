@@ -84,10 +84,14 @@ def run_capture(opt: CaptureOptions, progress: Callable[[str, int, int], None] |
     spec = SessionSpec(opt.out, opt.config, Mode.CAPTURE, opt.backend, run=opt.run, station=opt.station,
                        recorder=recorder, append=opt.append)
     ended: CaptureStatus | None = None
-    error = report = page = session = None
+    error: str | None = None
+    report: Path | None = None
+    page: Path | None = None
+    scene_object: SceneObject | None = None  # set when the session is open
     try:
         with closing(recorder), open_session(spec) as session:
-            cell, acq = session.cell, session.acquisition
+            cell, acq, station, scene_object = session.cell, session.acquisition, session.station, session.scene_object
+            assert acq is not None and station is not None and scene_object is not None  # an open session of an object
             for k, view in enumerate(opt.views, start=1):
                 try:
                     T = cell.view_pose(view)
@@ -96,8 +100,8 @@ def run_capture(opt: CaptureOptions, progress: Callable[[str, int, int], None] |
                     failures.append(ViewFailure(k, str(exc)))
                     step(k)
                     continue
-                if session.capabilities.cover_board:
-                    session.station.cover_board(k in opt.cover_board)
+                if station.capabilities.cover_board:
+                    station.cover_board(k in opt.cover_board)
                 t_cap = time.perf_counter()
                 scans.append(acq.scan(view_record(view, T), move))
                 capture_seconds.append(time.perf_counter() - t_cap)
@@ -111,13 +115,13 @@ def run_capture(opt: CaptureOptions, progress: Callable[[str, int, int], None] |
         raise
     finally:
         seconds = time.perf_counter() - t0
-        if session is not None:  # the session was opened: report what it did
+        if scene_object is not None:  # the session was opened: report what it did
             if ended is None:
                 ended = CaptureStatus.DONE if len(scans) == n else \
                     CaptureStatus.INCOMPLETE if scans else CaptureStatus.FAILED
             report, page = _write_report(opt, ended, len(scans), failures, seconds, error)
-    return CaptureResult(opt.out, scans, moves, failures, capture_seconds, seconds, session.scene_object, report,
-                         page)
+    assert scene_object is not None  # no error: the session was opened
+    return CaptureResult(opt.out, scans, moves, failures, capture_seconds, seconds, scene_object, report, page)
 
 
 def _write_report(opt: CaptureOptions, status: CaptureStatus, scans: int, failures: list[ViewFailure],

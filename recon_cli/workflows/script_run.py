@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -43,6 +44,9 @@ from recon_cli.scripts.state import (
     SequenceReport,
 )
 from recon_cli.session import Backend
+
+if TYPE_CHECKING:
+    from recon_cli.planning.trajectory import Trajectory
 
 Progress = Callable[[str, int, int], None]
 
@@ -148,15 +152,16 @@ class ScriptRunner:
         return Interruption(signal, f"interrupted by {signal} {where}", None if cmd is None else str(cmd.source),
                             self.state.scan_count())
 
-    def _run_command(self, cmd: C.Command, planned=None, note: str = "") -> None:
+    def _run_command(self, cmd: C.Command, planned: Trajectory | Literal[False] | None = None, note: str = "") -> None:
         report = CommandReport(str(cmd.source), cmd.describe(), message=note)
         t = time.perf_counter()
         self.current = cmd
         try:
-            if planned is not None:
-                execute_planned(self.state, cmd, planned, report)
-            else:
+            if planned is None:
                 handler_for(cmd)(self.state, cmd, report)
+            else:
+                assert isinstance(cmd, C.Move)  # a planned trajectory belongs to a move of an optimized sequence
+                execute_planned(self.state, cmd, planned, report)
         except KeyboardInterrupt:
             report.status = CommandStatus.INTERRUPTED
             report.message = "stopped by a signal; the robot was commanded to stop"

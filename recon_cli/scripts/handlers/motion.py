@@ -125,8 +125,8 @@ def wait(state: RunState, cmd: C.Wait, report: CommandReport) -> None:
     if state.dry_run:
         report.message = "dry run: no wall-clock wait"
         return
-    state.ensure_session()
-    if not state.session.capabilities.wall_clock:
+    caps = state.ensure_session().capabilities
+    if caps is None or not caps.wall_clock:
         report.message = "no physical robot or camera: the robot holds its pose; no wall-clock wait"
     else:  # pragma: no cover - hardware only
         time.sleep(cmd.seconds)

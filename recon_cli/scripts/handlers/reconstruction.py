@@ -102,7 +102,7 @@ def evaluate(state: RunState, cmd: C.Evaluate, report: CommandReport) -> None:
         raise ReconError(f"{cmd.source}: nothing reconstructed to evaluate yet",
                          hint="put <register/> (and <reconstruct/>) before <evaluate>")
     if cmd.reference == "ground_truth":
-        if state.scene_object is None or not state.session.capabilities.ground_truth:
+        if state.scene_object is None or state.capabilities is None or not state.capabilities.ground_truth:
             raise ReconError(f"{cmd.source}: ground truth exists only in simulation",
                              hint="give reference=\"path/to/mesh.ply\"")
         reference = state.out / "scans" / "ground_truth" / f"{state.scene_object.name}.ply"

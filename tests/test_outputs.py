@@ -8,9 +8,11 @@ and modification time stay as they were."""
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import shutil
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -101,7 +103,11 @@ def tripwire(monkeypatch):
                    "recon_cli.bench.registration.run_registration_bench",
                    "recon_cli.bench.sequence.run_sequence_bench", "recon_cli.bench.viewplan.run_viewplan_bench",
                    "recon_cli.bench.planners.run_planner_bench"):
-        monkeypatch.setattr(target, trip)
+        module_name, name = target.rsplit(".", 1)
+        original = getattr(importlib.import_module(module_name), name)
+        for module in [m for k, m in sys.modules.items() if k.startswith("recon_cli.")]:
+            if getattr(module, name, None) is original:  # where the commands imported it too
+                monkeypatch.setattr(module, name, trip)
 
 
 def _batch_file(tmp_path) -> Path:

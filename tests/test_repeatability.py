@@ -1,7 +1,8 @@
 """Seeds make runs repeatable: the same planning request with the same seed gives the same
-path in one process (whatever ran before), and `recon autoscan`, `recon run` and `recon
-bench planners` run twice in one process with the same --seed write the same results:
-joints, view poses, paths' numbers; only wall-clock times and the run folder differ.
+path in one process (whatever ran before); `recon autoscan`, `recon capture`, `recon
+register` and `recon run` run twice with the same --seed, and once more from the first run's
+config.yaml (--config), write the same reports, scan files and clouds; so do two batches and
+two `recon bench planners`. Only wall-clock times and the run folder differ.
 
 Not compared: the Poisson meshes (and their triangle counts). Open3D builds them with
 several threads, which sum in varying order; the points they are built from are compared.
@@ -15,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # before MuJoCo is imported
 
@@ -31,6 +33,8 @@ CLOCK_KEYS = frozenset({
     "capture_start", "capture_end", "capture_seconds", "global_s", "local_s", "surface_s", "total_s",
     "plan_time_s", "plan_time", "planning_s", "search_time", "simplify_time", "post_time",
     "time_min", "time_median", "time_p90", "time_max", "time_median_all", "post_time_median",
+    "simplify_time_s", "planning_total_s",
+    "started", "wall_s", "wall_time", "log_tail",  # a batch's jobs (log_tail: the job's output with its times)
 })
 #: keys of numbers that come from the Poisson mesh (see the module docstring)
 MESH_KEYS = frozenset({"triangles"})
@@ -120,30 +124,87 @@ def _assert_same(a: dict, b: dict) -> None:
         assert a[key] == b[key], f"{key} differs between the two runs"
 
 
+def _config_sections(folder: Path) -> dict:
+    data = yaml.safe_load((folder / "config.yaml").read_text())
+    return {k: v for k, v in data.items() if k != "run"}
+
+
+def _same_three_times(tmp_path: Path, argv: tuple, *patterns: str) -> tuple[list[Path], dict[str, object]]:
+    """Run argv twice and once from the first run's config.yaml: the files matching the
+    patterns and the configurations agree."""
+    folders = [tmp_path / name for name in ("first", "second", "repeat")]
+    _invoke(*map(str, argv), "--out", str(folders[0]))
+    _invoke(*map(str, argv), "--out", str(folders[1]))
+    _invoke(str(argv[0]), "--config", str(folders[0] / "config.yaml"), "--out", str(folders[2]))
+    files = [_files(f, *patterns) for f in folders]
+    _assert_same(files[0], files[1])
+    _assert_same(files[0], files[2])
+    assert _config_sections(folders[0]) == _config_sections(folders[1]) == _config_sections(folders[2])
+    return folders, files[0]
+
+
 @pytest.mark.slow
-def test_autoscan_twice_with_one_seed(tmp_path):
-    args = ("autoscan", "--n", "3", "--m", "20", "--resolution", "0.1", "--no-pictures", "--seed", "3")
-    runs = []
-    for k in (1, 2):
-        out = tmp_path / f"autoscan{k}"
-        _invoke(*args, "--out", str(out))
-        runs.append(_files(out, "*.json", "scan_*/*.json", "reconstruction/*.json", "reconstruction/cloud*.ply"))
-    _assert_same(*runs)
-    report = runs[0]["autoscan_report.json"]
+def test_autoscan_twice_and_from_its_config(tmp_path):
+    argv = ("autoscan", "--n", "3", "--m", "20", "--resolution", "0.1", "--no-pictures", "--seed", "3",
+            "--object", "bottle")
+    folders, files = _same_three_times(tmp_path, argv, "*.json", "scan_*/*.json", "reconstruction/*.json",
+                                       "reconstruction/cloud*.ply")
+    report = files["autoscan_report.json"]
     assert report["scans"] == 3 and len(report["views"]) >= 3 and report["trajectory_s"] > 0
+    assert report["seed"] == 3 and report["n"] == 3 and report["m"] == 20
+    repeat = yaml.safe_load((folders[2] / "config.yaml").read_text())
+    assert repeat["sensor"]["resolution"] == 0.1 and repeat["run"]["pictures"] is False
 
 
 @pytest.mark.slow
-def test_smoke_script_twice_with_one_seed(tmp_path):
+def test_capture_and_register_twice_and_from_their_config(tmp_path):
+    argv = ("capture", "--object", "bottle", "--resolution", "0.1", "--seed", "5", "--theta", "60")
+    folders, files = _same_three_times(tmp_path / "capture", argv, "capture_report.json", "session.json",
+                                       "scan_*/*.json")
+    assert files["session.json"]["seed"] == 5
+    store = folders[0]
+    argv = ("register", store, "--voxel", "0.002", "--global-only")
+    folders, _ = _same_three_times(tmp_path / "register", argv, "report.json", "cloud*.ply")
+    repeat = yaml.safe_load((folders[2] / "config.yaml").read_text())
+    assert repeat["run"]["store"] == str(store)
+    assert repeat["registration"]["surface"]["voxel"] == 0.002 and repeat["registration"]["local"] is False
+    # an option given together with --config overrides the file's value, the others keep it
+    _invoke("register", "--config", str(folders[0] / "config.yaml"), "--voxel", "0.003", "--out",
+            str(tmp_path / "other"))
+    other = yaml.safe_load((tmp_path / "other" / "config.yaml").read_text())
+    assert other["registration"]["surface"]["voxel"] == 0.003 and other["registration"]["local"] is False
+    assert other["seed"] == 0
+
+
+@pytest.mark.slow
+def test_smoke_script_twice_and_from_its_config(tmp_path):
+    argv = ("run", SCRIPTS_DIR / "smoke.xml", "--seed", "3")
+    folders, files = _same_three_times(tmp_path, argv, "run_report.json", "scans/scan_*/*.json",
+                                       "reconstruction/*.json", "reconstruction/cloud*.ply")
+    report = files["run_report.json"]
+    assert report["seed"] == 3
+    assert len([c for c in report["commands"] if "trajectory_s" in c]) == 4
+    repeat = yaml.safe_load((folders[2] / "config.yaml").read_text())
+    assert repeat["run"]["script"] == str(SCRIPTS_DIR / "smoke.xml") and repeat["seed"] == 3
+
+
+@pytest.mark.slow
+def test_batch_twice_with_one_seed(tmp_path):
+    """A batch's jobs run in their own processes: two batches of one seed, the same jobs'
+    reports, scans and summary."""
+    batch = tmp_path / "repeat.yaml"
+    batch.write_text("name: repeat\njobs:\n  - autoscan: {scans: 2, candidates: 10, resolution: 0.1, "
+                     "pictures: false, seed: 4, object: bottle}\n")
     runs = []
     for k in (1, 2):
-        out = tmp_path / f"run{k}"
-        _invoke("run", str(SCRIPTS_DIR / "smoke.xml"), "--seed", "3", "--out", str(out))
-        runs.append(_files(out, "run_report.json", "scans/scan_*/*.json", "reconstruction/*.json",
-                           "reconstruction/cloud*.ply"))
+        out = tmp_path / f"batch{k}"
+        _invoke("batch", str(batch), "--out", str(out))
+        runs.append(_files(out, "summary.json", "jobs/*/result.json", "jobs/*/output/*.json",
+                           "jobs/*/output/scan_*/*.json", "jobs/*/output/reconstruction/*.json"))
     _assert_same(*runs)
-    moves = [c for c in runs[0]["run_report.json"]["commands"] if "trajectory_s" in c]
-    assert len(moves) == 4
+    summary = runs[0]["summary.json"]
+    assert [j["status"] for j in summary["jobs"]] == ["passed"]
+    assert runs[0]["jobs/autoscan/output/autoscan_report.json"]["scans"] == 2
 
 
 @pytest.mark.slow

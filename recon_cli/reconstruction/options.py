@@ -45,7 +45,7 @@ class SurfaceOptions:
     # than the voxel; isolated points only); "statistical" is the thesis'
     # filter (outlier_neighbors, outlier_std_ratio sigma of the mean neighbour distance), which
     # also drops whole patches of a face that lies in one layer of the voxel grid while the
-    # faces around it straddle two (a box's top face: 4.7 % of the wood block)
+    # faces around it straddle two (a box's top face: 4.7 % of the wood block); "none" keeps them all
     outlier_filter: str = "radius"
     outlier_radius: float = 3.0  # [voxels, or the median point spacing where larger]
     outlier_min_points: int = 4
@@ -57,7 +57,7 @@ class SurfaceOptions:
     def __post_init__(self) -> None:
         _positive("surface voxel", self.voxel)
         _positive("surface normal_radius", self.normal_radius)
-        _one_of("outlier filter", self.outlier_filter, ("radius", "statistical"))
+        _one_of("outlier filter", self.outlier_filter, ("radius", "statistical", "none"))
         if not 0.0 <= self.density_quantile < 1.0:
             raise InputError(f"density quantile {self.density_quantile!r} is outside 0 ... 1",
                              hint="trim a share within 0 ... 0.5, e.g. 0.02")

@@ -61,8 +61,6 @@ def fuse(clouds: list, options: SurfaceOptions):
         fused, _ = fused.remove_radius_outlier(options.outlier_min_points, options.outlier_radius * spacing)
     elif options.outlier_filter == "statistical" and len(fused.points) > options.outlier_neighbors:
         fused, _ = fused.remove_statistical_outlier(options.outlier_neighbors, options.outlier_std_ratio)
-    elif options.outlier_filter not in ("radius", "statistical", "none"):
-        raise ValueError(f"outlier_filter must be 'radius', 'statistical' or 'none', not {options.outlier_filter!r}")
     if fused.has_normals():
         fused.normalize_normals()
     return fused

@@ -6,6 +6,7 @@ import numpy as np
 import open3d as o3d
 import pytest
 
+from recon_cli.errors import InputError
 from recon_cli.reconstruction.options import SurfaceOptions
 from recon_cli.reconstruction.surface import fuse
 
@@ -36,5 +37,5 @@ def test_radius_filter_drops_flying_points_and_keeps_the_faces():
 
 
 def test_unknown_outlier_filter():
-    with pytest.raises(ValueError):
-        fuse(_box_scans(np.random.default_rng(0)), SurfaceOptions(outlier_filter="median"))
+    with pytest.raises(InputError, match="outlier filter 'median' is not one of radius, statistical, none"):
+        SurfaceOptions(outlier_filter="median")

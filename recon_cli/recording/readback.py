@@ -5,7 +5,6 @@ robot's time. ``recon view`` prints it; the tests check recordings with it."""
 from __future__ import annotations
 
 import re
-import stat
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,7 +12,7 @@ from pathlib import Path
 from recon_cli.errors import FileError
 from recon_cli.inputs.images import native_output_captured
 from recon_cli.recording.recorder import TIMELINE
-from recon_cli.recording.sdk import require_rerun
+from recon_cli.recording.sdk import recording_file, require_rerun
 
 
 @dataclass
@@ -54,12 +53,7 @@ def summarize(path: Path) -> RecordingSummary:
     is one :class:`~recon_cli.errors.FileError` line (rerun's warnings kept off the terminal)."""
     require_rerun()
     path = Path(path)
-    try:
-        st = path.stat()
-    except OSError as exc:
-        raise FileError(f"{path} cannot be read ({exc.strerror})", hint=_HINT) from None
-    if not stat.S_ISREG(st.st_mode):
-        raise FileError(f"{path} is not a regular file", hint=_HINT)
+    size = recording_file(path)
     from pyarrow import ArrowException  # rerun's chunks are Arrow record batches
 
 
@@ -67,7 +61,7 @@ def summarize(path: Path) -> RecordingSummary:
     with native_output_captured((1, 2), opencv=False) as log, warnings.catch_warnings():
         warnings.simplefilter("ignore")  # e.g. "RRD file has no footer" before a truncated file fails
         try:
-            out = _summarize(path, st.st_size)
+            out = _summarize(path, size)
         except (RuntimeError, ValueError, OSError, EOFError, ArrowException) as exc:
             failure = exc
         except BaseException as exc:  # a panic of rerun's reader (pyo3's PanicException is no Exception)
@@ -82,7 +76,6 @@ def summarize(path: Path) -> RecordingSummary:
     return out
 
 
-_HINT = "give the recording.rrd a run wrote with --record (recon run, autoscan, capture, register)"
 
 
 def _unreadable(path: Path, reason: str) -> FileError:

@@ -15,7 +15,6 @@ import ipaddress
 import os
 import signal
 import socket
-import stat
 import subprocess
 import sys
 import tempfile
@@ -26,7 +25,7 @@ from urllib.parse import quote
 
 from recon_cli.errors import FileError, InputError, ReconError
 from recon_cli.interrupts import signal_name, stop_signals
-from recon_cli.recording.sdk import RECORDING_FILE, RERUN_VERSION, require_rerun
+from recon_cli.recording.sdk import RECORDING_FILE, RERUN_VERSION, recording_file, require_rerun
 
 #: where the web viewer listens unless ``--bind`` says otherwise: this machine only
 DEFAULT_BIND = "127.0.0.1"
@@ -54,13 +53,7 @@ def find_recording(target: Path) -> Path:
 
 def _regular(path: Path) -> Path:
     """``path`` if it is a regular file (a FIFO would block the reader), else a FileError."""
-    hint = "give the recording.rrd a run wrote with --record"
-    try:
-        st = path.stat()
-    except OSError as exc:
-        raise FileError(f"{path} cannot be read ({exc.strerror})", hint=hint) from None
-    if not stat.S_ISREG(st.st_mode):
-        raise FileError(f"{path} is not a regular file", hint=hint)
+    recording_file(path)
     return path
 
 

@@ -71,4 +71,5 @@ def test_a_recording_that_is_not_a_regular_file(tmp_path, capfd):
     for target in (tmp_path, tmp_path / "recording.rrd"):
         code, out, err = _summary(capfd, target)
         assert code == 1 and err == f"error: {tmp_path / 'recording.rrd'} is not a regular file; give the " \
-                                    "recording.rrd a run wrote with --record\n", err
+                                    "recording.rrd a run wrote with --record (recon run, autoscan, capture, " \
+                                    "register)\n", err

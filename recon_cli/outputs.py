@@ -36,7 +36,8 @@ from datetime import datetime
 from enum import StrEnum
 from pathlib import Path
 
-from recon_cli.errors import FileError, InputError
+from recon_cli.errors import FileError, InputError, ReconError
+from recon_cli.inputs.jsonfile import load_json
 
 
 def _umask() -> int:
@@ -277,8 +278,6 @@ def _recorded_exports(folder: Path) -> list[str]:
     for report in sorted(folder.glob("run_report*.json")):
         if report.is_symlink() or not report.is_file():
             continue
-        from recon_cli.errors import ReconError
-        from recon_cli.inputs.jsonfile import load_json
 
         try:
             outputs = load_json(report, "run report").get("outputs") or {}

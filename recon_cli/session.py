@@ -19,7 +19,7 @@ object's exact mesh, the realism record) follows the station's capabilities.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -28,7 +28,9 @@ import numpy as np
 
 from recon_cli.acquisition import Acquisition
 from recon_cli.backends.base import Backend, Capabilities, Station  # noqa: F401 (Backend re-exported)
+from recon_cli.backends.hardware.station import AdapterStation, preflight
 from recon_cli.backends.sim.station import SimStation
+from recon_cli.backends.station_file import load_station
 from recon_cli.config import DEFAULTS, Config, write_config
 from recon_cli.console import write_json
 from recon_cli.errors import FileError, HardwareUnavailable, InputError
@@ -38,6 +40,7 @@ from recon_cli.perception.sensor import motioncam_3d_m
 from recon_cli.planning.planner import seed_ompl
 from recon_cli.reconstruction.metadata import SESSION_FORMAT, BoxInfo, SessionInfo  # noqa: F401 (re-exported)
 from recon_cli.reconstruction.scan_store import ScanStore
+from recon_cli.recording.station import RecordedStation
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.collision import ObjectBox
 from recon_cli.robot.poses import named_configuration
@@ -146,7 +149,6 @@ class Session:
             realism=cfg.realism.summary() if caps.realism else None)
         self.store = self._open_store(self.info)
         if spec.recorder is not None:
-            from recon_cli.recording.station import RecordedStation
 
             self.station = RecordedStation(self.station, spec.recorder)
             spec.recorder.depth_scale = sensor.depth_scale
@@ -201,14 +203,11 @@ def open_session(spec: SessionSpec, rng: np.random.Generator | None = None, *, p
                          hint="e.g. 0.001 for millimetres")
     station_file = None
     if spec.station is not None:
-        from dataclasses import replace
 
-        from recon_cli.backends.station_file import load_station
 
         station_file = load_station(spec.station)
         spec = replace(spec, config=cfg.replace(cell=station_file.cell), backend=station_file.capabilities.backend)
         if not (plan_only or spec.station_checked):  # `recon station check`, before anything moves or is written
-            from recon_cli.backends.hardware.station import preflight
 
             preflight(station_file, spec.config.seed)
     seed_ompl(spec.config.seed)
@@ -220,7 +219,6 @@ def open_station(backend: Backend, cell, scene_object, start: np.ndarray, rng: n
                  cfg: Config, station_file: StationFile | None = None) -> Station:
     """The station of a backend: the adapters of a station file, or the MuJoCo simulation."""
     if station_file is not None:
-        from recon_cli.backends.hardware.station import AdapterStation
 
         return AdapterStation(station_file, cell, scene_object, start, rng)
     if backend is Backend.HARDWARE:

@@ -11,6 +11,7 @@ that ``recon batch --resume`` is about to clear; SIGTERM lets recon stop as on C
 
 from __future__ import annotations
 
+import ctypes
 import os
 import runpy
 import signal
@@ -21,7 +22,6 @@ def _die_with_parent() -> None:
     if not sys.platform.startswith("linux"):
         return
     try:
-        import ctypes
 
         libc = ctypes.CDLL(None, use_errno=True)
         PR_SET_PDEATHSIG = 1

@@ -5,6 +5,8 @@ from __future__ import annotations
 import typer
 from typer.core import TyperGroup
 
+from recon_cli import __version__
+
 #: the order of the commands in ``recon --help``: from looking at the cell to benchmarks
 ORDER = ("cell", "ik", "objects", "capture", "register", "evaluate", "validate", "run", "autoscan", "report", "view",
          "batch", "station", "replay", "calibrate", "bench")
@@ -35,7 +37,6 @@ bench_app = typer.Typer(help="Benchmarks with results tables and figures.", no_a
 
 def _version(value: bool) -> None:
     if value:
-        from recon_cli import __version__
 
         typer.echo(f"recon {__version__}")
         raise typer.Exit()

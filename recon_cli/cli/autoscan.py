@@ -35,6 +35,7 @@ from recon_cli.cli.options import (
 from recon_cli.config import VIEWPLAN_M, VIEWPLAN_SIGMA
 from recon_cli.console import console, progress_bar
 from recon_cli.errors import InputError
+from recon_cli.objects import load_object
 from recon_cli.session import resolve_object_name
 from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions
 
@@ -94,7 +95,6 @@ def autoscan(
         if abs(theta) > MAX_THETA or abs(phi) > MAX_TURN:
             raise InputError(f"--initial '{initial}' is outside theta ±{MAX_THETA:g}°, phi ±{MAX_TURN:g}°",
                              hint="give 'theta,phi' in degrees, e.g. 45,0")
-        from recon_cli.objects import load_object
 
         center, _ = load_object(object_name, scale).crop_box(config.scene.box_margin)
         view = make_view(",".join(map(str, center)), dc + 0.1, theta, phi, 0.0, "world")

@@ -17,6 +17,7 @@ from recon_cli.cli.app import app
 from recon_cli.cli.batch_commands import AppCommands
 from recon_cli.console import console, progress_bar, styled
 from recon_cli.interrupts import stop_signals
+from recon_cli.recording import require_rerun
 
 BATCH_EPILOG = ("Exit codes: 0 every job passed; 1 error in the batch file or options (nothing ran); 2 usage error; "
                 "3 some jobs failed, timed out or could not run; 130/143 interrupted by Ctrl-C/SIGTERM "
@@ -68,7 +69,6 @@ def batch(
     if cluster is not None and scheduler == os.environ.get("DASK_SCHEDULER_ADDRESS"):
         scheduler = None  # an explicit --cluster wins over the environment's scheduler
     if record:
-        from recon_cli.recording import require_rerun
 
         require_rerun()
     spec = load_batch(sources, AppCommands(), Overrides(timeout, retries, record))

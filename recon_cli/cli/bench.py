@@ -13,6 +13,7 @@ import typer
 
 from recon_cli.bench import render
 from recon_cli.bench.ik import IKBenchConfig, run_ik_bench
+from recon_cli.bench.mplib_peer import run_mplib
 from recon_cli.bench.planners import DEFAULT_PLANNERS, run_planner_bench, thesis_times, write_results
 from recon_cli.bench.registration import run_registration_bench
 from recon_cli.bench.sequence import CASES, ecdf_png, run_sequence_bench, summarize
@@ -228,7 +229,6 @@ def bench_planners(
         rows = run_planner_bench(names, n, time_limit, seed, update, options)
     peer_summary = None
     if peer == "mplib":
-        from recon_cli.bench.mplib_peer import run_mplib
 
         with console.status("mplib 0.2.1 on the same problem ..."):
             peer_summary = run_mplib(folder, peer_n, time_limit)

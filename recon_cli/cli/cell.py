@@ -33,6 +33,7 @@ from recon_cli.geometry.view import Frame
 from recon_cli.objects import available_objects, load_object
 from recon_cli.render import cell_tables, ik_table, pose_text
 from recon_cli.robot.ik import IKOptions
+from recon_cli.thesis import TABLE_4_1_START
 
 
 @app.command()
@@ -46,7 +47,6 @@ def cell(
     c = make_cell(cell, safety)
     q_show, label = c.kin.neutral(), "q = 0"
     if "base_joint_1" in c.joint_names:
-        from recon_cli.thesis import TABLE_4_1_START
 
         q_show, label = TABLE_4_1_START.copy(), "the Table 4.1 start"
     for table in cell_tables(c, q_show, label):

@@ -30,6 +30,7 @@ from recon_cli.objects import BUILTIN, ycb_names
 from recon_cli.outputs import OutputMode, claim_output
 from recon_cli.planning.options import PLANNERS, SIMPLIFICATIONS
 from recon_cli.realism import BUILT_IN, load_profile
+from recon_cli.recording import require_rerun
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.collision import ObjectBox
 from recon_cli.robot.description import CellConfig, CellKind
@@ -237,7 +238,6 @@ def output_folder(out: Path | None, command: str, *, append: bool = False, force
 def check_record(record: bool) -> None:
     """--record: the recording library must be there before anything runs."""
     if record:
-        from recon_cli.recording import require_rerun
 
         require_rerun()
 

@@ -48,12 +48,14 @@ from recon_cli.cli.options import (
 from recon_cli.console import console, progress_bar, styled
 from recon_cli.errors import FileError, InputError
 from recon_cli.geometry.view import Frame, View
+from recon_cli.outputs import OutputMode, claim_output
 from recon_cli.reconstruction.assessment import run_evaluate
 from recon_cli.reconstruction.crop import CropBox
 from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
 from recon_cli.report import write_pages_after_register
 from recon_cli.robot.description import CellKind
 from recon_cli.session import resolve_object_name
+from recon_cli.thesis import eq_4_1_views
 from recon_cli.workflows.capture import CaptureOptions, run_capture
 from recon_cli.workflows.register import register_folder
 
@@ -128,7 +130,6 @@ def capture(
     if views == "single":
         view_list = (make_view(focus, radius, theta, phi, alpha, frame),)
     else:
-        from recon_cli.thesis import eq_4_1_views
 
         view_list = tuple(eq_4_1_views())
     covered = index_list(cover_board, "--cover-board", len(view_list))
@@ -288,7 +289,6 @@ def evaluate(
 
     target = out or reconstruction.parent
     if target.is_dir():  # beside another command's results: only its two files, never through a link
-        from recon_cli.outputs import OutputMode, claim_output
 
         stem = reconstruction.stem
         claim_output(target, OutputMode.APPEND, command="evaluate",

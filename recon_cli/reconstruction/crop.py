@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from recon_cli.geometry.transforms import invert, transform_points
+from recon_cli.randomness import open3d_draws
 
 
 @dataclass(frozen=True)
@@ -76,7 +77,6 @@ def crop_cloud(cloud, box: CropBox, plane_slab: float = PLANE_SLAB, plane_tolera
     if slab.sum() >= 200:
         import open3d as o3d
 
-        from recon_cli.randomness import open3d_draws
 
         sub = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(local[slab]))
         # on one thread with a fixed seed the planes RANSAC tries are fixed: a scan is cropped

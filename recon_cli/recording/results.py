@@ -18,6 +18,7 @@ import numpy as np
 from recon_cli.errors import FileError, MetadataError
 from recon_cli.inputs.meshes import read_cloud, read_mesh
 from recon_cli.perception.charuco import detect, thesis_board
+from recon_cli.reconstruction.evaluation import signed_distances
 from recon_cli.reconstruction.global_registration import PoseSource
 from recon_cli.reconstruction.scan_store import ScanStore, read_scan
 from recon_cli.robot.cell import Cell
@@ -55,7 +56,6 @@ def record_registration(recorder, result, store_root: Path,
         return
     truth = _truth_mesh(Path(store_root))
     if truth is not None:
-        from recon_cli.reconstruction.evaluation import signed_distances
 
         points = np.asarray(read_cloud(result.cloud, "fused cloud", points=False).points)
         if len(points):

@@ -10,6 +10,7 @@ it and wait for it, and on Linux it also gets SIGTERM should recon die without c
 
 from __future__ import annotations
 
+import ctypes
 import errno
 import ipaddress
 import os
@@ -175,7 +176,6 @@ def _child_setup() -> Callable[[], None]:
     it. Everything it needs is looked up here, in the parent."""
     prctl = None
     if sys.platform.startswith("linux"):
-        import ctypes
 
         try:
             prctl = ctypes.CDLL(None, use_errno=True).prctl

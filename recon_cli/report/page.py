@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from recon_cli.config import DEFAULTS
+from recon_cli.console import err_console
 from recon_cli.errors import FileError, ReconError
 from recon_cli.outputs import atomic_write_text, inside
 from recon_cli.report import figures
@@ -157,7 +158,6 @@ def write_page_after_run(folder: Path, options: ReportOptions = ReportOptions())
     try:
         return write_page(folder, options)
     except Exception as exc:  # noqa: BLE001 (the run's results stand without their page)
-        from recon_cli.console import err_console
 
         why = exc.one_line() if isinstance(exc, ReconError) else f"{type(exc).__name__}: {exc}"
         err_console.print(f"warning: no report page for {folder} ({why}); 'recon report {folder}' tries again",

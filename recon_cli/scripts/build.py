@@ -17,6 +17,7 @@ from recon_cli.config import DEFAULTS as D
 from recon_cli.config import SensorConfig
 from recon_cli.errors import InputError, ScriptError
 from recon_cli.geometry.view import Frame, View
+from recon_cli.planning.options import PLANNERS
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.sandbox import LIMITS
 
@@ -125,7 +126,6 @@ def build_recon(el, src: C.Source) -> list[C.Command]:
             raise ScriptError(f"{src}: <box> sizes must be positive", hint="give edge lengths in metres")
         return [C.SetBox(src, center, size, a.get("frame", "world"), float(a.get("margin", D.scene.box_margin)))]
     if tag == "planner":
-        from recon_cli.planning.options import PLANNERS
 
         name = a.get("name", D.planner.planner)
         if name not in PLANNERS:

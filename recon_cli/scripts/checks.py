@@ -24,7 +24,7 @@ import numpy as np
 from lxml import etree
 
 from recon_cli.backends.base import Backend
-from recon_cli.errors import JointLimitError, ReconError, ScriptError
+from recon_cli.errors import HardwareUnavailable, JointLimitError, ReconError, ScriptError
 from recon_cli.objects import BUILTIN, available_objects, ycb_names
 from recon_cli.realism import BUILT_IN, load_profile
 from recon_cli.robot.description import CellConfig, CellKind, expand_urdf
@@ -213,7 +213,6 @@ def check_backend(script: C.Script, backend: str | None, station: Path | None, d
     cells = [c for c in script.commands if isinstance(c, C.SetCell)]
     wanted = Backend(backend or (cells[-1].backend if cells else Backend.SIM))
     if wanted is Backend.HARDWARE and station is None and not dry_run:
-        from recon_cli.errors import HardwareUnavailable
 
         where = f"{cells[-1].source}: " if backend is None and cells else ""
         raise HardwareUnavailable(

@@ -17,21 +17,27 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from recon_cli.acquisition import view_record
 from recon_cli.config import DEFAULTS, Config
-from recon_cli.errors import ReconError
+from recon_cli.errors import ReconError, UnknownNameError
 from recon_cli.geometry.view import View
+from recon_cli.inputs.meshes import read_cloud
 from recon_cli.perception.charuco import thesis_board
 from recon_cli.planning.lower_bound import duration_lower_bound
 from recon_cli.planning.planner import MotionPlanner
 from recon_cli.reconstruction.crop import CropBox
+from recon_cli.reconstruction.evaluation import histogram_png, signed_distances, within_shares
 from recon_cli.reconstruction.global_registration import global_pose
-from recon_cli.reconstruction.pipeline import scan_cloud
+from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
+from recon_cli.reconstruction.pipeline import run_register, scan_cloud
+from recon_cli.recording import open_recorder
+from recon_cli.recording.results import record_registration
+from recon_cli.report import write_page_after_run
 from recon_cli.runs import autoscan as autoscan_file
 from recon_cli.runs.autoscan import Accuracy
 from recon_cli.runs.codec import matrix
@@ -93,7 +99,6 @@ class Autoscan:
         try:
             method = Method(opt.method)
         except ValueError:
-            from recon_cli.errors import UnknownNameError
 
             raise UnknownNameError("view planning method", str(opt.method), METHODS) from None
         if opt.config.viewplan.n < 2:
@@ -110,7 +115,6 @@ class Autoscan:
 
         opt, cfg = self.opt, self.opt.config
         if opt.record:
-            from recon_cli.recording import open_recorder
 
             self.recorder = open_recorder(opt.out, f"recon autoscan ({self.method.value})")
         spec = SessionSpec(opt.out, cfg, Mode.AUTOSCAN, opt.backend, run={"method": self.method.value, **opt.run},
@@ -273,7 +277,6 @@ class Autoscan:
         finally:
             self._close_recorder()
         if opt.page:  # with the recording complete
-            from recon_cli.report import write_page_after_run
 
             written = write_page_after_run(opt.out)
             result.page = None if written is None else written.path
@@ -295,11 +298,7 @@ class Autoscan:
         cloud = mesh = None
         coverage = accuracy = None
         if not interrupted and error is None and len(self.store) > 0:
-            from dataclasses import replace
 
-            from recon_cli.reconstruction.evaluation import histogram_png, signed_distances, within_shares
-            from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
-            from recon_cli.reconstruction.pipeline import run_register
 
             try:
                 reg = run_register(opt.out, opt.out / "reconstruction", replace(cfg.registration, mesh=opt.mesh),
@@ -309,21 +308,18 @@ class Autoscan:
             else:
                 cloud, mesh = reg.cloud, reg.mesh
             if error is None and self.station.capabilities.ground_truth:  # the true surface is known
-                from recon_cli.inputs.meshes import read_cloud
 
                 fused = reg.cloud
                 pts = np.asarray(read_cloud(fused, "fused cloud", points=False).points)
                 coverage = surface_coverage(self.obj, pts, COVERAGE_TOLERANCE, np.random.default_rng(cfg.seed))
                 d = signed_distances(pts, self.obj.mesh_world())
                 if self.recorder is not None:
-                    from recon_cli.recording.results import record_registration
 
                     record_registration(self.recorder, reg, opt.out, distances=(pts, d))
                 accuracy = Accuracy(float(d.mean() * 1e3), float(d.std() * 1e3), len(pts), within_shares(d))
                 histogram_png(fused.parent / f"{fused.stem}_distances.png", {fused.stem: d},
                               f"{fused.name} vs the true {self.obj.name}")
             elif error is None and self.recorder is not None:
-                from recon_cli.recording.results import record_registration
 
                 record_registration(self.recorder, reg, opt.out)
         seconds_total = time.perf_counter() - t0

@@ -30,7 +30,8 @@ import numpy as np
 
 from recon_cli.acquisition import view_record
 from recon_cli.backends.base import Backend
-from recon_cli.calibration.camera_file import load_camera_file, write_camera_file
+from recon_cli.backends.station_file import load_station
+from recon_cli.calibration.camera_file import load_camera_file, write_calibrated_profile, write_camera_file
 from recon_cli.calibration.goals import board_view_goals
 from recon_cli.calibration.handeye import (
     Diversity,
@@ -58,6 +59,7 @@ from recon_cli.console import write_json
 from recon_cli.errors import FileError, InputError, ReconError
 from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.inputs.images import read_color
+from recon_cli.inputs.jsonfile import load_json
 from recon_cli.outputs import atomic_write, atomic_write_text
 from recon_cli.perception.charuco import BoardSpec, thesis_board
 from recon_cli.reconstruction.metadata import read_session
@@ -240,7 +242,6 @@ def _truth_flange_T_camera(scans: Path, model: np.ndarray) -> np.ndarray | None:
         return None
     record = Path(scans) / "ground_truth" / "realism.json"
     if record.exists():
-        from recon_cli.inputs.jsonfile import load_json
 
         data = load_json(record, "ground_truth/realism.json")
         kin = (data.get("kinematics") if isinstance(data, dict) else None) or {}
@@ -259,7 +260,6 @@ def run_handeye(opt: HandEyeOptions, progress: Progress | None = None) -> HandEy
     camera = load_camera_file(opt.camera) if opt.camera is not None else None
     station_file = None
     if opt.station is not None:
-        from recon_cli.backends.station_file import load_station
 
         station_file = load_station(opt.station)
     recorded = None
@@ -450,7 +450,6 @@ def run_intrinsics(opt: IntrinsicsOptions) -> IntrinsicsRun:
     figure = atomic_write(out / "intrinsics_reprojection.png", lambda tmp: plot_reprojection(result, tmp))
     profile = None
     if opt.profile is not None:
-        from recon_cli.calibration.camera_file import write_calibrated_profile
 
         profile = write_calibrated_profile(opt.profile, result.camera, out / "realism.yaml")
     return IntrinsicsRun(result, camera_file, report, figure, len(images), time.perf_counter() - t0, profile)

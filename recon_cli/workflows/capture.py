@@ -24,8 +24,10 @@ from recon_cli.config import DEFAULTS, Config
 from recon_cli.errors import ReconError
 from recon_cli.geometry.view import View
 from recon_cli.objects import SceneObject
+from recon_cli.outputs import keep_earlier, refuse_links
 from recon_cli.reconstruction.scan_store import Scan
 from recon_cli.recording import closing, open_recorder
+from recon_cli.report import write_page_after_run
 from recon_cli.runs import capture as capture_file
 from recon_cli.runs.capture import CAPTURE_REPORT, ViewFailure
 from recon_cli.session import Backend, Mode, SessionSpec, open_session
@@ -76,7 +78,6 @@ def run_capture(opt: CaptureOptions, progress: Callable[[str, int, int], None] |
     step = (lambda k: progress("capture", k, n)) if progress else (lambda k: None)
     scans, moves, failures, capture_seconds = [], [], [], []
     if opt.append:
-        from recon_cli.outputs import keep_earlier, refuse_links
 
         refuse_links(opt.out)
         keep_earlier(opt.out, CAPTURE_REPORT, "config.yaml", "recording.rrd")
@@ -133,7 +134,6 @@ def _write_report(opt: CaptureOptions, status: CaptureStatus, scans: int, failur
         failures=tuple(failures)))
     page = None
     if opt.page:
-        from recon_cli.report import write_page_after_run
 
         written = write_page_after_run(opt.out)
         page = None if written is None else written.path

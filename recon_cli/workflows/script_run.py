@@ -23,6 +23,8 @@ import numpy as np
 from recon_cli.errors import ReconError, RobotFault, RunInterrupted, ScriptAborted
 from recon_cli.interrupts import exit_code, signal_name
 from recon_cli.outputs import atomic_write_text, keep_earlier, refuse_links
+from recon_cli.recording import open_recorder
+from recon_cli.report import write_page_after_run
 from recon_cli.runs import script_run as run_file
 from recon_cli.runs.codec import from_json, plain
 from recon_cli.runs.script_run import RUN_REPORT, Interruption
@@ -106,7 +108,6 @@ class ScriptRunner:
             self._keep_earlier(RUN_REPORT, "script.expanded.xml", "config.yaml", "recording.rrd")
         atomic_write_text(self.out / "script.expanded.xml", self.script.expanded_xml)
         if self.options.record and not self.options.dry_run:
-            from recon_cli.recording import open_recorder
 
             self.state.recorder = open_recorder(self.out, f"recon run {self.script.name}")
         aborted, interrupted = "", None
@@ -214,7 +215,6 @@ class ScriptRunner:
     def _write_page(self) -> None:
         """The run's page, however the run ended (with what it wrote)."""
         if self.options.page:
-            from recon_cli.report import write_page_after_run
 
             page = write_page_after_run(self.out)
             self.page = None if page is None else page.path

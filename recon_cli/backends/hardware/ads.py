@@ -68,6 +68,7 @@ from recon_cli.backends.hardware.ads_config import (  # noqa: F401 (the config i
     range_rows,
 )
 from recon_cli.errors import HardwareUnavailable, InputError, RobotFault
+from recon_cli.inputs.images import native_output_captured
 from recon_cli.planning.trajectory import Trajectory
 from recon_cli.robot.limits import JointLimits
 
@@ -122,7 +123,6 @@ def adslib_quiet():
     except (ImportError, AttributeError, ValueError, OSError):
         level = None
     if level is None:
-        from recon_cli.inputs.images import native_output_captured
 
         with native_output_captured(opencv=False):
             yield

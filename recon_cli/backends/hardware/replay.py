@@ -52,7 +52,7 @@ from recon_cli.inputs.jsonfile import MAX_METADATA_BYTES, load_json, read_bytes
 from recon_cli.inputs.numbers import in_range
 from recon_cli.perception.camera_model import Intrinsics, backproject
 from recon_cli.reconstruction.metadata import read_scan_meta
-from recon_cli.reconstruction.scan_store import Scan, ScanStore
+from recon_cli.reconstruction.scan_store import Scan, ScanStore, read_scan
 
 log = logging.getLogger(__name__)
 
@@ -327,7 +327,6 @@ def load_frame(frame: RecordedFrame) -> RGBDFrame:
     import cv2
 
     if frame.scan_folder is not None:
-        from recon_cli.reconstruction.scan_store import read_scan
 
         scan = read_scan(frame.scan_folder)
         color = scan.color if scan.color is not None else np.zeros((*scan.depth.shape, 3), np.uint8)

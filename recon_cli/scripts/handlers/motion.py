@@ -17,6 +17,7 @@ from recon_cli.planning.planner import MotionPlanner
 from recon_cli.robot.poses import named_configuration
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.handlers import handles
+from recon_cli.scripts.handlers.fragments import make_fragment
 from recon_cli.scripts.state import CommandReport, CommandStatus, RunState
 
 
@@ -115,7 +116,6 @@ def scan(state: RunState, cmd: C.Scan, report: CommandReport) -> None:
     report.details.update(scan=s.index, points=int(np.count_nonzero(s.depth > 0)))
     state.registered = None  # a new scan invalidates earlier registration results
     if isinstance(cmd, C.FragmentScan):
-        from recon_cli.scripts.handlers.fragments import make_fragment
 
         make_fragment(state, cmd.name or f"scan_{s.index:04d}", s, report)
 

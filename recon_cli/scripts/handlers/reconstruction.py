@@ -8,10 +8,12 @@ from dataclasses import replace
 from pathlib import Path
 
 from recon_cli.errors import ReconError
+from recon_cli.inputs.meshes import read_mesh
 from recon_cli.outputs import atomic_write
 from recon_cli.reconstruction.assessment import run_evaluate
 from recon_cli.reconstruction.pipeline import run_register
 from recon_cli.reconstruction.surface import SurfaceOptions, fuse, poisson_mesh, write_cloud, write_mesh
+from recon_cli.recording.results import record_registration
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.checks import readable_file
 from recon_cli.scripts.handlers import handles
@@ -35,7 +37,6 @@ def register_scans(state: RunState, local=True, board=True, loop_closures="icp",
         opts = replace(opts, surface=surface)
     state.registered = run_register(state.store.root, state.out / "reconstruction", opts, seed=state.config.seed)
     if state.recorder is not None:
-        from recon_cli.recording.results import record_registration
 
         record_registration(state.recorder, state.registered, state.store.root)
     state.reconstruction = {"cloud": state.registered.cloud, "cloud_global": state.registered.cloud_global}
@@ -69,7 +70,6 @@ def reconstruct(state: RunState, cmd: C.Reconstruct, report: CommandReport) -> N
     mesh, _ = poisson_mesh(fused, surface)
     mesh_path = write_mesh(folder / "mesh.ply", mesh, r.out_T_marker)
     if state.recorder is not None:
-        from recon_cli.inputs.meshes import read_mesh
 
         state.recorder.mesh("reconstruction/mesh", read_mesh(mesh_path, "reconstructed mesh", triangles=False))
     state.reconstruction.update(cloud=cloud, mesh=mesh_path)

@@ -3,7 +3,8 @@
 From the top: the entry module (``python -m recon_cli``), the command line (cli/), the
 benchmarks (bench/), the workflows (workflows/), then the library (every other package and
 module). Imports are read from the source (also those inside functions), so a lazy import
-counts as much as one at the top of a file.
+counts as much as one at the top of a file; and imports stand at the top of their module,
+except those of heavy, optional or platform-specific libraries.
 """
 
 from __future__ import annotations
@@ -113,3 +114,32 @@ def test_the_parts_of_the_package_import_each_other_without_a_circle():
         if node not in state:
             visit(node)
     assert circles == []
+
+
+#: libraries a function may import where it uses them: slow to import, optional extras, or
+#: platform-specific; everything else is imported at the top of the module
+LATE = frozenset({"open3d", "cv2", "matplotlib", "scipy", "xacro", "ompl", "toppra", "pinocchio", "mplib",
+                  "pyads", "genicam", "harvesters", "pyrealsense2", "rerun", "rerun_cli", "pyarrow",
+                  "distributed", "fcntl"})
+
+
+def test_imports_stand_at_the_top_of_their_module():
+    """The arrows between modules are where a reader looks for them: an import inside a
+    function is only of a heavy, optional or platform-specific library."""
+    inside = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+        for fn in ast.walk(tree):
+            if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            for node in ast.walk(fn):
+                if isinstance(node, ast.ImportFrom):
+                    names = ["recon_cli" if node.level else (node.module or "")]
+                elif isinstance(node, ast.Import):
+                    names = [a.name for a in node.names]
+                else:
+                    continue
+                late = [n for n in names if n.split(".")[0] not in LATE]
+                if late:
+                    inside.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno} {', '.join(late)}")
+    assert not inside, "imports inside functions:\n" + "\n".join(sorted(set(inside)))

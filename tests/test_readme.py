@@ -101,8 +101,7 @@ def _run(step: Step, folders: dict[str, Path], tmp_path: Path) -> list[str]:
 #: the tour's commands that finish in seconds (not: the full 16-view autoscan with its
 #: recording)
 QUICK = ("recon ik ", "recon validate ", "recon run scripts_xml/smoke.xml", "recon autoscan --n 4 ",
-         "recon capture --views eq-4.1 ", "recon register /tmp/scans", "recon evaluate /tmp/scans/",
-         "recon bench sequence --quick ")
+         "recon capture --views eq-4.1 ", "recon register /tmp/scans", "recon evaluate /tmp/scans/")
 #: those of them that scan the YCB drill ('auto' where the shared test data is beside the checkout)
 DRILL = ("recon capture --views eq-4.1 ", "recon register /tmp/scans", "recon evaluate /tmp/scans/")
 

@@ -181,7 +181,7 @@ def _plain(value):
         return value.item()
     if isinstance(value, enum.Enum):
         return value.value
-    if isinstance(value, Path):
+    if isinstance(value, (Path, str)):  # a path, or a str subclass (a cell's name)
         return str(value)
     return value
 

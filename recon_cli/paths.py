@@ -1,5 +1,6 @@
-"""Where recon's data folders are: the cell description (robot/), the schemas (schemas/),
-the shipped scripts (scripts_xml/) and the shipped batches (batches/).
+"""Where recon's data folders are: the shipped cell files (cells/), the robot description
+(robot/), the schemas (schemas/), the shipped scripts (scripts_xml/) and the shipped batches
+(batches/).
 
 In a checkout (and an editable install) they are the folders beside the package; an
 installed wheel carries them as package data (``recon_cli._data``). ``RECON_HOME`` points
@@ -26,6 +27,7 @@ def _data_dir(name: str) -> Path:
 
 #: the checkout root (or, installed, the folder that holds the package)
 ROOT = _CHECKOUT
+CELLS_DIR = _data_dir("cells")
 ROBOT_DIR = _data_dir("robot")
 SCHEMA_DIR = _data_dir("schemas")
 SCRIPTS_DIR = _data_dir("scripts_xml")

@@ -26,7 +26,7 @@ def pose_text(T: np.ndarray) -> str:
 def cell_tables(cell: Cell, q_show: np.ndarray, q_label: str) -> list:
     lim = cell.limits
     out = []
-    joints = Table(title=f"joints of the {cell.config.kind.value} cell ({lim.n} DoF)")
+    joints = Table(title=f"joints of the {cell.config.name} cell ({lim.n} DoF)")
     for col in ("joint", "type", "hard limits", "soft limits", "velocity", "acceleration"):
         joints.add_column(col)
     for i, name in enumerate(lim.names):

@@ -37,7 +37,7 @@ from recon_cli.backends.base import Capabilities
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.inputs.schema import check
 from recon_cli.inputs.yamlfile import line_of, read_yaml
-from recon_cli.robot.description import CellConfig, CellKind
+from recon_cli.robot.description import CellConfig, CellName
 
 STATION_FORMAT = 1
 TOP_KEYS = ("format", "name", "cell", "hand_eye", "robot", "camera")
@@ -92,7 +92,7 @@ def load_station(path: Path) -> StationFile:
             raise InputError(f"{w}: hand_eye is not 4 rows of 4 numbers", hint="flange_T_camera, row by row [m]")
         flat = tuple(v for r in rows for v in r)
     try:
-        cell = CellConfig(kind=CellKind.parse(str(cell_map.get("kind", "gantry"))),
+        cell = CellConfig(kind=CellName.parse(str(cell_map.get("kind", "gantry"))),
                           safety_distance=float(cell_map.get("safety_distance", CellConfig.safety_distance)),
                           table_lift=float(cell_map.get("table_lift", 0.0)),
                           ceiling_xy=tuple(cell_map.get("ceiling_xy", (0.0, 0.0))), flange_T_camera=flat)

@@ -43,7 +43,7 @@ from recon_cli.cli.options import (
 )
 from recon_cli.console import console, progress_bar, write_json
 from recon_cli.planning.options import PLANNERS
-from recon_cli.robot.description import CellConfig, CellKind
+from recon_cli.robot.description import CellConfig, CellName
 from recon_cli.viewplan.policy import Method
 
 OutOpt = Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default "
@@ -80,7 +80,7 @@ def bench_ik(
         result = run_ik_bench(c, cfg, update)
     write_json(folder / "bench_ik.json", {"config": cfg.__dict__, "safety_distance": safety,
                                           "result": result.to_dict()})
-    for item in render.ik_report(result, c.config.kind.value, solutions):
+    for item in render.ik_report(result, c.config.name, solutions):
         console.print(item)
     console.print(f"results: {folder / 'bench_ik.json'}")
 
@@ -189,7 +189,7 @@ def bench_viewplan(
     folder = output_folder(out, "bench viewplan", force=force, inputs=(Path(realism),)).path
     with progress_bar() as update:
         rows = run_viewplan_bench(folder, split_names(objects), chosen, n, dc, seed,
-                                  resolution, CellConfig(kind=CellKind.parse(cell)), update, profile)
+                                  resolution, CellConfig(kind=CellName.parse(cell)), update, profile)
     write_json(folder / "bench_viewplan.json", {"n": n, "d_c": dc, "cell": cell, "realism": profile.summary(),
                                                 "resolution": resolution, "rows": [asdict(r) for r in rows]})
     coverage_png(folder / "coverage.png", rows)

@@ -32,8 +32,9 @@ from recon_cli.planning.options import PLANNERS, SIMPLIFICATIONS
 from recon_cli.realism import BUILT_IN, load_profile
 from recon_cli.recording import require_rerun
 from recon_cli.robot.cell import Cell
+from recon_cli.robot.cell_file import shipped_cells
 from recon_cli.robot.collision import ObjectBox
-from recon_cli.robot.description import CellConfig, CellKind
+from recon_cli.robot.description import CellConfig, CellName
 
 D = DEFAULTS
 
@@ -156,8 +157,26 @@ def _realism_metavar() -> str:
     return "<" + "|".join((*BUILT_IN, "FILE.yaml")) + ">"
 
 
-CellOpt = Annotated[CellKind, typer.Option("--cell", help="The cell: gantry (9 DoF, linear axes) or ceiling "
-                                                          "(7 DoF).")]
+def _cell(value: str | None) -> str | None:
+    """--cell: a shipped cell's name or a cell FILE.yaml (read when the command runs)."""
+
+    if value is None:
+        return value
+    try:
+        return CellName.parse(value)
+    except UnknownNameError:
+        names = ", ".join(repr(n) for n in shipped_cells())
+        raise typer.BadParameter(f"{value!r} is not one of {names} or a cell FILE.yaml") from None
+
+
+def _cell_metavar() -> str:
+
+    return "<" + "|".join((*shipped_cells(), "FILE.yaml")) + ">"
+
+
+CellOpt = Annotated[str, typer.Option("--cell", metavar=_cell_metavar(), callback=_cell,
+                                      help="The cell: a shipped cell (gantry: 9 DoF with linear axes, ceiling: "
+                                           "7 DoF) or a cell FILE.yaml.")]
 SafetyOpt = Annotated[float, typer.Option("--safety", min=SAFETY_RANGE[0], max=SAFETY_RANGE[1],
                                           help="Safety distance [m] that inflates every collision shape.")]
 SeedOpt = Annotated[int, typer.Option("--seed", min=SEED_RANGE[0], max=SEED_RANGE[1],
@@ -251,7 +270,7 @@ def realism_profile(text: str):
 def make_cell(cell: str, safety: float, object_box: str | None = None):
     """The cell of ``--cell`` / ``--safety`` with an optional box 'sx,sy,sz' on the table centre."""
 
-    c = Cell(CellConfig(kind=CellKind.parse(cell), safety_distance=safety))
+    c = Cell(CellConfig(kind=CellName.parse(cell), safety_distance=safety))
     if object_box:
         size = parse_vector(object_box, 3, "--object-box", "metres")
         if min(size) <= 0:

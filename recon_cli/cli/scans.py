@@ -53,7 +53,7 @@ from recon_cli.reconstruction.assessment import run_evaluate
 from recon_cli.reconstruction.crop import CropBox
 from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
 from recon_cli.report import write_pages_after_register
-from recon_cli.robot.description import CellKind
+from recon_cli.robot.description import CellName
 from recon_cli.session import resolve_object_name
 from recon_cli.thesis import eq_4_1_views
 from recon_cli.workflows.capture import CaptureOptions, run_capture
@@ -135,7 +135,7 @@ def capture(
     covered = index_list(cover_board, "--cover-board", len(view_list))
     positive(scale, "--scale", "e.g. 0.001 for millimetres")
     config = base.config.with_values({"scene.object_name": object_name, **base.picked(
-        cell=("cell.kind", lambda: CellKind.parse(cell)), safety=("cell.safety_distance", safety),
+        cell=("cell.kind", lambda: CellName.parse(cell)), safety=("cell.safety_distance", safety),
         scale=("scene.object_scale", scale), noise=("sensor.noise", noise),
         resolution=("sensor.resolution", resolution), seed=("seed", seed), planner=("planner.planner", planner),
         planning_time=("planner.time_limit", planning_time), realism=("realism", lambda: realism_profile(realism)))})

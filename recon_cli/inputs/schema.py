@@ -25,7 +25,7 @@ from recon_cli.inputs.yamlfile import line_of
 from recon_cli.paths import SCHEMA_DIR
 
 #: the YAML file kinds with a schema (schemas/KIND.schema.json)
-KINDS = ("station", "realism", "camera", "batch", "config")
+KINDS = ("station", "realism", "camera", "batch", "config", "cell")
 
 
 @cache
@@ -35,11 +35,13 @@ def load_schema(kind: str) -> dict:
 
 
 @cache
-def _validator(kind: str):
+def _validator(kind: str, part: str | None = None):
 
     schema = load_schema(kind)
     cls = jsonschema.validators.validator_for(schema)
     cls.check_schema(schema)
+    if part is not None:  # one definition of the schema, for a file a document refers to
+        schema = {"$schema": schema["$schema"], "$ref": f"#/$defs/{part}", "$defs": schema["$defs"]}
     return cls(schema)
 
 
@@ -141,9 +143,10 @@ def _best(errors) -> Any:
     return jsonschema.exceptions.best_match(errors)
 
 
-def check(doc: Any, kind: str, where: str | Path) -> None:
-    """Refuse ``doc`` (read from ``where``) unless it matches the schema of ``kind``."""
-    error = _best(_validator(kind).iter_errors(doc))
+def check(doc: Any, kind: str, where: str | Path, part: str | None = None) -> None:
+    """Refuse ``doc`` (read from ``where``) unless it matches the schema of ``kind`` (or, with
+    ``part``, the definition ``$defs/part`` of that schema: a file the document refers to)."""
+    error = _best(_validator(kind, part).iter_errors(doc))
     if error is not None:
         # within oneOf/anyOf, the problem inside the branch the value was meant for (the one
         # of its type, or the deepest) is the useful one, not "is not of type null"

@@ -23,7 +23,7 @@ from recon_cli.reconstruction.global_registration import PoseSource
 from recon_cli.reconstruction.scan_store import ScanStore, read_scan
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.collision import ObjectBox
-from recon_cli.robot.description import CellConfig, CellKind
+from recon_cli.robot.description import CellConfig, CellName
 
 
 def record_registration(recorder, result, store_root: Path,
@@ -87,7 +87,7 @@ def record_store(recorder, store_root: Path) -> int:
     box = None if info.object_box is None else ObjectBox(info.object_box.center, info.object_box.size)
     cell = None
     if info.cell_kind is not None:  # stores replayed from other cameras have no cell
-        kind, lift = CellKind.parse(info.cell_kind), info.table_lift or 0.0
+        kind, lift = CellName.parse(info.cell_kind), info.table_lift or 0.0
         cfg = CellConfig(kind=kind, table_lift=lift) if info.safety_distance is None else \
             CellConfig(kind=kind, table_lift=lift, safety_distance=info.safety_distance)
         cell = Cell(cfg, object_box=box)

@@ -17,6 +17,7 @@ from recon_cli.robot.description import CellConfig, expand_urdf
 from recon_cli.robot.ik import IKOptions, IKResult, IKSolver, IKStatus
 from recon_cli.robot.kinematics import Kinematics
 from recon_cli.robot.limits import JointLimits
+from recon_cli.robot.shapes import CollisionShape
 
 
 class Cell:
@@ -26,7 +27,7 @@ class Cell:
                  object_box: ObjectBox | None = None) -> None:
         self.config = config
         self.urdf = expand_urdf(config)
-        self.kin = Kinematics(self.urdf)
+        self.kin = Kinematics(self.urdf, config.cell_file)
         self.collision = CollisionModel(self.urdf, self.kin, object_box, config.safety_distance)
         self.ik = IKSolver(self.kin, self.collision)
         self.world_T_marker = self.kin.world_T_marker()
@@ -46,16 +47,21 @@ class Cell:
         """``world_T_camera`` of a view given in the world or the marker frame."""
         return world_T_camera(view, self.world_T_marker)
 
+    def _table_top(self) -> CollisionShape:
+        """The table top's collision shape (the cell file's ``table.shape``)."""
+        name = self.config.cell_file.table_shape
+        return next(s for s in self.collision.env_shapes if s.name == name)
+
     @property
     def table_surface_z(self) -> float:
         """[m] world height of the table top surface (from the description, lift included)."""
-        top = next(s for s in self.collision.env_shapes if s.name == "table_top")
+        top = self._table_top()
         return float(top.joint_T_shape[2, 3] + top.dims[2] / 2.0 - self.config.safety_distance)
 
     def check_camera_position(self, world_T_cam: npt.NDArray[np.float64], what: str = "view") -> None:
         """Refuse a camera pose whose origin lies inside an obstacle (table, frame, object)."""
         p = world_T_cam[:3, 3]
-        top = next(s for s in self.collision.env_shapes if s.name == "table_top")
+        top = self._table_top()
         centre, half = top.joint_T_shape[:3, 3], np.asarray(top.dims) / 2.0  # axis-aligned
         if np.all(np.abs(p[:2] - centre[:2]) <= half[:2]) and p[2] < centre[2] + half[2]:
             raise InvalidViewError(
@@ -82,7 +88,7 @@ class Cell:
         if result.status is IKStatus.UNREACHABLE:
             p = world_T_cam[:3, 3]
             raise UnreachableViewError(
-                f"{what} is out of reach of the {self.config.kind.value} cell: no IK solution "
+                f"{what} is out of reach of the {self.config.name} cell: no IK solution "
                 f"within the soft joint limits for the camera at ({p[0]:.3f}, {p[1]:.3f}, "
                 f"{p[2]:.3f}) m after {result.attempts} attempts",
                 hint="move the focus point toward the table or change r, theta or phi",

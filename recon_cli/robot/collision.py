@@ -9,7 +9,7 @@ safety distance.
 
 Checked pairs: every robot shape against every environment shape, and robot shapes of
 different links against each other, except links on the same rigid body, a link and its
-URDF parent, the pairs listed with a reason in robot/collision.yaml, and the pairs proven
+URDF parent, the pairs listed with a reason in the cell file's collision section, and the pairs proven
 apart over the whole joint range. Yes/no queries run batched in C++ (pinocchio + coal,
 ``motion_check``); python-fcl on the same shapes answers distance queries, proves the
 certificates and names the pairs of a collision report.
@@ -21,7 +21,6 @@ that invariant in one place.
 
 from __future__ import annotations
 
-import functools
 import itertools
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
@@ -32,10 +31,9 @@ import numpy.typing as npt
 from lxml import etree
 
 from recon_cli.geometry.transforms import pose_from_xyz_rpy
-from recon_cli.inputs.yamlfile import read_yaml
 from recon_cli.lazy import lazy_module
-from recon_cli.paths import ROBOT_DIR
 from recon_cli.robot.batch_fk import BatchFK
+from recon_cli.robot.cell_file import DEFAULT_CELL, CellFile, load_cell
 from recon_cli.robot.kinematics import Kinematics
 from recon_cli.robot.motion_check import BatchChecker
 from recon_cli.robot.pair_field import PairField
@@ -160,23 +158,17 @@ def shapes_from_urdf(urdf: str, kin: Kinematics) -> list[CollisionShape]:
     return shapes
 
 
-@functools.lru_cache(maxsize=1)
-def _declared_allowed() -> tuple[frozenset[str], ...]:
-    entries = read_yaml(ROBOT_DIR / "collision.yaml", "collision file")["allowed"]
-    return tuple(frozenset(e["links"]) for e in entries)
-
-
-@functools.lru_cache(maxsize=1)
-def allowed_shape_pairs() -> frozenset[frozenset[str]]:
-    """Shape pairs ("link/shape" labels) never checked, from robot/collision.yaml."""
-    entries = read_yaml(ROBOT_DIR / "collision.yaml", "collision file").get("shapes", [])
-    return frozenset(frozenset(pair) for pair in entries)
+def allowed_shape_pairs(cell: CellFile | None = None) -> frozenset[frozenset[str]]:
+    """Shape pairs ("link/shape" labels) never checked, from the cell file (None: the default cell)."""
+    cell = cell if cell is not None else load_cell(DEFAULT_CELL)
+    return frozenset(frozenset(pair) for pair in cell.allowed_shapes)
 
 
 def allowed_link_pairs(urdf: str, kin: Kinematics) -> set[frozenset[str]]:
-    """Link pairs that are never checked (same rigid body, URDF parent/child, declared)."""
+    """Link pairs that are never checked (same rigid body, URDF parent/child, declared in the
+    cell file of ``kin``)."""
     root = etree.fromstring(urdf.encode())
-    allowed: set[frozenset[str]] = set(_declared_allowed())
+    allowed: set[frozenset[str]] = {frozenset(pair.links) for pair in kin.cell.allowed_links}
     links = [attribute(link, "name") for link in root.iter("link")]
     body = {name: kin.model.frames[kin.model.getFrameId(name, pin.BODY)].parentJoint
             for name in links}
@@ -212,7 +204,7 @@ class CollisionModel:
         self._robot_joints: npt.NDArray[np.intp] = np.array([s.joint for s in self.robot_shapes])
         self._robot_local = np.stack([s.joint_T_shape for s in self.robot_shapes])  # (R, 4, 4)
         # robot shape pairs to check against each other
-        shape_allowed = allowed_shape_pairs()
+        shape_allowed = allowed_shape_pairs(self.kin.cell)
         self._self_pairs: npt.NDArray[np.intp] = np.array([
             (i, j) for i, j in itertools.combinations(range(len(self.robot_shapes)), 2)
             if frozenset((self.robot_shapes[i].link, self.robot_shapes[j].link)) not in self._allowed
@@ -395,7 +387,7 @@ class CollisionModel:
                                 fcl.Transform(s.joint_T_shape[:3, :3], s.joint_T_shape[:3, 3]))
             for s in env
         ]
-        shape_allowed = allowed_shape_pairs()
+        shape_allowed = allowed_shape_pairs(self.kin.cell)
         skip: npt.NDArray[np.bool_] = np.array([
             [frozenset((r.link, e.link)) in self._allowed or frozenset((r.label, e.label)) in shape_allowed
              for e in env] for r in self.robot_shapes

@@ -1,8 +1,11 @@
-"""Expanding the cell's xacro description (robot/cell.urdf.xacro) into URDF text.
+"""A cell's robot description expanded into URDF text, and ``CellConfig``: which cell (a
+shipped cell's name or a cell file) with recon's settings of it.
 
-The one description feeds every consumer: pinocchio (kinematics, dynamics), the FCL
-collision model and the MuJoCo scene. Expansion is cached per process, keyed by the
-arguments and the content of every file under robot/.
+The cell file (:mod:`recon_cli.robot.cell_file`) names the description (a URDF or xacro
+file), its xacro arguments and the arguments that take the settings (safety distance, table
+lift, base and camera poses). The one description feeds every consumer: pinocchio
+(kinematics, dynamics), the collision model and the MuJoCo scene. Expansion is cached per
+process, keyed by the arguments and the content of the description's files.
 """
 
 from __future__ import annotations
@@ -15,71 +18,101 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import StrEnum
+from pathlib import Path
 
 import numpy as np
 
 from recon_cli.errors import InputError, UnknownNameError
-from recon_cli.paths import ROBOT_DIR
-
-CELL_XACRO = ROBOT_DIR / "cell.urdf.xacro"
+from recon_cli.geometry.transforms import invert
+from recon_cli.robot.cell_file import (
+    ALIASES,
+    DEFAULT_CELL,
+    CellFile,
+    camera_parent,
+    check_against_urdf,
+    load_cell,
+    parent_T_child,
+    resolve,
+    shipped_cells,
+)
 
 #: the thesis planned with a 3 cm safety distance (MoveIt planning context, CELL_FACTS 3.4)
 DEFAULT_SAFETY_DISTANCE = 0.03
-#: [m] the camera bracket frame camera_link_0 above the flange (robot/parts/camera.xacro)
-BRACKET_HEIGHT = 0.0723
 
 
 class CellKind(StrEnum):
-    """The two cells of the thesis."""
+    """The names of the thesis' two shipped cells (cells/gantry.yaml, cells/ceiling.yaml)."""
 
     GANTRY = "gantry"  #: 9 DoF: two linear axes + iiwa (Figures 1.1, 2.7)
     CEILING = "ceiling"  #: 7 DoF: iiwa fixed under the roof (section 5.1)
 
+
+class CellName(str):
+    """Which cell: the name of a shipped cell (cells/NAME.yaml) or the path of a cell file."""
+
+    __slots__ = ()
+
+    @property
+    def value(self) -> str:
+        return str(self)
+
+    @property
+    def shipped(self) -> bool:
+        return str(self) in shipped_cells()
+
+    @property
+    def path(self) -> Path:
+        """The cell file."""
+        return resolve(str(self))
+
     @classmethod
-    def parse(cls, name: str) -> CellKind:
-        aliases = {"9dof": cls.GANTRY, "7dof": cls.CEILING}
-        key = str(name).strip().lower()
-        if key in aliases:
-            return aliases[key]
-        try:
-            return cls(key)
-        except ValueError:
-            raise UnknownNameError(
-                "cell", name, [c.value for c in cls] + list(aliases)
-            ) from None
+    def parse(cls, text: str) -> CellName:
+        """A shipped cell's name (or alias, any case) or a cell file's path (made absolute);
+        anything else is refused naming the shipped cells."""
+        key = str(text).strip()
+        low = ALIASES.get(key.lower(), key.lower())
+        if low in shipped_cells():
+            return cls(low)
+        path = Path(key).expanduser()
+        if path.suffix.lower() in (".yaml", ".yml"):
+            return cls(str(path.resolve()))
+        raise UnknownNameError("cell", str(text), [*shipped_cells(), "a cell FILE.yaml"])
 
 
 @dataclass(frozen=True)
 class CellConfig:
-    """Arguments of the cell description.
+    """Which cell, and recon's settings of it.
 
-    kind: which cell
-    safety_distance: inflation of every collision shape [m] (thesis 2.2.4)
+    kind: the cell: a shipped cell's name or a cell file's path (:class:`CellName`)
+    safety_distance: inflation of every collision shape [m] (thesis 2.2.4); None: the cell file's
     table_lift: extension of the telescoping table [m]
-    ceiling_xy: base position of the ceiling cell in the world [m]
-    flange_T_camera: hand-eye transform, the camera's optical frame in the flange (arm_link_7)
-        frame, 16 numbers row by row [m]; None: the thesis' calibration in the description
-    mount_T_base: the iiwa base (arm_link_0) in its mount (gantry carriage or ceiling plate),
-        16 numbers row by row [m]; None: the nominal mount of the description (a realism
-        profile gives the simulated robot another one: base pose error)
+    ceiling_xy: base position of the robot in the world [m] (cells whose description takes it)
+    flange_T_camera: hand-eye transform, the camera's optical frame in the flange frame,
+        16 numbers row by row [m]; None: the calibration in the description
+    mount_T_base: the robot base link in its mount (its URDF parent: gantry carriage or
+        ceiling plate), 16 numbers row by row [m]; None: the nominal mount of the description
+        (a realism profile gives the simulated robot another one: base pose error)
     """
 
-    kind: CellKind = CellKind.GANTRY
-    safety_distance: float = DEFAULT_SAFETY_DISTANCE
+    kind: CellName = CellName(DEFAULT_CELL)
+    safety_distance: float | None = None
     table_lift: float = 0.0
     ceiling_xy: tuple[float, float] = (0.0, 0.0)
     flange_T_camera: tuple[float, ...] | None = None
     mount_T_base: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
+        if not isinstance(self.kind, CellName):
+            object.__setattr__(self, "kind", CellName.parse(self.kind))
+        if self.safety_distance is None:
+            object.__setattr__(self, "safety_distance", self.cell_file.safety_distance)
         if self.mount_T_base is not None:
             object.__setattr__(self, "mount_T_base", _rigid(self.mount_T_base, "the robot base pose mount_T_base"))
         if self.flange_T_camera is not None:
             object.__setattr__(self, "flange_T_camera",
                                _rigid(self.flange_T_camera, "the hand-eye transform flange_T_camera"))
-        if not isinstance(self.kind, CellKind):
-            object.__setattr__(self, "kind", CellKind.parse(self.kind))
-        if not (math.isfinite(self.safety_distance) and 0.0 <= self.safety_distance <= 0.2):
+        sd = float(self.safety_distance)  # type: ignore[arg-type]
+        if not (math.isfinite(sd) and 0.0 <= sd <= 0.2):
             raise InputError(
                 f"safety distance {self.safety_distance} m is outside 0 ... 0.2 m",
                 hint="give it in metres, e.g. 0.03",
@@ -90,40 +123,58 @@ class CellConfig:
                 hint="give it in metres",
             )
 
+    @property
+    def cell_file(self) -> CellFile:
+        """The checked cell file (read once per process and file version)."""
+        return load_cell(str(self.kind))
+
+    @property
+    def name(self) -> str:
+        """The cell's name (its cell file's ``name``)."""
+        return self.cell_file.name
+
     def xacro_args(self) -> dict[str, str]:
-        return {
-            "cell": self.kind.value,
-            "sd": repr(float(self.safety_distance)),
-            "table_lift": repr(float(self.table_lift)),
-            "ceiling_x": repr(float(self.ceiling_xy[0])),
-            "ceiling_y": repr(float(self.ceiling_xy[1])),
-            **self._camera_args(),
-            **self._base_args(),
-        }
+        cell = self.cell_file
+        s = cell.settings
+        args = dict(cell.arguments)
+        if s.safety_distance:
+            args[s.safety_distance] = repr(float(self.safety_distance))  # type: ignore[arg-type]
+        self._setting(s.table_lift, "table lift", self.table_lift != 0.0)
+        if s.table_lift:
+            args[s.table_lift] = repr(float(self.table_lift))
+        self._setting(s.base_position, "base position (ceiling_xy)", tuple(self.ceiling_xy) != (0.0, 0.0))
+        if s.base_position:
+            args[s.base_position[0]] = repr(float(self.ceiling_xy[0]))
+            args[s.base_position[1]] = repr(float(self.ceiling_xy[1]))
+        self._setting(s.base_pose, "base pose (mount_T_base)", self.mount_T_base is not None)
+        if s.base_pose and self.mount_T_base is not None:
+            args.update(zip(s.base_pose, _xyz_rpy(np.array(self.mount_T_base).reshape(4, 4)), strict=True))
+        self._setting(s.camera_pose, "camera pose (flange_T_camera)", self.flange_T_camera is not None)
+        if s.camera_pose and self.flange_T_camera is not None:
+            mount_T_camera = invert(_flange_T_mount(cell)) @ np.array(self.flange_T_camera).reshape(4, 4)
+            args.update(zip(s.camera_pose, _xyz_rpy(mount_T_camera), strict=True))
+        return args
 
-    def _base_args(self) -> dict[str, str]:
-        """The iiwa base in its mount (only when it differs from the description's)."""
-        if self.mount_T_base is None:
-            return {}
-        from scipy.spatial.transform import Rotation
+    def _setting(self, argument: object, what: str, given: bool) -> None:
+        if given and not argument:
+            raise InputError(f"the {self.name} cell's description takes no {what}",
+                             hint=f"leave it out, or name its xacro argument in {self.cell_file.path}: "
+                                  "description.settings")
 
-        m = self.mount_T_base
-        rpy = Rotation.from_matrix([m[0:3], m[4:7], m[8:11]]).as_euler("xyz")
-        return {"base_xyz": " ".join(repr(float(v)) for v in (m[3], m[7], m[11])),
-                "base_rpy": " ".join(repr(float(v)) for v in rpy)}
 
-    def _camera_args(self) -> dict[str, str]:
-        """The optical frame in the camera bracket frame (BRACKET_HEIGHT above the flange)."""
-        if self.flange_T_camera is None:
-            return {}
-        from scipy.spatial.transform import Rotation
+def _xyz_rpy(T: np.ndarray) -> tuple[str, str]:
+    """URDF origin text (xyz, rpy: fixed axes x, y, z) of a rigid transform."""
+    from scipy.spatial.transform import Rotation
 
-        m = self.flange_T_camera
-        R = [m[0:3], m[4:7], m[8:11]]
-        xyz = (m[3], m[7], m[11] - BRACKET_HEIGHT)
-        rpy = Rotation.from_matrix(R).as_euler("xyz")  # fixed axes x, y, z: URDF's rpy
-        return {"camera_xyz": " ".join(repr(float(v)) for v in xyz),
-                "camera_rpy": " ".join(repr(float(v)) for v in rpy)}
+    rpy = Rotation.from_matrix(T[:3, :3]).as_euler("xyz")
+    return (" ".join(repr(float(v)) for v in T[:3, 3]), " ".join(repr(float(v)) for v in rpy))
+
+
+@functools.lru_cache(maxsize=16)
+def _flange_T_mount(cell: CellFile) -> np.ndarray:
+    """The camera frame's URDF parent in the flange frame (from the description as written)."""
+    urdf = _expand_file(cell, tuple(sorted(cell.arguments)))
+    return parent_T_child(urdf, cell.flange_link, camera_parent(urdf, cell.camera_frame))
 
 
 #: largest |R^T R - I| entry a given rotation may have: 5 decimals written by hand are
@@ -156,26 +207,40 @@ def _rigid(values: Iterable[float], what: str) -> tuple[float, ...]:
     return tuple(m)
 
 
-def _robot_dir_digest() -> str:
+def _digest(description: Path) -> str:
+    """Content of a URDF file, or of every description file in a xacro's folder tree."""
     h = hashlib.sha256()
-    for path in sorted(ROBOT_DIR.rglob("*")):
+    if description.suffix.lower() == ".urdf":
+        h.update(description.read_bytes())
+        return h.hexdigest()
+    folder = description.parent
+    for path in sorted(folder.rglob("*")):
         if path.is_file() and path.suffix in {".xacro", ".yaml", ".urdf"}:
-            h.update(str(path.relative_to(ROBOT_DIR)).encode())
+            h.update(str(path.relative_to(folder)).encode())
             h.update(path.read_bytes())
     return h.hexdigest()
 
 
 def expand_urdf(config: CellConfig = CellConfig()) -> str:  # noqa: B008 (frozen)
-    """URDF text of the cell for the given arguments."""
-    return _expand(tuple(sorted(config.xacro_args().items())), _robot_dir_digest())
+    """URDF text of the cell for the given settings (its cell file checked against it)."""
+    cell = config.cell_file
+    urdf = _expand_file(cell, tuple(sorted(config.xacro_args().items())))
+    check_against_urdf(cell, urdf)
+    return urdf
+
+
+def _expand_file(cell: CellFile, args: tuple[tuple[str, str], ...]) -> str:
+    return _expand(str(cell.description), args, _digest(cell.description))
 
 
 @functools.lru_cache(maxsize=16)
-def _expand(args: tuple[tuple[str, str], ...], digest: str) -> str:
+def _expand(description: str, args: tuple[tuple[str, str], ...], digest: str) -> str:
+    if description.lower().endswith(".urdf"):
+        return Path(description).read_text(encoding="utf-8")
     import xacro
 
     # xacro reports harmless notes on stderr; keep library output quiet
     with contextlib.redirect_stderr(io.StringIO()):
-        doc = xacro.process_file(str(CELL_XACRO), mappings=dict(args))
+        doc = xacro.process_file(description, mappings=dict(args))
     text: str = doc.toprettyxml(indent="  ")
     return text

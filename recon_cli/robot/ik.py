@@ -101,10 +101,10 @@ class IKSolver:
         self._mid = (self._lo + self._hi) / 2.0
         self._inv_range2 = 1.0 / ((self._hi - self._lo) / 2.0) ** 2
         names = kin.joint_names
-        self._gantry = [names.index(j) for j in ("base_joint_1", "base_joint_2") if j in names]
+        self._gantry = [names.index(j) for j in kin.cell.linear_joints]
         # where the iiwa base sits relative to the gantry joints: base_xy = offset + (q_b, q_a)
         q0 = kin.neutral()
-        base0 = kin.frame_pose(q0, "arm_link_0")[:3, 3]
+        base0 = kin.frame_pose(q0, kin.cell.base_link)[:3, 3]
         self._base_offset_xy = base0[:2].copy()
 
     # ------------------------------------------------------------------ seeds

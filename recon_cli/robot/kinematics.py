@@ -1,9 +1,10 @@
 """Kinematics of the cell with pinocchio, built from the expanded URDF.
 
 ``Kinematics.world_T_camera(q)`` is eq. 2.10 of the thesis: the chain of link transforms
-from the world to the optical frame ``camera``. Joint vectors follow the URDF tree order,
-which is the thesis order: base_joint_1, base_joint_2, arm_joint_1 ... arm_joint_7
-(9-DoF gantry cell) or arm_joint_1 ... arm_joint_7 (7-DoF ceiling cell).
+from the world to the camera's optical frame (the cell file's ``camera.frame``). Joint
+vectors follow the URDF tree order, which the cell file's ``joints.planning`` lists (the thesis
+order in the shipped cells: base_joint_1, base_joint_2, arm_joint_1 ... arm_joint_7 in the
+9-DoF gantry cell, arm_joint_1 ... arm_joint_7 in the 7-DoF ceiling cell).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from recon_cli.lazy import lazy_module
+from recon_cli.robot.cell_file import DEFAULT_CELL, CellFile, load_cell
 from recon_cli.robot.limits import JointLimits, limits_from_urdf
 
 if TYPE_CHECKING:
@@ -21,20 +23,22 @@ if TYPE_CHECKING:
 else:
     pin = lazy_module("pinocchio")
 
-CAMERA_FRAME = "camera"
-MARKER_FRAME = "marker"
 
 
 class Kinematics:
-    """Forward kinematics and Jacobians of one cell. Not thread-safe (one pinocchio Data)."""
+    """Forward kinematics and Jacobians of one cell. Not thread-safe (one pinocchio Data).
 
-    def __init__(self, urdf: str) -> None:
+    ``cell``: the cell file the URDF was expanded from (frames, limits); None: the default cell's.
+    """
+
+    def __init__(self, urdf: str, cell: CellFile | None = None) -> None:
+        self.cell: CellFile = cell if cell is not None else load_cell(DEFAULT_CELL)
         self.model: pin.Model = pin.buildModelFromXML(urdf)
         self.data: pin.Data = self.model.createData()
         self.joint_names: tuple[str, ...] = tuple(self.model.names[1:])
-        self.limits: JointLimits = limits_from_urdf(urdf, self.joint_names)
-        self.camera_frame_id: int = self.model.getFrameId(CAMERA_FRAME)
-        self._marker_frame_id: int = self.model.getFrameId(MARKER_FRAME)
+        self.limits: JointLimits = limits_from_urdf(urdf, self.joint_names, self.cell.limits)
+        self.camera_frame_id: int = self.model.getFrameId(self.cell.camera_frame)
+        self._marker_frame_id: int = self.model.getFrameId(self.cell.board_frame)
 
     @property
     def nq(self) -> int:

@@ -1,23 +1,22 @@
-"""Joint limits of a cell, read from the expanded URDF and robot/limits.yaml.
+"""Joint limits of a cell, read from the expanded URDF and the cell file's limits.
 
-Position, soft position and velocity limits come from the URDF (``<limit>`` and
-``<safety_controller>``, written by the xacro from limits.yaml); acceleration limits, which
-URDF cannot hold, come from limits.yaml itself. Units: m, rad, s.
+Position, soft position, velocity and effort limits come from the URDF (``<limit>`` and
+``<safety_controller>``) unless the cell file's limits give them (revolute joints in deg,
+prismatic in m; a soft margin there puts the soft limits that far inside the hard ones);
+acceleration limits, which URDF cannot hold, come from the cell file. Units: m, rad, s.
 """
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 from lxml import etree
 
-from recon_cli.inputs.yamlfile import read_yaml
-from recon_cli.paths import ROBOT_DIR
+from recon_cli.errors import InputError
+from recon_cli.robot.cell_file import LimitTable
 from recon_cli.robot.urdf import attribute, child
 
 
@@ -59,35 +58,34 @@ class JointLimits:
         return rng.uniform(self.soft_lower, self.soft_upper)
 
 
-@functools.lru_cache(maxsize=1)
-def _limits_yaml() -> dict[str, Any]:
-    doc: dict[str, Any] = read_yaml(ROBOT_DIR / "limits.yaml", "limits file")
-    return doc
-
-
-def acceleration_limit(joint: str) -> float:
-    """Acceleration limit of a joint in SI units [m/s^2 or rad/s^2]."""
-    entry = _limits_yaml()["joints"][joint]
-    scale = math.pi / 180.0 if entry["type"] == "revolute" else 1.0
-    return float(entry["acceleration"]) * scale
-
-
-def limits_from_urdf(urdf: str, joint_names: tuple[str, ...] | list[str]) -> JointLimits:
-    """Collect the limits of the given (movable) joints from URDF text."""
+def limits_from_urdf(urdf: str, joint_names: tuple[str, ...] | list[str], table: LimitTable) -> JointLimits:
+    """Collect the limits of the given (movable) joints from URDF text and a cell's limit table."""
     root = etree.fromstring(urdf.encode())
     rows = []
     for name in joint_names:
         joint = child(root, f"joint[@name='{name}']")
         limit = child(joint, "limit")
         safety = joint.find("safety_controller")
-        lo, hi = float(attribute(limit, "lower")), float(attribute(limit, "upper"))
-        if safety is not None:
-            slo = float(attribute(safety, "soft_lower_limit"))
-            shi = float(attribute(safety, "soft_upper_limit"))
+        prismatic = joint.get("type") == "prismatic"
+        given = table.get(name)
+        if given is None or given.acceleration is None:
+            raise InputError(f"{table.where}: the limits lack the acceleration of joint {name}",
+                             hint="give limits.joints.NAME.acceleration of every planning joint")
+        k = 1.0 if prismatic else math.pi / 180.0
+        margin = table.soft_margin_prismatic_m if prismatic else table.soft_margin_revolute_deg
+        lo = given.lower * k if given.lower is not None else float(attribute(limit, "lower"))
+        hi = given.upper * k if given.upper is not None else float(attribute(limit, "upper"))
+        if margin is not None:
+            m = margin if prismatic else margin * math.pi / 180.0
+            slo, shi = lo + m, hi - m
+        elif safety is not None:
+            slo = max(lo, float(attribute(safety, "soft_lower_limit")))
+            shi = min(hi, float(attribute(safety, "soft_upper_limit")))
         else:
             slo, shi = lo, hi
-        rows.append((lo, hi, slo, shi, float(attribute(limit, "velocity")), acceleration_limit(name),
-                     float(attribute(limit, "effort")), joint.get("type") == "prismatic"))
+        velocity = given.velocity * k if given.velocity is not None else float(attribute(limit, "velocity"))
+        effort = given.effort if given.effort is not None else float(attribute(limit, "effort"))
+        rows.append((lo, hi, slo, shi, velocity, given.acceleration * k, effort, prismatic))
     cols = list(zip(*rows, strict=True))
     return JointLimits(
         names=tuple(joint_names),

@@ -27,7 +27,7 @@ from recon_cli.backends.base import Backend
 from recon_cli.errors import HardwareUnavailable, JointLimitError, ReconError, ScriptError
 from recon_cli.objects import BUILTIN, available_objects, ycb_names
 from recon_cli.realism import BUILT_IN, load_profile
-from recon_cli.robot.description import CellConfig, CellKind, expand_urdf
+from recon_cli.robot.description import CellConfig, CellName, expand_urdf
 from recon_cli.robot.limits import limits_from_urdf
 from recon_cli.robot.urdf import attribute
 from recon_cli.scripts import commands as C
@@ -84,7 +84,7 @@ def is_file_name(name: str) -> bool:
 @functools.lru_cache(maxsize=4)
 def _joint_limits(kind: str) -> JointLimits:
 
-    urdf = expand_urdf(CellConfig(kind=CellKind.parse(kind)))
+    urdf = expand_urdf(CellConfig(kind=CellName.parse(kind)))
 
     names = [attribute(j, "name") for j in etree.fromstring(urdf.encode()).iter("joint")
              if j.get("type") in ("revolute", "prismatic", "continuous")]

@@ -63,7 +63,7 @@ from recon_cli.inputs.jsonfile import load_json
 from recon_cli.outputs import atomic_write, atomic_write_text
 from recon_cli.perception.charuco import BoardSpec, thesis_board
 from recon_cli.reconstruction.metadata import read_session
-from recon_cli.robot.description import CellKind, expand_urdf
+from recon_cli.robot.description import CellName, expand_urdf
 from recon_cli.robot.kinematics import Kinematics
 from recon_cli.session import Mode, SessionSpec, open_session
 
@@ -227,7 +227,7 @@ def _model_kinematics(scans: Path, station_file, config: Config):
         info = read_session(scans)
         cell = config.cell
         if info.cell_kind is not None:
-            cell = replace(cell, kind=CellKind.parse(info.cell_kind),
+            cell = replace(cell, kind=CellName.parse(info.cell_kind),
                            table_lift=info.table_lift if info.table_lift is not None else cell.table_lift)
     return Kinematics(expand_urdf(cell))
 

@@ -30,15 +30,14 @@ from recon_cli.geometry.transforms import invert, rpy_to_matrix
 from recon_cli.lazy import lazy_module
 from recon_cli.realism import KinematicErrors, PoseError
 from recon_cli.robot.cell import Cell
-from recon_cli.robot.description import CellConfig, CellKind, expand_urdf
+from recon_cli.robot.cell_file import load_cell, shipped_cells
+from recon_cli.robot.description import CellConfig, expand_urdf
 from recon_cli.robot.urdf import attribute, child
 
 if TYPE_CHECKING:
     import pinocchio as pin
 else:
     pin = lazy_module("pinocchio")
-
-FLANGE_FRAME = "arm_link_7"
 
 
 @dataclass(frozen=True)
@@ -77,11 +76,11 @@ def random_pose_error(error: PoseError, rng: np.random.Generator) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=4)
-def _joint_origin(urdf: str, joint: str) -> np.ndarray:
-    """The origin of a joint of a URDF as a 4 x 4 transform (parent link -> child link)."""
+def _joint_origin(urdf: str, link: str) -> np.ndarray:
+    """The origin of the joint above ``link`` as a 4 x 4 transform (parent link -> link)."""
 
     root = etree.fromstring(urdf.encode())
-    origin = child(root, f"joint[@name='{joint}']/origin")
+    origin = child(root, f"joint[child/@link='{link}']/origin")
     xyz = [float(v) for v in (origin.get("xyz") or "0 0 0").split()]
     rpy = [float(v) for v in (origin.get("rpy") or "0 0 0").split()]
     T = np.eye(4)
@@ -92,12 +91,11 @@ def _joint_origin(urdf: str, joint: str) -> np.ndarray:
 
 @functools.lru_cache(maxsize=1)
 def _all_joint_names() -> frozenset[str]:
-    """Movable joints of either cell (a profile may name joints of the other cell)."""
+    """Planning joints of every shipped cell (a profile may name joints of another cell)."""
 
     names: set[str] = set()
-    for kind in CellKind:
-        root = etree.fromstring(expand_urdf(CellConfig(kind=kind)).encode())
-        names |= {attribute(j, "name") for j in root.iter("joint") if j.get("type") != "fixed"}
+    for name in shipped_cells():
+        names |= set(load_cell(name).planning_joints)
     return frozenset(names)
 
 
@@ -118,11 +116,11 @@ def true_cell(cell: Cell, errors: KinematicErrors, rng: np.random.Generator, whe
     config = cell.config
     if errors.base != PoseError():
         nominal = (np.reshape(config.mount_T_base, (4, 4)) if config.mount_T_base is not None
-                   else _joint_origin(cell.urdf, "arm_joint_0"))
+                   else _joint_origin(cell.urdf, cell.kin.cell.base_link))
         config = replace(config, mount_T_base=tuple((nominal @ base_error).ravel()))
     if errors.hand_eye != PoseError():
         q0 = cell.kin.neutral()
-        nominal = invert(cell.kin.frame_pose(q0, FLANGE_FRAME)) @ cell.kin.world_T_camera(q0)
+        nominal = invert(cell.kin.frame_pose(q0, cell.kin.cell.flange_link)) @ cell.kin.world_T_camera(q0)
         config = replace(config, flange_T_camera=tuple((nominal @ hand_eye_error).ravel()))
     return TrueCell(config, tuple(names), offsets, noise, np.asarray(errors.compliance(names)), base_error,
                     hand_eye_error)

@@ -53,7 +53,7 @@ def move_joints(state: RunState, cmd: C.MoveJoints, report: CommandReport) -> No
     state.move_failed = False
     q = np.asarray(cmd.values, dtype=float)
     if len(q) != state.cell.kin.nq:
-        raise ScriptError(f"{cmd.source}: <joints> has {len(q)} values, the {state.config.cell.kind.value} "
+        raise ScriptError(f"{cmd.source}: <joints> has {len(q)} values, the {state.config.cell.name} "
                           f"cell has {state.cell.kin.nq} joints", hint="one value per joint, in URDF order")
     if cmd.unit == "deg":
         q = np.where(state.cell.limits.prismatic, q, np.radians(q))

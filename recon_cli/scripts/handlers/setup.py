@@ -8,7 +8,7 @@ from recon_cli.config import SceneConfig, SensorConfig
 from recon_cli.objects import load_object
 from recon_cli.planning.planner import MotionPlanner
 from recon_cli.realism import load_profile
-from recon_cli.robot.description import CellConfig, CellKind
+from recon_cli.robot.description import CellConfig, CellName
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.checks import is_file_name, readable_file, script_realism
 from recon_cli.scripts.handlers import handles
@@ -20,7 +20,7 @@ from recon_cli.session import Backend
 def set_cell(state: RunState, cmd: C.SetCell, report: CommandReport) -> None:
 
     realism = state.options.realism or load_profile(script_realism(state.script, cmd))
-    state.set_config(cell=CellConfig(kind=CellKind.parse(cmd.kind), safety_distance=cmd.safety_distance),
+    state.set_config(cell=CellConfig(kind=CellName.parse(cmd.kind), safety_distance=cmd.safety_distance),
                      sensor=SensorConfig(noise=cmd.noise, resolution=cmd.resolution), realism=realism)
     state.backend = state.options.backend or Backend(cmd.backend)
 

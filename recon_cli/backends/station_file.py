@@ -93,7 +93,8 @@ def load_station(path: Path) -> StationFile:
         flat = tuple(v for r in rows for v in r)
     try:
         cell = CellConfig(kind=CellName.parse(str(cell_map.get("kind", "gantry"))),
-                          safety_distance=float(cell_map.get("safety_distance", CellConfig.safety_distance)),
+                          safety_distance=(float(cell_map["safety_distance"]) if "safety_distance" in cell_map
+                                           else None),  # type: ignore[arg-type]  # None: the cell file's
                           table_lift=float(cell_map.get("table_lift", 0.0)),
                           ceiling_xy=tuple(cell_map.get("ceiling_xy", (0.0, 0.0))), flange_T_camera=flat)
     except (TypeError, ValueError) as exc:

@@ -240,7 +240,7 @@ def _parse(path: Path) -> CellFile:
     board = _file(lines, doc["board"], "spec", "board.spec", "board file")
     drives = _file(lines, doc, "drives", "drives", "drives file") if "drives" in doc else None
 
-    limits = _limits(doc, lines, planning, linear)
+    limits = _limits(doc, lines)
     allowed, shapes = _collision(doc, lines)
 
     poses = []
@@ -270,7 +270,7 @@ def _argument(value: Any) -> str:
     return str(value)
 
 
-def _limits(doc: Any, lines: _Lines, planning: tuple[str, ...], linear: tuple[str, ...]) -> LimitTable:
+def _limits(doc: Any, lines: _Lines) -> LimitTable:
     section, owner = doc["limits"], lines
     where = lines.at(doc, "limits", "limits")
     if isinstance(section, str):
@@ -285,20 +285,8 @@ def _limits(doc: Any, lines: _Lines, planning: tuple[str, ...], linear: tuple[st
         rows.append(JointLimit(str(name), entry.get("type"), *(entry.get(k) for k in
                                                                 ("lower", "upper", "velocity", "acceleration",
                                                                  "effort"))))
-        kind = entry.get("type")
-        if name in planning and kind is not None and (kind == "prismatic") != (name in linear):
-            raise InputError(f"{at}: limits of {name} are given as {kind}, the cell's joints.linear says "
-                             f"{'prismatic' if name in linear else 'revolute'}",
-                             hint="list every linear axis in joints.linear, and give it prismatic limits")
-    table = LimitTable(tuple(rows), section.get("soft_margin_revolute_deg"), section.get("soft_margin_prismatic_m"),
-                       where)
-    for joint in planning:
-        entry = table.get(joint)
-        if entry is None or entry.acceleration is None:
-            raise InputError(f"{where}: the limits lack the acceleration of planning joint {joint}",
-                             hint="give limits.joints.NAME.acceleration of every planning joint "
-                                  "(deg/s^2, m/s^2 for linear axes; URDF holds no acceleration limits)")
-    return table
+    return LimitTable(tuple(rows), section.get("soft_margin_revolute_deg"), section.get("soft_margin_prismatic_m"),
+                      where)
 
 
 def _collision(doc: Any, lines: _Lines) -> tuple[tuple[AllowedPair, ...], tuple[tuple[str, str], ...]]:
@@ -330,8 +318,8 @@ def check_against_urdf(cell: CellFile, urdf: str) -> None:
 def _check(cell: CellFile, urdf: str) -> None:
     root = etree.fromstring(urdf.encode())
     desc = cell.description.name
-    links = [link.get("name") for link in root.iter("link")]
-    joints = {j.get("name"): j for j in root.iter("joint")}
+    links = [str(link.get("name")) for link in root.iter("link")]
+    joints = {str(j.get("name")): j for j in root.iter("joint")}
     movable = [n for n, j in joints.items() if j.get("type") not in ("fixed", "floating", "planar")]
 
     for i, name in enumerate(cell.planning_joints):
@@ -340,7 +328,8 @@ def _check(cell: CellFile, urdf: str) -> None:
                              hint=f"its movable joints: {', '.join(movable)}")
         if name not in movable:
             raise InputError(f"{cell.where(f'joints.planning[{i}]')}: planning joint {name} is a "
-                             f"{joints[name].get('type')} joint of {desc}", hint=f"its movable joints: {', '.join(movable)}")
+                             f"{joints[name].get('type')} joint of {desc}",
+                             hint=f"its movable joints: {', '.join(movable)}")
     order = _tree_order(root, movable)
     if list(cell.planning_joints) != order:
         raise InputError(f"{cell.where('joints.planning[0]')}: joints.planning is not the movable joints of {desc} "
@@ -351,6 +340,12 @@ def _check(cell: CellFile, urdf: str) -> None:
             raise InputError(f"{cell.where(f'joints.planning[{i}]')}: joint {name} is {joints[name].get('type')} "
                              f"in {desc} but {'' if name in cell.linear_joints else 'not '}in joints.linear",
                              hint="joints.linear lists exactly the prismatic planning joints")
+    for joint in cell.planning_joints:
+        entry = cell.limits.get(joint)
+        if entry is None or entry.acceleration is None:
+            raise InputError(f"{cell.limits.where}: the limits lack the acceleration of planning joint {joint}",
+                             hint="give limits.joints.NAME.acceleration of every planning joint "
+                                  "(deg/s^2, m/s^2 for linear axes; URDF holds no acceleration limits)")
 
     for key, name in (("base", cell.base_link), ("flange", cell.flange_link), ("camera.frame", cell.camera_frame),
                       ("board.frame", cell.board_frame)):
@@ -369,8 +364,8 @@ def _check(cell: CellFile, urdf: str) -> None:
     if not any(s.endswith(f"/{cell.table_shape}") for s in shapes):
         raise InputError(f"{cell.where('table.shape')}: {desc} has no collision shape {cell.table_shape}",
                          hint="name the <collision name=...> of the table top")
-    for i, pair in enumerate(cell.allowed_shapes):
-        for label in pair:
+    for i, shape_pair in enumerate(cell.allowed_shapes):
+        for label in shape_pair:
             if label not in shapes:
                 raise InputError(f"{cell.where(f'collision.shapes[{i}]')}: {label} is not a collision shape "
                                  f"(link/name) of {desc}", hint="name shapes as LINK/COLLISION_NAME")

@@ -36,9 +36,6 @@ from recon_cli.robot.cell_file import (
     shipped_cells,
 )
 
-#: the thesis planned with a 3 cm safety distance (MoveIt planning context, CELL_FACTS 3.4)
-DEFAULT_SAFETY_DISTANCE = 0.03
-
 
 class CellKind(StrEnum):
     """The names of the thesis' two shipped cells (cells/gantry.yaml, cells/ceiling.yaml)."""
@@ -95,7 +92,7 @@ class CellConfig:
     """
 
     kind: CellName = CellName(DEFAULT_CELL)
-    safety_distance: float | None = None
+    safety_distance: float = None  # type: ignore[assignment]  # None: the cell file's (a float after init)
     table_lift: float = 0.0
     ceiling_xy: tuple[float, float] = (0.0, 0.0)
     flange_T_camera: tuple[float, ...] | None = None
@@ -111,8 +108,7 @@ class CellConfig:
         if self.flange_T_camera is not None:
             object.__setattr__(self, "flange_T_camera",
                                _rigid(self.flange_T_camera, "the hand-eye transform flange_T_camera"))
-        sd = float(self.safety_distance)  # type: ignore[arg-type]
-        if not (math.isfinite(sd) and 0.0 <= sd <= 0.2):
+        if not (math.isfinite(self.safety_distance) and 0.0 <= self.safety_distance <= 0.2):
             raise InputError(
                 f"safety distance {self.safety_distance} m is outside 0 ... 0.2 m",
                 hint="give it in metres, e.g. 0.03",
@@ -138,7 +134,7 @@ class CellConfig:
         s = cell.settings
         args = dict(cell.arguments)
         if s.safety_distance:
-            args[s.safety_distance] = repr(float(self.safety_distance))  # type: ignore[arg-type]
+            args[s.safety_distance] = repr(float(self.safety_distance))
         self._setting(s.table_lift, "table lift", self.table_lift != 0.0)
         if s.table_lift:
             args[s.table_lift] = repr(float(self.table_lift))

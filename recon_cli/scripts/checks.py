@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from lxml import etree
 
 from recon_cli.backends.base import Backend
 from recon_cli.errors import HardwareUnavailable, JointLimitError, ReconError, ScriptError
@@ -29,7 +28,6 @@ from recon_cli.objects import BUILTIN, available_objects, ycb_names
 from recon_cli.realism import BUILT_IN, load_profile
 from recon_cli.robot.description import CellConfig, CellName, expand_urdf
 from recon_cli.robot.limits import limits_from_urdf
-from recon_cli.robot.urdf import attribute
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.readable import readable
 
@@ -84,11 +82,9 @@ def is_file_name(name: str) -> bool:
 @functools.lru_cache(maxsize=4)
 def _joint_limits(kind: str) -> JointLimits:
 
-    urdf = expand_urdf(CellConfig(kind=CellName.parse(kind)))
-
-    names = [attribute(j, "name") for j in etree.fromstring(urdf.encode()).iter("joint")
-             if j.get("type") in ("revolute", "prismatic", "continuous")]
-    return limits_from_urdf(urdf, names)
+    config = CellConfig(kind=CellName.parse(kind))
+    urdf = expand_urdf(config)
+    return limits_from_urdf(urdf, config.cell_file.planning_joints, config.cell_file.limits)
 
 
 def _check_joints(cmd: C.MoveJoints, kind: str) -> None:

@@ -155,7 +155,7 @@ def build_scene(config: CellConfig, scene_object: SceneObject | None = None,
     d = drives()
     joint_names = []
     movable = [j.name for j in spec.joints]
-    effort = dict(zip(movable, limits_from_urdf(urdf, movable).effort, strict=True))
+    effort = dict(zip(movable, limits_from_urdf(urdf, movable, config.cell_file.limits).effort, strict=True))
     for joint in spec.joints:
         joint_names.append(joint.name)
         joint.armature = float(d["armature"].get(joint.name, 0.0))

@@ -32,7 +32,7 @@ from recon_cli.realism import KinematicErrors, PoseError
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.cell_file import load_cell, shipped_cells
 from recon_cli.robot.description import CellConfig, expand_urdf
-from recon_cli.robot.urdf import attribute, child
+from recon_cli.robot.urdf import child
 
 if TYPE_CHECKING:
     import pinocchio as pin

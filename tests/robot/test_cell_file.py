@@ -1,0 +1,139 @@
+"""Cell files: the shipped cells give the thesis' description unchanged, and a cell file with
+a mistake is refused with one line naming file:line and what to do."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from recon_cli.errors import InputError
+from recon_cli.paths import CELLS_DIR, ROBOT_DIR
+from recon_cli.robot.cell import Cell
+from recon_cli.robot.cell_file import load_cell, shipped_cells
+from recon_cli.robot.description import CellConfig, CellName, expand_urdf
+
+#: the thesis' hand-eye transform, the optical frame in the flange frame (docs/cell.md)
+HAND_EYE = (0.01, 0.02, 0.03)
+
+
+def _xacro(args: dict[str, str]) -> str:
+    """robot/cell.urdf.xacro expanded directly with the given arguments."""
+    import xacro
+
+    with contextlib.redirect_stderr(io.StringIO()):
+        return xacro.process_file(str(ROBOT_DIR / "cell.urdf.xacro"), mappings=args).toprettyxml(indent="  ")
+
+
+def _body(urdf: str) -> str:
+    return re.sub(r"<!--.*?-->", "", urdf, flags=re.S)
+
+
+def test_the_shipped_cells_are_the_thesis_cells():
+    assert shipped_cells() == ("gantry", "ceiling")
+    assert CellName.parse("9DOF") == "gantry" and CellName.parse("7dof") == "ceiling"
+
+
+@pytest.mark.parametrize("kind", ["gantry", "ceiling"])
+def test_shipped_cell_files_give_the_same_urdf(kind):
+    plain = {"cell": kind, "sd": "0.03", "table_lift": "0.0", "ceiling_x": "0.0", "ceiling_y": "0.0"}
+    assert _body(expand_urdf(CellConfig(kind=kind))) == _body(_xacro(plain))
+    # settings through the cell file's argument names: lift, safety, hand-eye and base pose
+    T = np.eye(4)
+    T[:3, 3] = HAND_EYE
+    given = CellConfig(kind=kind, safety_distance=0.05, table_lift=0.1, flange_T_camera=tuple(T.ravel()),
+                       mount_T_base=tuple(T.ravel()))
+    rpy = " ".join(repr(float(v)) for v in Rotation.from_matrix(np.eye(3)).as_euler("xyz"))
+    # the optical frame in the camera bracket, 0.0723 m above the flange (robot/parts/camera.xacro)
+    args = {**plain, "sd": "0.05", "table_lift": "0.1", "camera_xyz": f"0.01 0.02 {0.03 - 0.0723!r}",
+            "camera_rpy": rpy, "base_xyz": "0.01 0.02 0.03", "base_rpy": rpy}
+    assert _body(expand_urdf(given)) == _body(_xacro(args))
+
+
+def test_shipped_cell_files_give_the_same_model():
+    g = Cell(CellConfig(kind="gantry"))
+    assert g.joint_names == ("base_joint_1", "base_joint_2", *(f"arm_joint_{i}" for i in range(1, 8)))
+    assert np.allclose(g.limits.soft_upper[2:], np.radians([160, 110, 160, 110, 160, 110, 165]), atol=1e-12)
+    assert np.allclose(g.limits.acceleration[2:], np.radians([85, 85, 100, 75, 130, 135, 135]), atol=1e-12)
+    assert list(g.limits.prismatic) == [True, True] + [False] * 7
+    home = load_cell("gantry").pose("home", g.joint_names)
+    assert np.array_equal(home, [-1.0, 0, 0, 0, 0, 0, 0, 0, 0])
+    c = Cell(CellConfig(kind="ceiling"))
+    assert c.joint_names == tuple(f"arm_joint_{i}" for i in range(1, 8)) and not c.limits.prismatic.any()
+    # the camera frame hangs on the flange at the thesis' hand-eye pose, in both cells
+    for cell in (g, c):
+        q = cell.kin.neutral()
+        flange_T_camera = np.linalg.inv(cell.kin.frame_pose(q, "arm_link_7")) @ cell.kin.world_T_camera(q)
+        assert np.allclose(flange_T_camera[:3, 3], (-0.0288531, -0.1731820, 0.0608131 + 0.0723), atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- mistakes
+def _cell(tmp_path: Path, edit) -> Path:
+    """cells/gantry.yaml copied beside a copy of robot/ (relative paths keep working), edited."""
+    import shutil
+
+    shutil.copytree(ROBOT_DIR, tmp_path / "robot", ignore=shutil.ignore_patterns("realism"))
+    text = edit((CELLS_DIR / "gantry.yaml").read_text())
+    (tmp_path / "cells").mkdir()
+    path = tmp_path / "cells" / "mine.yaml"
+    path.write_text(text)
+    return path
+
+
+def _line(path: Path, needle: str) -> int:
+    return next(i for i, line in enumerate(path.read_text().splitlines(), 1) if needle in line)
+
+
+@pytest.mark.parametrize("edit, needle, message, hint", [
+    (lambda t: t.replace("base: arm_link_0", "base: arm_link_0\nbogus: 1"), "bogus: 1",
+     "bogus is not a known key", "known keys"),
+    (lambda t: t.replace("flange: arm_link_7", "flange: arm_link_9"), "flange: arm_link_9",
+     "flange arm_link_9 is not a link of cell.urdf.xacro", "its links: world, frame_link"),
+    (lambda t: t.replace("arm_joint_6, arm_joint_7]", "arm_joint_8, arm_joint_7]"), "arm_joint_8,",
+     "planning joint arm_joint_8 is not a joint of cell.urdf.xacro", "its movable joints: base_joint_1"),
+    (lambda t: t.replace("file: ../robot/cell.urdf.xacro", "file: ../robot/nope.urdf.xacro"), "nope.urdf.xacro",
+     "description.file: the robot description ../robot/nope.urdf.xacro does not exist", "relative to the cell file"),
+    (lambda t: t.replace("limits: ../robot/limits.yaml", "limits: {joints: {base_joint_1: {acceleration: 5}}}"),
+     "limits: {joints", "the limits lack the acceleration of planning joint base_joint_2", "acceleration"),
+    (lambda t: t.replace("home: [-1.0, 0.0, 0, 0, 0, 0, 0, 0, 0]", "home: [0, 0, 0]"), "home: [0, 0, 0]",
+     "pose home has 3 values, the cell has 9 planning joints", "one value per joint"),
+    (lambda t: t.replace("linear: [base_joint_1, base_joint_2]", "linear: [base_joint_1]"), "arm_joint_1, arm_joint_2",
+     "joint base_joint_2 is prismatic in cell.urdf.xacro but not in joints.linear", "prismatic planning joints"),
+    (lambda t: t.replace("planning: [base_joint_1, base_joint_2,", "planning: [base_joint_2, base_joint_1,"),
+     "planning: [base_joint_2", "joints.planning is not the movable joints of cell.urdf.xacro in tree order",
+     "list them as base_joint_1, base_joint_2, arm_joint_1"),
+    (lambda t: t.replace("shape: table_top", "shape: table_plate"), "shape: table_plate",
+     "cell.urdf.xacro has no collision shape table_plate", "<collision name=...>"),
+    (lambda t: t.replace("links: [arm_link_5, arm_link_7]", "links: [arm_link_5, arm_link_77]"), "arm_link_77",
+     "arm_link_77 is not a link of cell.urdf.xacro", "its links"),
+    (lambda t: t.replace("safety_distance: 0.03", "safety_distance: 0.5"), "safety_distance: 0.5",
+     "safety_distance = 0.5 m is outside [0, 0.2] m", None),
+])
+def test_a_cell_file_with_a_mistake_is_one_line_with_file_and_line(tmp_path, edit, needle, message, hint):
+    path = _cell(tmp_path, edit)
+    with pytest.raises(InputError) as info:
+        expand_urdf(CellConfig(kind=str(path)))
+    text = info.value.one_line()
+    assert "\n" not in text
+    assert text.startswith(f"{path.resolve()}:{_line(path, needle)}: "), text
+    assert message in text, text
+    if hint is not None:
+        assert hint in (info.value.hint or ""), info.value.hint
+
+
+def test_a_cell_file_names_its_cell(tmp_path):
+    path = _cell(tmp_path, lambda t: t.replace("name: gantry", "name: mine"))
+    config = CellConfig(kind=str(path))
+    assert config.kind == str(path.resolve()) and config.name == "mine" and config.safety_distance == 0.03
+    assert _body(expand_urdf(config)) == _body(expand_urdf(CellConfig()))
+
+
+def test_an_unknown_cell_names_the_shipped_ones():
+    with pytest.raises(InputError, match="unknown cell 'scara'") as info:
+        CellName.parse("scara")
+    assert "gantry, ceiling, a cell FILE.yaml" in info.value.hint

@@ -80,7 +80,8 @@ def _joint_origin(urdf: str, link: str) -> np.ndarray:
     """The origin of the joint above ``link`` as a 4 x 4 transform (parent link -> link)."""
 
     root = etree.fromstring(urdf.encode())
-    origin = child(root, f"joint[child/@link='{link}']/origin")
+    joint = next(j for j in root.iter("joint") if child(j, "child").get("link") == link)
+    origin = child(joint, "origin")
     xyz = [float(v) for v in (origin.get("xyz") or "0 0 0").split()]
     rpy = [float(v) for v in (origin.get("rpy") or "0 0 0").split()]
     T = np.eye(4)

@@ -109,7 +109,9 @@ def _message(error, doc: Any, where: str) -> InputError:
     if validator == "required":
         missing = [k for k in error.validator_value if not isinstance(instance, dict) or k not in instance]
         if not path:
-            return InputError(f"{at}: no {', '.join(missing)} section", hint=hint or "see docs/inputs.md")
+            names = missing[0] if len(missing) == 1 else f"{', '.join(missing[:-1])} and {missing[-1]}"
+            return InputError(f"{at}: no {names} section{'s' if len(missing) > 1 else ''}",
+                              hint=hint or "see docs/inputs.md")
         return InputError(f"{at}: {name} lacks {', '.join(missing)}", hint=hint or "see docs/inputs.md")
     if validator == "type":
         return InputError(f"{at}: {name} = {_short(instance)} is not {_type_text(error.validator_value)}",

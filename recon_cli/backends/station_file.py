@@ -91,8 +91,11 @@ def load_station(path: Path) -> StationFile:
         if len(rows) != 4 or any(len(r) != 4 for r in rows):
             raise InputError(f"{w}: hand_eye is not 4 rows of 4 numbers", hint="flange_T_camera, row by row [m]")
         flat = tuple(v for r in rows for v in r)
+    kind = str(cell_map.get("kind", "gantry"))
+    if Path(kind).suffix.lower() in (".yaml", ".yml"):  # a cell file, relative to the station file
+        kind = str(path.parent / Path(kind).expanduser())
     try:
-        cell = CellConfig(kind=CellName.parse(str(cell_map.get("kind", "gantry"))),
+        cell = CellConfig(kind=CellName.parse(kind),
                           safety_distance=(float(cell_map["safety_distance"]) if "safety_distance" in cell_map
                                            else None),  # type: ignore[arg-type]  # None: the cell file's
                           table_lift=float(cell_map.get("table_lift", 0.0)),
@@ -100,6 +103,8 @@ def load_station(path: Path) -> StationFile:
     except (TypeError, ValueError) as exc:
         raise InputError(f"{w}: cell: {exc}", hint="see docs/hardware.md") from None
     except InputError as exc:
+        if Path(kind).suffix.lower() in (".yaml", ".yml") and exc.message.startswith(str(Path(kind).parent)):
+            raise  # an error of the cell file, with its own file:line
         key = "hand_eye" if "hand-eye" in exc.message else "cell"
         line = line_of(data, key)
         raise InputError(f"{w}:{line}: {exc.message}" if line else f"{w}: {exc.message}", hint=exc.hint) from None

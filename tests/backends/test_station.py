@@ -131,6 +131,26 @@ def test_plc_fault_mid_run_stops_and_keeps_scans(plc, files, tmp_path, capsys):
     assert plc.get("stop", "B")[0] == 1
 
 
+def test_station_file_names_a_cell_file_beside_it(tmp_path, capsys):
+    """`cell: {kind: FILE.yaml}`: a cell file relative to the station file; a mistake in that
+    file is its own one line with file:line."""
+    from recon_cli.paths import CELLS_DIR, ROBOT_DIR
+
+    text = (CELLS_DIR / "gantry.yaml").read_text().replace("../robot/", f"{ROBOT_DIR}/")
+    (tmp_path / "cells").mkdir()
+    (tmp_path / "cells" / "lab.yaml").write_text(text.replace("name: gantry", "name: lab gantry"))
+    path = tmp_path / "station.yaml"
+    path.write_text(STATION.replace("cell: {kind: gantry, safety_distance: 0.03}", "cell: {kind: cells/lab.yaml}"))
+    station = load_station(path)
+    assert station.cell.name == "lab gantry" and station.cell.safety_distance == 0.03
+    assert station.cell.cell_file.planning_joints == CellConfig().cell_file.planning_joints
+    (tmp_path / "cells" / "lab.yaml").write_text(text.replace("flange: arm_link_7", "flange: arm_link_77"))
+    assert main(["station", "check", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {tmp_path / 'cells' / 'lab.yaml'}:") and err.count("\n") == 1, err
+    assert "arm_link_77" in err
+
+
 @pytest.mark.parametrize("text, message", [
     ("format: 1\nrobot: {adapter: ads}\n", "no camera section"),
     ("format: 1\nrobot: {adapter: kuka}\ncamera: {adapter: sim}\n", "robot.adapter = 'kuka' is not one of ads, sim"),

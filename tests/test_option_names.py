@@ -13,7 +13,9 @@ from pathlib import Path
 import pytest
 import typer
 
-from recon_cli.cli import app, main
+from recon_cli.cli import main
+
+from .cli_commands import all_commands
 
 ROOT = Path(__file__).resolve().parents[1]
 COMMANDS_MD = ROOT / "docs" / "commands.md"
@@ -21,22 +23,7 @@ COMMANDS_MD = ROOT / "docs" / "commands.md"
 FILE_WORDS = ("FILE", "FILE.yaml")
 
 
-def _commands():
-    """(name, command) of every command of the app ("recon bench ik", ...)."""
-    out = []
-
-    def walk(cmd, path):
-        if hasattr(cmd, "list_commands"):
-            for name in cmd.list_commands(None):
-                walk(cmd.get_command(None, name), (*path, name))
-        else:
-            out.append((" ".join(path), cmd))
-
-    walk(typer.main.get_command(app), ("recon",))
-    return out
-
-
-COMMANDS = _commands()
+COMMANDS = all_commands()
 
 
 def _is_option(param) -> bool:

@@ -11,28 +11,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import typer
 
-from recon_cli.cli import app, main
+from recon_cli.cli import main
 from recon_cli.errors import InputError, InvalidViewError, UnreachableViewError
+
+from .cli_commands import all_commands
 
 ROOT = Path(__file__).resolve().parents[1]
 COMMANDS_MD = ROOT / "docs" / "commands.md"
-
-
-def _commands():
-    """(name, command) of every command of the app ("recon bench ik", ...)."""
-    out = []
-
-    def walk(cmd, path):
-        if hasattr(cmd, "list_commands"):
-            for name in cmd.list_commands(None):
-                walk(cmd.get_command(None, name), (*path, name))
-        else:
-            out.append((" ".join(path), cmd))
-
-    walk(typer.main.get_command(app), ("recon",))
-    return out
 
 
 def _is_number(param) -> bool:
@@ -40,7 +26,7 @@ def _is_number(param) -> bool:
     return annotation in (int, float) or bool(set(typing.get_args(annotation)) & {int, float})
 
 
-NUMBER_OPTIONS = [(name, p) for name, cmd in _commands() for p in cmd.params if _is_number(p)]
+NUMBER_OPTIONS = [(name, p) for name, cmd in all_commands() for p in cmd.params if _is_number(p)]
 IDS = [f"{name} {p.opts[-1]}" for name, p in NUMBER_OPTIONS]
 
 
@@ -141,7 +127,7 @@ def test_values_beyond_the_range_are_usage_errors(capsys, tmp_path, argv, needle
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize("command", sorted({name for name, cmd in _commands()
+@pytest.mark.parametrize("command", sorted({name for name, cmd in all_commands()
                                             if any("--focus" in p.opts for p in cmd.params)}))
 def test_every_command_taking_a_view_bounds_it(capsys, command):
     words = command.split()[1:]

@@ -37,6 +37,7 @@ from recon_cli.backends.base import Capabilities
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.inputs.schema import check
 from recon_cli.inputs.yamlfile import line_of, read_yaml
+from recon_cli.robot.cell_file import load_cell
 from recon_cli.robot.description import CellConfig, CellName
 
 STATION_FORMAT = 1
@@ -94,6 +95,7 @@ def load_station(path: Path) -> StationFile:
     kind = str(cell_map.get("kind", "gantry"))
     if Path(kind).suffix.lower() in (".yaml", ".yml"):  # a cell file, relative to the station file
         kind = str(path.parent / Path(kind).expanduser())
+        load_cell(kind)  # its mistakes are lines of that file
     try:
         cell = CellConfig(kind=CellName.parse(kind),
                           safety_distance=(float(cell_map["safety_distance"]) if "safety_distance" in cell_map
@@ -103,8 +105,6 @@ def load_station(path: Path) -> StationFile:
     except (TypeError, ValueError) as exc:
         raise InputError(f"{w}: cell: {exc}", hint="see docs/hardware.md") from None
     except InputError as exc:
-        if Path(kind).suffix.lower() in (".yaml", ".yml") and exc.message.startswith(str(Path(kind).parent)):
-            raise  # an error of the cell file, with its own file:line
         key = "hand_eye" if "hand-eye" in exc.message else "cell"
         line = line_of(data, key)
         raise InputError(f"{w}:{line}: {exc.message}" if line else f"{w}: {exc.message}", hint=exc.hint) from None

@@ -270,14 +270,21 @@ def _argument(value: Any) -> str:
     return str(value)
 
 
+def _inline_or_file(doc: Any, lines: _Lines, key: str) -> tuple[Any, _Lines]:
+    """The section ``key`` as written in the cell file, or read (and checked) from the file
+    it names; with the lines of where it stands."""
+    section = doc[key]
+    if not isinstance(section, str):
+        return section, lines
+    source = _file(lines, doc, key, key, f"{key} file")
+    section = read_yaml(source, f"{key} file")
+    check(section, "cell", source, part=key)
+    return section, _Lines(source)
+
+
 def _limits(doc: Any, lines: _Lines) -> LimitTable:
-    section, owner = doc["limits"], lines
     where = lines.at(doc, "limits", "limits")
-    if isinstance(section, str):
-        source = _file(lines, doc, "limits", "limits", "limits file")
-        section = read_yaml(source, "limits file")
-        check(section, "cell", source, part="limits")
-        owner = _Lines(source)
+    section, owner = _inline_or_file(doc, lines, "limits")
     rows = []
     for name, entry in section["joints"].items():
         at = owner.at(section["joints"], name, f"limits.joints.{name}")
@@ -290,13 +297,8 @@ def _limits(doc: Any, lines: _Lines) -> LimitTable:
 
 
 def _collision(doc: Any, lines: _Lines) -> tuple[tuple[AllowedPair, ...], tuple[tuple[str, str], ...]]:
-    section, owner = doc["collision"], lines
     lines.at(doc, "collision", "collision")
-    if isinstance(section, str):
-        source = _file(lines, doc, "collision", "collision", "collision file")
-        section = read_yaml(source, "collision file")
-        check(section, "cell", source, part="collision")
-        owner = _Lines(source)
+    section, owner = _inline_or_file(doc, lines, "collision")
     allowed = []
     for i, entry in enumerate(section.get("allowed", [])):
         lines.rows[f"collision.allowed[{i}]"] = owner.at(section["allowed"], i, f"collision.allowed[{i}]")

@@ -1,0 +1,22 @@
+"""Every command of the typer app, for the tests that walk the command line."""
+
+from __future__ import annotations
+
+import typer
+
+from recon_cli.cli import app
+
+
+def all_commands() -> list[tuple[str, object]]:
+    """(name, command) of every command of the app ("recon bench ik", ...)."""
+    out: list[tuple[str, object]] = []
+
+    def walk(cmd, path):
+        if hasattr(cmd, "list_commands"):
+            for name in cmd.list_commands(None):
+                walk(cmd.get_command(None, name), (*path, name))
+        else:
+            out.append((" ".join(path), cmd))
+
+    walk(typer.main.get_command(app), ("recon",))
+    return out

@@ -145,7 +145,10 @@ class Config:
 
     def with_values(self, values: dict) -> Config:
         """A copy with ``{"section.field": value}`` set (``"seed"`` for the seed)."""
-        out = self
+        out, values = self, dict(values)
+        if "cell.kind" in values:  # another cell comes with its own default safety distance
+            kind, safety = values.pop("cell.kind"), values.pop("cell.safety_distance", None)
+            out = dataclasses.replace(out, cell=dataclasses.replace(out.cell, kind=kind, safety_distance=safety))
         for path, value in values.items():
             out = _set(out, path.split("."), value)
         return out

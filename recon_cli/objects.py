@@ -10,7 +10,8 @@ primitives; their ground-truth surface samples leave out the faces hidden inside
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -274,8 +275,19 @@ def load_mesh_file(path: Path, scale: float = 1.0) -> SceneObject:
                      np.asarray(mesh.triangles), (0.7, 0.7, 0.72, 1.0))
 
 
-def load_object(name: str, scale: float = 1.0) -> SceneObject:
-    """A built-in object, a YCB object of the thesis, or a mesh file path."""
+def load_object(name: str, scale: float = 1.0, position: Sequence[float] | None = None) -> SceneObject:
+    """A built-in object, a YCB object of the thesis, or a mesh file path, standing at
+    ``position`` (the world point under its base centre: a cell file's ``objects.position``;
+    None: the thesis cell's board centre)."""
+    obj = _load_object(name, scale)
+    if position is None:
+        return obj
+    T = obj.world_T_object.copy()
+    T[:3, 3] = np.asarray(position, dtype=float)
+    return replace(obj, world_T_object=T)
+
+
+def _load_object(name: str, scale: float) -> SceneObject:
     if name in BUILTIN:
         return BUILTIN[name]()
     if name in _YCB:

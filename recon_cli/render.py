@@ -59,10 +59,11 @@ def cell_tables(cell: Cell, q_show: np.ndarray, q_label: str) -> list:
     cam = Table(title="camera and marker frames")
     cam.add_column("frame")
     cam.add_column("pose")
-    flange = cell.kin.frame_pose(q_show, "arm_link_7")
+    flange_link = cell.config.cell_file.flange_link
+    flange = cell.kin.frame_pose(q_show, flange_link)
     T_cam = cell.kin.world_T_camera(q_show)
     f_T_c = invert(flange) @ T_cam
-    cam.add_row("camera in flange (arm_link_7)", pose_text(f_T_c))
+    cam.add_row(f"camera in flange ({flange_link})", pose_text(f_T_c))
     cam.add_row(f"camera in world at {q_label}", pose_text(T_cam))
     m = cell.world_T_marker
     cam.add_row("marker in world", f"origin ({m[0, 3]:+.4f}, {m[1, 3]:+.4f}, {m[2, 3]:+.4f}) m, x "

@@ -36,7 +36,8 @@ from recon_cli.console import write_json
 from recon_cli.errors import FileError, HardwareUnavailable, InputError
 from recon_cli.objects import available_objects, load_object
 from recon_cli.outputs import atomic_write
-from recon_cli.perception.sensor import motioncam_3d_m
+from recon_cli.perception.charuco import cell_board
+from recon_cli.perception.sensor import cell_sensor
 from recon_cli.planning.planner import seed_ompl
 from recon_cli.reconstruction.metadata import SESSION_FORMAT, BoxInfo, SessionInfo  # noqa: F401 (re-exported)
 from recon_cli.reconstruction.scan_store import ScanStore
@@ -100,8 +101,8 @@ class Session:
         self.spec = spec
         self.rng = rng
         self.station_file = station_file
-        self.scene_object = None if spec.board_only else load_object(resolve_object_name(cfg.scene.object_name),
-                                                                     cfg.scene.object_scale)
+        self.scene_object = None if spec.board_only else load_object(
+            resolve_object_name(cfg.scene.object_name), cfg.scene.object_scale, cfg.cell.cell_file.object_position)
         self.object_box = None if spec.board_only else self._object_box()
         self.cell = Cell(cfg.cell, object_box=self.object_box)
         self.start = named_configuration(cfg.cell.kind, "home", self.cell.joint_names)
@@ -127,7 +128,7 @@ class Session:
     def _open(self) -> None:
 
         spec, cfg = self.spec, self.spec.config
-        sensor = motioncam_3d_m()
+        sensor = cell_sensor(cfg.cell.cell_file)
         box, obj = self.object_box, self.scene_object
         if box is None or obj is None:
             crop = None
@@ -142,6 +143,8 @@ class Session:
         self.info = SessionInfo(
             backend=caps.backend.value, mode=spec.mode.value, cell_kind=cfg.cell.kind.value,
             safety_distance=cfg.cell.safety_distance, table_lift=cfg.cell.table_lift, sensor=sensor.name,
+            sensor_range=(sensor.z_min, sensor.z_max, math.degrees(sensor.max_incidence)),
+            board=cell_board(cfg.cell.cell_file).as_tuple(),
             noise=cfg.sensor.noise, seed=cfg.seed, object_name=None if obj is None else obj.name,
             world_T_object=None if obj is None else obj.world_T_object,
             object_box=None if box is None else BoxInfo(tuple(box.center), tuple(box.size)), crop_box=crop,

@@ -4,8 +4,9 @@ A robot whose model is not exact (joint zero offsets, elastic joints sagging und
 a base placed a little off) puts the flange off its modelled pose by an error that depends
 on the configuration. Hand-eye calibration works with the flange motions between views, so
 what matters is how much that error *changes* between views. It changes little when the
-shoulder and elbow (arm joints 1-4, which carry the arm's weight) keep their posture and the
-camera is turned by the wrist (joints 5-7) and carried by the linear axes: the error is then
+shoulder and elbow (the arm's revolute joints before its three wrist joints: joints 1-4 of a
+7-joint arm, 1-3 of a 6-joint arm; they carry the arm's weight) keep their posture and the
+camera is turned by the wrist and carried by the linear axes: the error is then
 nearly one rigid transform in the frame of the gantry carriage, which the calibration
 estimates alongside (:mod:`recon_cli.calibration.refine`). On the ceiling cell, which has no
 linear axes, the weighting still keeps the shoulder and elbow as still as the views allow.
@@ -23,9 +24,9 @@ import numpy as np
 from recon_cli.errors import ReconError
 from recon_cli.robot.ik import IKOptions
 
-GANTRY_JOINTS = ("base_joint_1", "base_joint_2")
-POSTURE_JOINTS = ("arm_joint_1", "arm_joint_2", "arm_joint_3", "arm_joint_4")
 POSTURE_WEIGHT = 100.0
+#: the last revolute joints of an arm that turn the camera (the wrist)
+WRIST_JOINTS = 3
 
 
 @dataclass(frozen=True)
@@ -36,8 +37,15 @@ class ViewGoal:
     reason: str = ""
 
 
-def joint_weights(joint_names) -> np.ndarray:
-    return np.array([POSTURE_WEIGHT if n in POSTURE_JOINTS else 1.0 for n in joint_names])
+def posture_joints(cell) -> tuple[str, ...]:
+    """The joints that hold the arm's posture: its revolute planning joints before the wrist."""
+    revolute = [n for n in cell.joint_names if n not in cell.config.cell_file.linear_joints]
+    return tuple(revolute[:-WRIST_JOINTS])
+
+
+def joint_weights(cell) -> np.ndarray:
+    posture = posture_joints(cell)
+    return np.array([POSTURE_WEIGHT if n in posture else 1.0 for n in cell.joint_names])
 
 
 def _descend(kin, weights: np.ndarray, goal: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -71,25 +79,14 @@ def _descend(kin, weights: np.ndarray, goal: np.ndarray, q: np.ndarray, lo: np.n
     return q, False
 
 
-def _shift_gantry(cell, q: np.ndarray, dxy: np.ndarray) -> np.ndarray:
-    """q with the linear axes moved by dxy [m] in the world (axis a along y, b along x)."""
-    names = cell.joint_names
-    q = q.copy()
-    if "base_joint_1" in names:
-        q[names.index("base_joint_1")] += dxy[1]
-    if "base_joint_2" in names:
-        q[names.index("base_joint_2")] += dxy[0]
-    return q
-
-
 def posture_goal(cell, world_T_camera: np.ndarray, reference: np.ndarray, reference_T: np.ndarray,
                  min_margin: float = 0.05) -> ViewGoal:
     """A collision-free goal near the reference posture: the linear axes shifted by the
     camera's horizontal displacement from the reference view, then the weighted descent."""
     lim = cell.limits
     lo, hi = np.asarray(lim.soft_lower, float), np.asarray(lim.soft_upper, float)
-    start = np.clip(_shift_gantry(cell, reference, world_T_camera[:2, 3] - reference_T[:2, 3]), lo, hi)
-    q, ok = _descend(cell.kin, joint_weights(cell.joint_names), world_T_camera, start, lo, hi)
+    start = np.clip(cell.ik.shift_linear(reference, world_T_camera[:2, 3] - reference_T[:2, 3]), lo, hi)
+    q, ok = _descend(cell.kin, joint_weights(cell), world_T_camera, start, lo, hi)
     if not ok:
         return ViewGoal(None, "out of reach while keeping the arm's posture")
     if float(np.min(lim.margin_to_soft(q))) < min_margin:
@@ -102,7 +99,7 @@ def posture_goal(cell, world_T_camera: np.ndarray, reference: np.ndarray, refere
 
 def _posture_change(cell, goals: list[ViewGoal], reference: np.ndarray) -> float:
     """Largest change of an arm joint 1-4 from the reference over the goals [rad]."""
-    idx = [i for i, n in enumerate(cell.joint_names) if n in POSTURE_JOINTS]
+    idx = [i for i, n in enumerate(cell.joint_names) if n in posture_joints(cell)]
     Q = [g.q for g in goals if g.q is not None]
     return max((float(np.max(np.abs(q[idx] - reference[idx]))) for q in Q), default=np.inf)
 

@@ -21,9 +21,6 @@ from recon_cli.errors import FileError, InputError, MetadataError
 from recon_cli.perception.charuco import BoardSpec, detect, estimate_pose
 from recon_cli.reconstruction.scan_store import ScanStore, read_scan
 
-#: the flange frame of both cells' description (the iiwa's link 7)
-FLANGE_FRAME = "arm_link_7"
-BASE_FRAME = "arm_link_0"  # the iiwa base, carried by the linear axes
 MIN_CORNERS = 8
 
 
@@ -88,11 +85,11 @@ def scan_observations(folder: Path, board: BoardSpec, kin, camera: CameraCalibra
                              f"{len(names)}-joint model are not recorded",
                              hint="calibrate with the cell the scans were recorded with (--station or --cell)")
         q = np.array([scan.joints[j] for j in names], dtype=float)
-        found = observe(name, scan.color, scan_camera(scan, camera), kin.frame_pose(q, FLANGE_FRAME), board,
+        found = observe(name, scan.color, scan_camera(scan, camera), kin.frame_pose(q, kin.cell.flange_link), board,
                         min_corners)
         if isinstance(found, SkippedImage):
             skipped.append(found)
             continue
-        obs.append(replace(found, base_position=kin.frame_pose(q, BASE_FRAME)[:3, 3].copy()))
+        obs.append(replace(found, base_position=kin.frame_pose(q, kin.cell.base_link)[:3, 3].copy()))
         truth.append(scan.ground_truth)
     return ScanObservations(obs, skipped, truth)

@@ -36,6 +36,7 @@ from recon_cli.config import VIEWPLAN_M, VIEWPLAN_SIGMA
 from recon_cli.console import console, progress_bar
 from recon_cli.errors import InputError
 from recon_cli.objects import load_object
+from recon_cli.perception.sensor import cell_sensor
 from recon_cli.session import resolve_object_name
 from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions
 
@@ -45,7 +46,7 @@ _V = D.viewplan
 @app.command()
 def autoscan(
     ctx: typer.Context,
-    dc: DcOpt = _V.d_c,
+    dc: DcOpt = None,
     n: ScansOpt = _V.n,
     object_name: Annotated[str, typer.Option("--object", metavar=object_metavar(True), callback=object_option(True),
                                              help="Object to scan (built-in, YCB or mesh file; 'auto': the drill "
@@ -60,7 +61,7 @@ def autoscan(
     initial: Annotated[str | None, typer.Option(help="Initial view 'theta,phi' in degrees around the object's box "
                                                      "centre at r = dc + 0.1 (default 45,0).")] = None,
     cell: CellOpt = D.cell.kind,
-    safety: SafetyOpt = D.cell.safety_distance,
+    safety: SafetyOpt = None,
     resolution: ResolutionOpt = D.sensor.resolution,
     pictures: Annotated[bool, typer.Option("--pictures/--no-pictures", help="A PNG per iteration.")] = True,
     out: Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default runs/autoscan-<time>).")]
@@ -82,8 +83,10 @@ def autoscan(
         object_name=("scene.object_name", lambda: resolve_object_name(object_name)),
         scale=("scene.object_scale", scale),
         resolution=("sensor.resolution", resolution), seed=("seed", seed), n=("viewplan.n", n),
-        dc=("viewplan.d_c", dc), m=("viewplan.m", m), sigma=("viewplan.sigma", sigma),
+        **({} if dc is None else {"dc": ("viewplan.d_c", dc)}), m=("viewplan.m", m), sigma=("viewplan.sigma", sigma),
         realism=("realism", lambda: realism_profile(realism))))
+    if dc is None and base.path is None:  # the camera distance of the cell's sensor
+        config = config.with_values({"viewplan.d_c": cell_sensor(config.cell.cell_file).default_distance})
     object_name, scale, dc = config.scene.object_name, config.scene.object_scale, config.viewplan.d_c
     initial = base.pick("initial", initial, base.stored("initial"))
     pictures = base.pick("pictures", pictures, base.stored("pictures", pictures))
@@ -96,7 +99,8 @@ def autoscan(
             raise InputError(f"--initial '{initial}' is outside theta ±{MAX_THETA:g}°, phi ±{MAX_TURN:g}°",
                              hint="give 'theta,phi' in degrees, e.g. 45,0")
 
-        center, _ = load_object(object_name, scale).crop_box(config.scene.box_margin)
+        center, _ = load_object(object_name, scale, config.cell.cell_file.object_position).crop_box(
+            config.scene.box_margin)
         view = make_view(",".join(map(str, center)), dc + 0.1, theta, phi, 0.0, "world")
     folder = output_folder(out, "autoscan", force=force,
                            inputs=(station, Path(realism), Path(object_name))).path

@@ -42,6 +42,7 @@ from recon_cli.cli.options import (
     split_names,
 )
 from recon_cli.console import console, progress_bar, write_json
+from recon_cli.perception.sensor import cell_sensor
 from recon_cli.planning.options import PLANNERS
 from recon_cli.robot.description import CellConfig, CellName
 from recon_cli.viewplan.policy import Method
@@ -66,7 +67,7 @@ def bench_ik(
     solutions: Annotated[int, typer.Option(min=1, max=32, help="Solutions asked per pose in the second run.")]
     = D.planner.ik_solutions,
     cell: CellOpt = D.cell.kind,
-    safety: SafetyOpt = D.cell.safety_distance,
+    safety: SafetyOpt = None,
     seed: SeedOpt = D.seed,
     out: OutOpt = None,
     force: ForceOpt = False,
@@ -78,7 +79,7 @@ def bench_ik(
     cfg = IKBenchConfig(n_poses=n, solutions=solutions, seed=seed)
     with progress_bar() as update:
         result = run_ik_bench(c, cfg, update)
-    write_json(folder / "bench_ik.json", {"config": cfg.__dict__, "safety_distance": safety,
+    write_json(folder / "bench_ik.json", {"config": cfg.__dict__, "safety_distance": c.config.safety_distance,
                                           "result": result.to_dict()})
     for item in render.ik_report(result, c.config.name, solutions):
         console.print(item)
@@ -173,7 +174,7 @@ def bench_viewplan(
                                          callback=name_list(lambda: [m.value for m in Method]),
                                          help="Comma-separated view planning methods.")] = "ellipsoid,sphere,random",
     n: ScansOpt = D.viewplan.n,
-    dc: DcOpt = D.viewplan.d_c,
+    dc: DcOpt = None,
     cell: CellOpt = D.cell.kind,
     resolution: ResolutionOpt = D.sensor.resolution,
     seed: SeedOpt = D.seed,
@@ -185,11 +186,13 @@ def bench_viewplan(
 
 
     chosen = split_names(methods)
+    cell_cfg = CellConfig(kind=CellName.parse(cell))
+    dc = cell_sensor(cell_cfg.cell_file).default_distance if dc is None else dc
     profile = realism_profile(realism)
     folder = output_folder(out, "bench viewplan", force=force, inputs=(Path(realism),)).path
     with progress_bar() as update:
         rows = run_viewplan_bench(folder, split_names(objects), chosen, n, dc, seed,
-                                  resolution, CellConfig(kind=CellName.parse(cell)), update, profile)
+                                  resolution, cell_cfg, update, profile)
     write_json(folder / "bench_viewplan.json", {"n": n, "d_c": dc, "cell": cell, "realism": profile.summary(),
                                                 "resolution": resolution, "rows": [asdict(r) for r in rows]})
     coverage_png(folder / "coverage.png", rows)

@@ -21,6 +21,7 @@ from recon_cli.cli.options import (
     ResolutionOpt,
     SafetyOpt,
     SeedOpt,
+    cell_config,
     output_folder,
     realism_option,
     realism_profile,
@@ -29,7 +30,6 @@ from recon_cli.config import SensorConfig
 from recon_cli.console import console, progress_bar, styled
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.perception.charuco import BoardSpec
-from recon_cli.robot.description import CellConfig, CellName
 from recon_cli.workflows.calibrate import HandEyeOptions, IntrinsicsOptions, check_pattern, run_handeye, run_intrinsics
 
 calibrate_app = typer.Typer(help="Calibration from views of the ChArUco board: camera intrinsics and distortion, "
@@ -118,7 +118,7 @@ def handeye(
     noise: Annotated[bool, typer.Option("--noise/--no-noise", help="Sensor noise of the simulation.")]
     = D.sensor.noise,
     cell: CellOpt = D.cell.kind,
-    safety: SafetyOpt = D.cell.safety_distance,
+    safety: SafetyOpt = None,
     seed: SeedOpt = D.seed,
     realism: RealismOpt = D.realism.name,
     force: ForceOpt = False,
@@ -126,7 +126,7 @@ def handeye(
     """Hand-eye calibration: flange_T_camera (and the board in the world) from board views."""
 
 
-    config = D.replace(cell=CellConfig(kind=CellName.parse(cell), safety_distance=safety),
+    config = D.replace(cell=cell_config(cell, safety),
                        sensor=SensorConfig(noise, resolution), seed=seed, realism=realism_profile(realism))
     spec = parse_board(board)
     folder = output_folder(out, "calibrate handeye", default="handeye", force=force,

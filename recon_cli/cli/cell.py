@@ -33,22 +33,20 @@ from recon_cli.geometry.view import Frame
 from recon_cli.objects import available_objects, load_object
 from recon_cli.render import cell_tables, ik_table, pose_text
 from recon_cli.robot.ik import IKOptions
-from recon_cli.thesis import TABLE_4_1_START
 
 
 @app.command()
 def cell(
     cell: CellOpt = D.cell.kind,
-    safety: SafetyOpt = D.cell.safety_distance,
+    safety: SafetyOpt = None,
     urdf: Annotated[Path | None, typer.Option(help="Also write the expanded URDF to this file.")] = None,
 ) -> None:
     """Print the loaded cell: joints, limits, collision shapes, camera and marker frames."""
 
     c = make_cell(cell, safety)
     q_show, label = c.kin.neutral(), "q = 0"
-    if "base_joint_1" in c.joint_names:
-
-        q_show, label = TABLE_4_1_START.copy(), "the Table 4.1 start"
+    if "home" in dict(c.config.cell_file.poses):
+        q_show, label = c.config.cell_file.pose("home", c.joint_names), "home"
     for table in cell_tables(c, q_show, label):
         console.print(table)
     if urdf is not None:
@@ -74,7 +72,7 @@ def ik(
     solutions: Annotated[int, typer.Option(min=1, max=32, help="How many distinct solutions to look for.")]
     = D.planner.ik_solutions,
     cell: CellOpt = D.cell.kind,
-    safety: SafetyOpt = D.cell.safety_distance,
+    safety: SafetyOpt = None,
     seed: SeedOpt = D.seed,
 ) -> None:
     """Solve inverse kinematics for a camera view (f, r, theta, phi, alpha)."""

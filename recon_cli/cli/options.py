@@ -177,8 +177,9 @@ def _cell_metavar() -> str:
 CellOpt = Annotated[str, typer.Option("--cell", metavar=_cell_metavar(), callback=_cell,
                                       help="The cell: a shipped cell (gantry: 9 DoF with linear axes, ceiling: "
                                            "7 DoF) or a cell FILE.yaml.")]
-SafetyOpt = Annotated[float, typer.Option("--safety", min=SAFETY_RANGE[0], max=SAFETY_RANGE[1],
-                                          help="Safety distance [m] that inflates every collision shape.")]
+SafetyOpt = Annotated[float | None, typer.Option("--safety", min=SAFETY_RANGE[0], max=SAFETY_RANGE[1],
+                                                 help="Safety distance [m] that inflates every collision shape "
+                                                      "(default: the cell file's).")]
 SeedOpt = Annotated[int, typer.Option("--seed", min=SEED_RANGE[0], max=SEED_RANGE[1],
                                       help="Seed of the random number generator (0 ... 2^32-1).")]
 FocusOpt = Annotated[str, typer.Option("--focus", callback=_focus, help="Focus point f as x,y,z [m], each "
@@ -198,8 +199,9 @@ ScaleOpt = Annotated[float, typer.Option("--scale", min=SCALE_RANGE[0], max=SCAL
 PlanningTimeOpt = Annotated[float, typer.Option("--planning-time", min=PLANNING_TIME_RANGE[0],
                                                 max=PLANNING_TIME_RANGE[1],
                                                 help="Planning time limit per request [s].")]
-DcOpt = Annotated[float, typer.Option("--dc", min=VIEWPLAN_DC[0], max=VIEWPLAN_DC[1],
-                                      help="Camera distance to the ellipsoid [m].")]
+DcOpt = Annotated[float | None, typer.Option("--dc", min=VIEWPLAN_DC[0], max=VIEWPLAN_DC[1],
+                                             help="Camera distance to the ellipsoid [m] (default: the scan distance "
+                                                  "of the cell's camera, 0.55 m on the thesis' cells).")]
 REALISM_HELP = ("How real the simulated cell is: 'ideal' (the model itself), 'thesis' (errors of the thesis' cell) "
                 "or a profile FILE.yaml (docs/simulation.md).")
 
@@ -267,10 +269,16 @@ def realism_profile(text: str):
     return load_profile(text)
 
 
-def make_cell(cell: str, safety: float, object_box: str | None = None):
+def cell_config(cell: str, safety: float | None) -> CellConfig:
+    """The cell of ``--cell`` with ``--safety`` (None: the cell file's safety distance)."""
+    kind = CellName.parse(cell)
+    return CellConfig(kind=kind) if safety is None else CellConfig(kind=kind, safety_distance=safety)
+
+
+def make_cell(cell: str, safety: float | None, object_box: str | None = None):
     """The cell of ``--cell`` / ``--safety`` with an optional box 'sx,sy,sz' on the table centre."""
 
-    c = Cell(CellConfig(kind=CellName.parse(cell), safety_distance=safety))
+    c = Cell(cell_config(cell, safety))
     if object_box:
         size = parse_vector(object_box, 3, "--object-box", "metres")
         if min(size) <= 0:

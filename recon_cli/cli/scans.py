@@ -90,7 +90,7 @@ def capture(
     planner: Annotated[PlannerName, typer.Option(help="OMPL planner.")] = D.planner.planner,
     planning_time: PlanningTimeOpt = D.planner.time_limit,
     cell: CellOpt = D.cell.kind,
-    safety: SafetyOpt = D.cell.safety_distance,
+    safety: SafetyOpt = None,
     seed: SeedOpt = D.seed,
     views: Annotated[ViewSet, typer.Option(help="'single' (the view given by --focus ... --alpha) or "
                                                            "'eq-4.1' (the thesis' 24 views around f = (0, 0, 0.78) "

@@ -10,14 +10,18 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from recon_cli.inputs.yamlfile import read_yaml
+from recon_cli.errors import InputError
+from recon_cli.inputs.schema import check
+from recon_cli.inputs.yamlfile import line_of, read_yaml
 from recon_cli.lazy import lazy_module
 from recon_cli.paths import ROBOT_DIR
 from recon_cli.perception.camera_model import Intrinsics
+from recon_cli.robot.cell_file import CellFile
 
 if TYPE_CHECKING:
     import cv2
@@ -32,6 +36,9 @@ class BoardSpec:
     square_length: float  # [m]
     marker_length: float  # [m]
     dictionary: str
+
+    def as_tuple(self) -> tuple[int, int, float, float, str]:
+        return (self.squares_x, self.squares_y, self.square_length, self.marker_length, self.dictionary)
 
     @property
     def size(self) -> tuple[float, float]:
@@ -56,9 +63,39 @@ class BoardSpec:
         return T
 
 
-@functools.lru_cache(maxsize=1)
 def thesis_board() -> BoardSpec:
-    d = read_yaml(ROBOT_DIR / "board.yaml", "board file")
+    """The thesis' board (robot/board.yaml), the board of the gantry and ceiling cells."""
+    return board_file(ROBOT_DIR / "board.yaml")
+
+
+def recorded_board(values: tuple[int, int, float, float, str] | None) -> BoardSpec:
+    """The board a scan store's session.json names (stores without one: the thesis' board)."""
+    return thesis_board() if values is None else BoardSpec(*values)
+
+
+def cell_board(cell: CellFile) -> BoardSpec:
+    """The board of a cell (its cell file's ``board.spec``)."""
+    return board_file(cell.board_file)
+
+
+def board_file(path: Path) -> BoardSpec:
+    """A board file, read and checked (one line naming ``file:line`` when it is wrong)."""
+    try:
+        st = path.stat()
+        stamp = (st.st_mtime_ns, st.st_size)
+    except OSError:
+        stamp = (0, 0)  # read_yaml names the problem
+    return _board_file(path.resolve(), stamp)
+
+
+@functools.lru_cache(maxsize=8)
+def _board_file(path: Path, stamp: tuple[int, int]) -> BoardSpec:
+    d = read_yaml(path, "board file")
+    check(d, "board", path)
+    if float(d["marker_length"]) >= float(d["square_length"]):
+        raise InputError(f"{path}:{line_of(d, 'marker_length') or 1}: marker_length {float(d['marker_length']):g} m "
+                         f"is not smaller than square_length {float(d['square_length']):g} m",
+                         hint="a ChArUco marker sits inside its square")
     return BoardSpec(int(d["squares_x"]), int(d["squares_y"]), float(d["square_length"]),
                      float(d["marker_length"]), str(d["dictionary"]))
 

@@ -1,4 +1,5 @@
-"""The depth sensor's figures and noise model (robot/camera.yaml).
+"""The depth sensor's figures and noise model (a sensor file: the cell file's ``camera.sensor``,
+robot/camera.yaml in the thesis' cells; schemas/sensor.schema.json).
 
 Noise model: each valid pixel's depth z is perturbed along its ray by zero-mean Gaussian
 noise with sigma(z) = sigma_ref * (z / z_ref)^2 (triangulation noise grows with the square
@@ -13,12 +14,16 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from recon_cli.inputs.yamlfile import read_yaml
+from recon_cli.errors import InputError
+from recon_cli.inputs.schema import check
+from recon_cli.inputs.yamlfile import line_of, read_yaml
 from recon_cli.paths import ROBOT_DIR
 from recon_cli.perception.camera_model import Intrinsics, fovy_from_hfov, intrinsics_from_fovy
+from recon_cli.robot.cell_file import CellFile
 
 
 @dataclass(frozen=True)
@@ -34,6 +39,16 @@ class SensorModel:
     max_incidence: float  # [rad]
     depth_scale: float  # depth PNG units per metre
     color_noise_std: float = 0.0  # [8-bit levels]
+    scan_distance: float | None = None  # [m] default camera-to-object distance; None: see default_distance
+
+    @property
+    def default_distance(self) -> float:
+        """[m] the camera-to-object distance a scan uses unless told otherwise: the sensor
+        file's ``scan_distance``, else a quarter into the working range (depth noise grows
+        with z^2, so the near part of the range, with room for the object's depth)."""
+        if self.scan_distance is not None:
+            return self.scan_distance
+        return self.z_min + 0.25 * (self.z_max - self.z_min)
 
     @property
     def fovy(self) -> float:
@@ -99,15 +114,52 @@ def _incidence_cos(depth: np.ndarray, K: Intrinsics) -> tuple[np.ndarray, np.nda
     return cos, edge
 
 
-@functools.lru_cache(maxsize=1)
 def motioncam_3d_m() -> SensorModel:
-    d = read_yaml(ROBOT_DIR / "camera.yaml", "camera file")
+    """The thesis' sensor (robot/camera.yaml), the camera of the gantry and ceiling cells."""
+    return sensor_file(ROBOT_DIR / "camera.yaml")
+
+
+def cell_sensor(cell: CellFile) -> SensorModel:
+    """The sensor of a cell (its cell file's ``camera.sensor``)."""
+    return sensor_file(cell.sensor_file)
+
+
+def sensor_file(path: Path) -> SensorModel:
+    """A sensor file, read and checked (one line naming ``file:line`` when it is wrong)."""
+    try:
+        st = path.stat()
+        stamp = (st.st_mtime_ns, st.st_size)
+    except OSError:
+        stamp = (0, 0)  # read_yaml names the problem
+    return _sensor_file(path.resolve(), stamp)
+
+
+@functools.lru_cache(maxsize=8)
+def _sensor_file(path: Path, stamp: tuple[int, int]) -> SensorModel:
+    d = read_yaml(path, "sensor file")
+    check(d, "sensor", path)
+
+    def refuse(key: str, what: str, hint: str) -> InputError:
+        line = line_of(d, key)
+        return InputError(f"{path}:{line or 1}: {key}: {what}", hint=hint)
+
+    z_min, z_max = float(d["z_min"]), float(d["z_max"])
+    if z_min >= z_max:
+        raise refuse("z_max", f"the working range {z_min:g} ... {z_max:g} m is empty", "z_max must exceed z_min")
+    scan = d.get("scan_distance")
+    if scan is not None and not z_min <= float(scan) <= z_max:
+        raise refuse("scan_distance", f"{float(scan):g} m lies outside the working range {z_min:g} ... {z_max:g} m",
+                     "choose a distance inside the range")
+    if float(d["depth_scale"]) * z_max > 65535:
+        raise refuse("depth_scale", f"{float(d['depth_scale']):g} units per m cannot hold z_max = {z_max:g} m in "
+                     "a 16-bit depth image", f"at most {65535 / z_max:.0f} units per m")
     return SensorModel(
         name=d["name"], width=int(d["width"]), height=int(d["height"]),
-        hfov=math.radians(float(d["hfov_deg"])), z_min=float(d["z_min"]), z_max=float(d["z_max"]),
+        hfov=math.radians(float(d["hfov_deg"])), z_min=z_min, z_max=z_max,
         noise_sigma_ref=float(d["noise_sigma_ref"]), noise_z_ref=float(d["noise_z_ref"]),
         max_incidence=math.radians(float(d["max_incidence_deg"])),
         depth_scale=float(d["depth_scale"]), color_noise_std=float(d.get("color_noise_std", 0.0)),
+        scan_distance=None if scan is None else float(scan),
     )
 
 

@@ -8,6 +8,7 @@ store gives the camera poses), writes a JSON report and a histogram PNG.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -63,9 +64,13 @@ def camera_views(folder: Path) -> list[CameraView]:
     store = ScanStore(folder)
     if not store.indices():
         raise FileError(f"{folder} holds no scans", hint="--scan-store takes a scan store folder")
-    sensor = motioncam_3d_m()
-    return [CameraView(s.world_T_camera_fk, s.intrinsics, sensor.z_min, sensor.z_max, sensor.max_incidence)
-            for s in store]
+    recorded = store.session().sensor_range
+    if recorded is None:  # stores without the figures: the thesis' sensor
+        sensor = motioncam_3d_m()
+        z_min, z_max, incidence = sensor.z_min, sensor.z_max, sensor.max_incidence
+    else:
+        z_min, z_max, incidence = recorded[0], recorded[1], math.radians(recorded[2])
+    return [CameraView(s.world_T_camera_fk, s.intrinsics, z_min, z_max, incidence) for s in store]
 
 
 def align_icp(points: np.ndarray, reference, distance: float = 0.005, seed: int = 0) -> np.ndarray:

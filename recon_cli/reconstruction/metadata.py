@@ -60,6 +60,17 @@ class BoxInfo:
         return cls((cx, cy, cz), (sx, sy, sz), d.get("frame", "world"))
 
 
+def _sensor_range(d: dict | None) -> tuple[float, float, float] | None:
+    return None if d is None else (float(d["z_min"]), float(d["z_max"]), float(d["max_incidence_deg"]))
+
+
+def _board(d: dict | None) -> tuple[int, int, float, float, str] | None:
+    if d is None:
+        return None
+    return (int(d["squares_x"]), int(d["squares_y"]), float(d["square_length"]), float(d["marker_length"]),
+            str(d["dictionary"]))
+
+
 def _pose(value) -> np.ndarray | None:
     return None if value is None else np.asarray(value, dtype=float)
 
@@ -75,6 +86,10 @@ class SessionInfo:
     safety_distance: float | None = None
     table_lift: float | None = None
     sensor: str | None = None
+    #: (z_min [m], z_max [m], max_incidence [deg]) of the sensor
+    sensor_range: tuple[float, float, float] | None = None
+    #: the cell's ChArUco board: (squares_x, squares_y, square_length [m], marker_length [m], dictionary)
+    board: tuple[int, int, float, float, str] | None = None
     noise: bool | None = None
     seed: int | None = None
     object_name: str | None = None
@@ -91,7 +106,12 @@ class SessionInfo:
         return {
             "format": self.format, "created": self.created, "backend": self.backend, "mode": self.mode,
             "cell": {"kind": self.cell_kind, "safety_distance": self.safety_distance, "table_lift": self.table_lift},
-            "sensor": self.sensor, "noise": self.noise, "seed": self.seed, "script": self.script,
+            "sensor": self.sensor,
+            **({} if self.sensor_range is None else {"sensor_range": dict(zip(
+                ("z_min", "z_max", "max_incidence_deg"), self.sensor_range, strict=True))}),
+            **({} if self.board is None else {"board": dict(zip(
+                ("squares_x", "squares_y", "square_length", "marker_length", "dictionary"), self.board, strict=True))}),
+            "noise": self.noise, "seed": self.seed, "script": self.script,
             "object": None if self.object_name is None else {"name": self.object_name,
                                                              "world_T_object": self.world_T_object},
             "object_box": None if self.object_box is None else self.object_box.to_dict(),
@@ -108,7 +128,8 @@ class SessionInfo:
         return cls(
             backend=d.get("backend"), mode=d.get("mode"), cell_kind=cell.get("kind"),
             safety_distance=cell.get("safety_distance"), table_lift=cell.get("table_lift"),
-            sensor=d.get("sensor"), noise=d.get("noise"), seed=d.get("seed"),
+            sensor=d.get("sensor"), sensor_range=_sensor_range(d.get("sensor_range")), board=_board(d.get("board")),
+            noise=d.get("noise"), seed=d.get("seed"),
             object_name=obj.get("name"), world_T_object=_pose(obj.get("world_T_object")),
             object_box=BoxInfo.from_dict(d.get("object_box")), crop_box=BoxInfo.from_dict(d.get("crop_box")),
             world_T_marker=_pose(d.get("world_T_marker")), script=d.get("script"), realism=d.get("realism"),

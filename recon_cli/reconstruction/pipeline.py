@@ -22,7 +22,7 @@ import numpy as np
 from recon_cli.errors import FileError, InputError, MetadataError
 from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.outputs import OutputFolder
-from recon_cli.perception.charuco import thesis_board
+from recon_cli.perception.charuco import recorded_board
 from recon_cli.randomness import DEFAULT_SEED
 from recon_cli.reconstruction.crop import CropBox, box_pixels, crop_cloud
 from recon_cli.reconstruction.global_registration import (
@@ -223,7 +223,7 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
     session = store.session()
     world_T_marker = session.world_T_marker
     box = _crop_box(options, session, world_T_marker)
-    board = options.board or thesis_board()
+    board = options.board or recorded_board(session.board)
     rng = np.random.default_rng(seed)
 
     # 1. global registration, cropping, oriented normals (per scan)

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from recon_cli.perception.charuco import thesis_board
+from recon_cli.perception.charuco import cell_board
 from recon_cli.recording import scene as S
 from recon_cli.recording.sdk import require_rerun
 
@@ -117,7 +117,7 @@ class Recorder:
         M = cell.world_T_marker
         self.rec.log("world/marker", rr.Transform3D(translation=M[:3, 3], mat3x3=M[:3, :3]),
                      rr.TransformAxes3D(0.1), static=True)
-        self.rec.log("world/board", rr.LineStrips3D([S.board_corners_world(thesis_board(), M)],
+        self.rec.log("world/board", rr.LineStrips3D([S.board_corners_world(cell_board(cell.config.cell_file), M)],
                                                     colors=[(230, 230, 230)], radii=0.0015), static=True)
         if object_box is not None:
             self.rec.log("world/object_box", rr.Boxes3D(centers=[object_box.center],

@@ -17,7 +17,7 @@ import numpy as np
 
 from recon_cli.errors import FileError, MetadataError
 from recon_cli.inputs.meshes import read_cloud, read_mesh
-from recon_cli.perception.charuco import detect, thesis_board
+from recon_cli.perception.charuco import detect, recorded_board
 from recon_cli.reconstruction.evaluation import signed_distances
 from recon_cli.reconstruction.global_registration import PoseSource
 from recon_cli.reconstruction.scan_store import ScanStore, read_scan
@@ -32,7 +32,7 @@ def record_registration(recorder, result, store_root: Path,
     fused cloud's points and their distances when the caller has them, else computed
     against the store's simulated object)."""
 
-    spec = thesis_board()
+    spec = recorded_board(ScanStore(store_root).session().board)
     for rec in result.used:
         if rec.pose is None or not rec.folder:
             continue

@@ -123,6 +123,8 @@ class CellFile:
     poses: tuple[tuple[str, tuple[float, ...]], ...]
     allowed_links: tuple[AllowedPair, ...]
     allowed_shapes: tuple[tuple[str, str], ...]
+    #: named poses tried as IK seeds before random ones (posture preferences, e.g. elbow up)
+    ik_seeds: tuple[str, ...] = ()
     lines: tuple[tuple[str, str], ...] = field(default=(), compare=False, repr=False)
 
     def where(self, key: str) -> str:
@@ -251,6 +253,12 @@ def _parse(path: Path) -> CellFile:
                              "planning joints", hint=f"give one value per joint: {', '.join(planning)}")
         poses.append((str(name), _numbers(values)))
 
+    seeds = tuple(str(s) for s in (doc.get("ik") or {}).get("seeds", ()))
+    for i, name in enumerate(seeds):
+        where = lines.at(doc["ik"]["seeds"], i, f"ik.seeds[{i}]")
+        if name not in dict(poses):
+            raise InputError(f"{where}: IK seed {name} is not a pose of the cell",
+                             hint=f"name one of poses: {', '.join(dict(poses))}")
     lines.at(doc, "safety_distance", "safety_distance")
     return CellFile(
         path=path, name=str(doc["name"]), description=description, arguments=arguments, settings=settings,
@@ -259,7 +267,7 @@ def _parse(path: Path) -> CellFile:
         board_frame=str(doc["board"]["frame"]), board_file=board,
         object_position=tuple(_numbers(doc["objects"]["position"])),  # type: ignore[arg-type]
         drives_file=drives, limits=limits, safety_distance=float(doc["safety_distance"]), poses=tuple(poses),
-        allowed_links=allowed, allowed_shapes=shapes, lines=tuple(lines.rows.items()))
+        allowed_links=allowed, allowed_shapes=shapes, ik_seeds=seeds, lines=tuple(lines.rows.items()))
 
 
 def _argument(value: Any) -> str:

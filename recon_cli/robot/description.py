@@ -24,6 +24,7 @@ import numpy as np
 
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.geometry.transforms import invert
+from recon_cli.robot.capsule_fit import FittedCapsule, MeshFit, fit_mesh_collisions
 from recon_cli.robot.cell_file import (
     ALIASES,
     DEFAULT_CELL,
@@ -218,11 +219,24 @@ def _digest(description: Path) -> str:
 
 
 def expand_urdf(config: CellConfig = CellConfig()) -> str:  # noqa: B008 (frozen)
-    """URDF text of the cell for the given settings (its cell file checked against it)."""
+    """URDF text of the cell for the given settings (its cell file checked against it); collision
+    meshes replaced by fitted capsules inflated by the safety distance (:mod:`.capsule_fit`)."""
     cell = config.cell_file
-    urdf = _expand_file(cell, tuple(sorted(config.xacro_args().items())))
+    urdf = _fitted(config).urdf
     check_against_urdf(cell, urdf)
     return urdf
+
+
+def mesh_capsules(config: CellConfig = CellConfig()) -> tuple[FittedCapsule, ...]:  # noqa: B008 (frozen)
+    """The capsules fitted to the description's collision meshes (link frames, before inflation)."""
+    return _fitted(config).capsules
+
+
+def _fitted(config: CellConfig) -> MeshFit:
+    # a plain URDF takes no xacro argument for the safety distance: the meshes' capsules take it here
+    cell = config.cell_file
+    urdf = _expand_file(cell, tuple(sorted(config.xacro_args().items())))
+    return fit_mesh_collisions(urdf, cell.description, config.safety_distance)
 
 
 def _expand_file(cell: CellFile, args: tuple[tuple[str, str], ...]) -> str:

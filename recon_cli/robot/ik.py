@@ -4,8 +4,10 @@ Damped least squares (Levenberg-Marquardt) on the SE(3) error ``log(world_T_came
 world_T_goal)`` with pinocchio's Jacobians, from several seeds, projected onto the soft
 joint limits. Converged solutions are kept when they are collision-free and differ from
 the ones already found, so the caller gets several distinct goal configurations (the
-redundancy of the 9-DoF chain gives infinitely many). Seeds: the caller's seed first,
-then random configurations whose gantry puts the iiwa base near the camera.
+redundancy of the 9-DoF chain gives infinitely many). Seeds: the caller's seed first, then
+the cell file's posture seeds (``ik.seeds``: named poses such as an elbow-up home), then
+random configurations within the soft limits whose linear axes (if any) put the arm's base
+near the camera.
 """
 
 from __future__ import annotations
@@ -101,24 +103,61 @@ class IKSolver:
         self._mid = (self._lo + self._hi) / 2.0
         self._inv_range2 = 1.0 / ((self._hi - self._lo) / 2.0) ** 2
         names = kin.joint_names
-        self._gantry = [names.index(j) for j in kin.cell.linear_joints]
-        # where the iiwa base sits relative to the gantry joints: base_xy = offset + (q_b, q_a)
+        self._linear = [names.index(j) for j in kin.cell.linear_joints]
+        # how the linear axes move the arm's base: base_xy = offset + A q_linear
         q0 = kin.neutral()
         base0 = kin.frame_pose(q0, kin.cell.base_link)[:3, 3]
         self._base_offset_xy = base0[:2].copy()
+        columns = []
+        for i in self._linear:
+            q1 = q0.copy()
+            q1[i] += 1.0
+            columns.append(kin.frame_pose(q1, kin.cell.base_link)[:2, 3] - base0[:2])
+        axes = np.array(columns).T.reshape(2, len(self._linear))  # (2, k)
+        unit = np.round(axes)  # axes along the world's x or y: exactly so (no rounding in the seeds)
+        self._axes_xy = np.where(np.abs(axes - unit) < 1e-9, unit, axes)
+        # orthonormal horizontal axes (any gantry): project; otherwise least squares
+        gram = self._axes_xy.T @ self._axes_xy
+        self._orthonormal = bool(np.allclose(gram, np.eye(len(self._linear)), atol=1e-9))
+        self._posture_seeds = tuple(np.clip(kin.cell.pose(name, names), self._lo, self._hi)
+                                    for name in kin.cell.ik_seeds)
 
     # ------------------------------------------------------------------ seeds
     def random_seed(self, world_T_goal: npt.NDArray[np.float64], rng: np.random.Generator) -> npt.NDArray[np.float64]:
-        """A random configuration; with linear axes, the iiwa base is placed within 0.6 m
-        (horizontally) of the goal camera position."""
+        """A random configuration; with linear axes, the arm's base is placed within 0.6 m
+        (horizontally) of the goal camera position, as far as the axes reach."""
         q = rng.uniform(self._lo, self._hi)
-        if self._gantry:
+        if self._linear:
             target = world_T_goal[:2, 3] + rng.uniform(-0.6, 0.6, size=2)
-            ia, ib = self._gantry  # a moves along world y, b along world x
-            q[ia] = target[1] - self._base_offset_xy[1]
-            q[ib] = target[0] - self._base_offset_xy[0]
+            shift = target - self._base_offset_xy
+            if self._orthonormal:
+                q[self._linear] = self._axes_xy.T @ shift
+            else:
+                q[self._linear] = np.linalg.lstsq(self._axes_xy, shift, rcond=None)[0]
             q = np.clip(q, self._lo, self._hi)
         return q
+
+    def shift_linear(self, q: npt.NDArray[np.float64], dxy: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """q with the linear axes moved so that the arm's base moves by dxy [m] in the world's
+        horizontal plane (as far as the axes' directions allow; q itself without linear axes)."""
+        q = np.array(q, dtype=float)
+        if self._linear:
+            if self._orthonormal:
+                q[self._linear] += self._axes_xy.T @ dxy
+            else:
+                q[self._linear] += np.linalg.lstsq(self._axes_xy, dxy, rcond=None)[0]
+        return q
+
+    def start(self, attempt: int, world_T_goal: npt.NDArray[np.float64], rng: np.random.Generator,
+              seed: npt.NDArray[np.float64] | None) -> npt.NDArray[np.float64]:
+        """The start of one descent: the caller's seed, then the posture seeds, then random."""
+        if seed is not None:
+            if attempt == 0:
+                return np.clip(seed, self._lo, self._hi)
+            attempt -= 1
+        if attempt < len(self._posture_seeds):
+            return self._posture_seeds[attempt].copy()
+        return self.random_seed(world_T_goal, rng)
 
     # ------------------------------------------------------------------ one descent
     def descend(self, world_T_goal: npt.NDArray[np.float64], q: npt.NDArray[np.float64], options: IKOptions
@@ -175,8 +214,7 @@ class IKSolver:
             return IKResult(IKStatus.UNREACHABLE, (), 0, 0, 0, time.perf_counter() - t0, pairs)
         attempts = 0
         while attempts < options.max_attempts and len(solutions) < options.max_solutions:
-            start = (np.clip(seed, self._lo, self._hi) if (seed is not None and attempts == 0)
-                     else self.random_seed(world_T_goal, rng))
+            start = self.start(attempts, world_T_goal, rng, seed)
             attempts += 1
             q, ok, ep, er = self.descend(world_T_goal, start, options)
             if not ok:

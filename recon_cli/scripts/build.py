@@ -18,6 +18,7 @@ from recon_cli.config import SensorConfig
 from recon_cli.errors import InputError, ScriptError
 from recon_cli.geometry.view import Frame, View
 from recon_cli.planning.options import PLANNERS
+from recon_cli.robot.cell_file import load_cell
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.sandbox import LIMITS
 
@@ -113,7 +114,8 @@ def build_recon(el, src: C.Source) -> list[C.Command]:
         except InputError as exc:
             raise ScriptError(f"{src}: <cell resolution> {exc.message}", hint=exc.hint) from None
         return [C.SetCell(src, a.get("kind", D.cell.kind.value),
-                          float(a.get("safety_distance", D.cell.safety_distance)), a.get("backend", "sim"),
+                          float(a["safety_distance"]) if "safety_distance" in a
+                          else load_cell(a.get("kind", D.cell.kind.value)).safety_distance, a.get("backend", "sim"),
                           resolution, as_bool(a.get("noise"), D.sensor.noise), a.get("realism", D.realism.name))]
     if tag == "object":
         return [C.SetObject(src, a["name"], float(a.get("scale", D.scene.object_scale)))]

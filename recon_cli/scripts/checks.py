@@ -26,6 +26,7 @@ from recon_cli.backends.base import Backend
 from recon_cli.errors import HardwareUnavailable, JointLimitError, ReconError, ScriptError
 from recon_cli.objects import BUILTIN, available_objects, ycb_names
 from recon_cli.realism import BUILT_IN, load_profile
+from recon_cli.robot.cell_file import DEFAULT_CELL
 from recon_cli.robot.description import CellConfig, CellName, expand_urdf
 from recon_cli.robot.limits import limits_from_urdf
 from recon_cli.scripts import commands as C
@@ -124,7 +125,7 @@ def _check_object(script: C.Script, cmd: C.SetObject) -> None:
 def check_script(script: C.Script, *, object_override: str | None = None) -> None:
     """Raise a ScriptError (file:line: what; what to do) for the first problem found."""
     started: C.Command | None = None
-    kind = "gantry"
+    kind = DEFAULT_CELL
     scans = 0
     registered = reconstructed = False
     names: dict[str, C.Source] = {}

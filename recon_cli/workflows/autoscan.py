@@ -27,7 +27,7 @@ from recon_cli.config import DEFAULTS, Config
 from recon_cli.errors import ReconError, UnknownNameError
 from recon_cli.geometry.view import View
 from recon_cli.inputs.meshes import read_cloud
-from recon_cli.perception.charuco import thesis_board
+from recon_cli.perception.charuco import cell_board
 from recon_cli.planning.lower_bound import duration_lower_bound
 from recon_cli.planning.planner import MotionPlanner
 from recon_cli.reconstruction.crop import CropBox
@@ -130,6 +130,7 @@ class Autoscan:
         self.feasible = Feasibility(self.cell, self.rng, self.vp.min_height)
         self.marker_T_world = self.feasible.marker_T_world
         self.crop_marker = CropBox(self.marker_T_world @ T, size)
+        self.board = cell_board(self.cell.config.cell_file)
         self.motion = MotionPlanner(self.cell, cfg.planner)
         lim, plan = self.cell.limits, cfg.planner
         self.lower = lambda a, b: duration_lower_bound(a, b, lim.velocity, lim.acceleration,
@@ -149,7 +150,7 @@ class Autoscan:
         """Scan where the robot is; add the registered, cropped points to the partial object."""
 
         scan = self.acq.scan(view_record(None, view_T))
-        pose = global_pose(scan, thesis_board(), self.cell.world_T_marker)
+        pose = global_pose(scan, self.board, self.cell.world_T_marker)
         assert pose is not None  # the kinematics place every scan (world_T_marker is known)
         cloud = scan_cloud(scan, pose, self.crop_marker, self.opt.config.registration.surface)
         cloud.transform(self.cell.world_T_marker)

@@ -50,7 +50,7 @@ from recon_cli.calibration.intrinsics import (
     find_boards,
     plot_reprojection,
 )
-from recon_cli.calibration.observations import FLANGE_FRAME, scan_observations
+from recon_cli.calibration.observations import scan_observations
 from recon_cli.calibration.refine import corrected, refine_hand_eye
 from recon_cli.calibration.station_update import hand_eye_block, write_station_hand_eye
 from recon_cli.calibration.views import BoardViewOptions, board_views
@@ -61,7 +61,7 @@ from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.inputs.images import read_color
 from recon_cli.inputs.jsonfile import load_json
 from recon_cli.outputs import atomic_write, atomic_write_text
-from recon_cli.perception.charuco import BoardSpec, thesis_board
+from recon_cli.perception.charuco import BoardSpec, cell_board, recorded_board
 from recon_cli.reconstruction.metadata import read_session
 from recon_cli.robot.description import CellName, expand_urdf
 from recon_cli.robot.kinematics import Kinematics
@@ -88,7 +88,7 @@ def record_board_views(out: Path, config: Config = DEFAULTS, views: BoardViewOpt
     write one scan per reachable view into the scan store ``out``."""
 
     t0 = time.perf_counter()
-    view_list = board_views(board or thesis_board(), views)
+    view_list = board_views(board or cell_board(config.cell.cell_file), views)
     n = len(view_list)
     failures, scans = [], 0
     spec = SessionSpec(Path(out), config, Mode.CALIBRATION, station=station, board_only=True,
@@ -256,7 +256,7 @@ def run_handeye(opt: HandEyeOptions, progress: Progress | None = None) -> HandEy
     t0 = time.perf_counter()
     out = Path(opt.out)
     out.mkdir(parents=True, exist_ok=True)
-    board = opt.board or thesis_board()
+    board = opt.board or cell_board(opt.config.cell.cell_file)
     camera = load_camera_file(opt.camera) if opt.camera is not None else None
     station_file = None
     if opt.station is not None:
@@ -269,7 +269,7 @@ def run_handeye(opt: HandEyeOptions, progress: Progress | None = None) -> HandEy
         recorded = record_board_views(scans, opt.config, opt.views, opt.station, board, progress)
     kin = _model_kinematics(scans, station_file, opt.config)
     q0 = kin.neutral()
-    model_X = invert(kin.frame_pose(q0, FLANGE_FRAME)) @ kin.world_T_camera(q0)
+    model_X = invert(kin.frame_pose(q0, kin.cell.flange_link)) @ kin.world_T_camera(q0)
     found = scan_observations(scans, board, kin, camera)
     obs = found.observations
     diversity = pose_diversity([o.world_T_flange for o in obs])
@@ -431,7 +431,9 @@ def run_intrinsics(opt: IntrinsicsOptions) -> IntrinsicsRun:
     t0 = time.perf_counter()
     out = Path(opt.out)
     out.mkdir(parents=True, exist_ok=True)
-    board = opt.board or thesis_board()
+    # the board of the scan store's session, when the source is one (else the thesis' board)
+    store = Path(opt.source) / "session.json"
+    board = opt.board or recorded_board(read_session(Path(opt.source)).board if store.is_file() else None)
     away: list[SkippedImage] = []
     images = board_images(opt.source, opt.pattern, away)
     views, skipped = find_boards(images, board, opt.min_corners)

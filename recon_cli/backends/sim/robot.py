@@ -1,9 +1,9 @@
 """The simulated robot: MuJoCo plant under computed-torque control with integral action.
 
-Control law (thesis eqs. 2.12-2.14), at the plant's 1 kHz step (gains in robot/drives.yaml):
+Control law (thesis eqs. 2.12-2.14), at the plant's 1 kHz step (gains in the cell's drives file):
     tau = M(q) v + C(q, qd) qd + g(q),   v = qdd_d - K0 e - K1 ed - KI int(e),   e = q - q_d
 with M, C, g from pinocchio's model of the same URDF plus the reflected rotor inertia of
-robot/drives.yaml. The plant additionally has viscous joint friction the controller does
+the drives file. The plant additionally has viscous joint friction the controller does
 not know; the integral term removes the resulting error. After the trajectory the final
 configuration is held until the robot has settled: the camera within ``position`` [m] and
 ``rotation`` [rad] of its goal pose (forward kinematics of the measured joints) and every
@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from recon_cli.backends.base import ExecutionReport
-from recon_cli.backends.sim.scene import SimScene, drives, mujoco
+from recon_cli.backends.sim.scene import Drives, SimScene, mujoco
 from recon_cli.backends.sim.truth import JointSensor
 from recon_cli.lazy import lazy_module
 from recon_cli.planning.trajectory import Trajectory
@@ -39,10 +39,9 @@ class ControllerGains:
     KI: float
 
     @classmethod
-    def from_drives(cls) -> ControllerGains:
-        """The gains of robot/drives.yaml."""
-        c = drives()["controller"]
-        return cls(float(c["K0"]), float(c["K1"]), float(c["KI"]))
+    def from_drives(cls, d: Drives) -> ControllerGains:
+        """The gains of a cell's drives file."""
+        return cls(d.K0, d.K1, d.KI)
 
 
 @dataclass(frozen=True)
@@ -66,11 +65,10 @@ class SimRobot:
         self.data = data
         self.kin = kin
         self.joint_names = scene.joint_names
-        self.gains = gains or ControllerGains.from_drives()
+        self.gains = gains or ControllerGains.from_drives(scene.drives)
         self.settle = settle or SettleCriterion()
         self._pin_data = kin.model.createData()
-        arm = drives()["armature"]
-        self._armature = np.array([float(arm.get(n, 0.0)) for n in self.joint_names])
+        self._armature = np.array([scene.drives.armature_of(n) for n in self.joint_names])
         self._effort = kin.limits.effort
         # the true robot's joint sensors (realism profile); None: they read the true angles
         self.joint_sensor = joint_sensor

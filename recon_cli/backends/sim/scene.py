@@ -5,7 +5,7 @@ geometry is dropped (planning checks collisions with the coal/pinocchio collisio
 the robot only moves along checked trajectories). Added through the MjSpec API: the flange camera (MuJoCo cameras
 look along -z, so the OpenCV optical frame is turned by pi about x), the ChArUco board as
 a texture on the board plate, the object to scan as a mesh, lights, joint motors, and the
-drive data of robot/drives.yaml (reflected rotor inertia, plant-only viscous friction).
+drive data of the cell's drives file (reflected rotor inertia, plant-only viscous friction).
 """
 
 from __future__ import annotations
@@ -14,18 +14,21 @@ import dataclasses
 import functools
 import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 from lxml import etree
 
 from recon_cli.errors import InputError
+from recon_cli.inputs.schema import check
 from recon_cli.inputs.yamlfile import read_yaml
 from recon_cli.lazy import lazy_module
 from recon_cli.objects import SceneObject
 from recon_cli.paths import ROBOT_DIR
-from recon_cli.perception.charuco import BoardSpec, thesis_board
-from recon_cli.perception.sensor import SensorModel, motioncam_3d_m
+from recon_cli.perception.charuco import BoardSpec, cell_board
+from recon_cli.perception.sensor import SensorModel, cell_sensor
+from recon_cli.robot.cell_file import CellFile
 from recon_cli.robot.description import CellConfig, expand_urdf
 from recon_cli.robot.limits import limits_from_urdf
 
@@ -41,9 +44,49 @@ OBJECT_NAME = "scan_object"
 BOARD_PIXELS_PER_METRE = 8000.0  # texture resolution of the printed board (0.125 mm per texel)
 
 
-@functools.lru_cache(maxsize=1)
-def drives() -> dict:
-    return read_yaml(ROBOT_DIR / "drives.yaml", "drives file")
+#: the thesis cells' drives file, whose controller gains a cell without a drives file gets
+DEFAULT_DRIVES = ROBOT_DIR / "drives.yaml"
+
+
+@dataclass(frozen=True)
+class Drives:
+    """Drive data of a cell's joints (a drives file; schemas/drives.schema.json).
+
+    armature: reflected rotor inertia per joint [kg m^2 or kg]; friction: viscous friction of
+    the simulated plant per joint, unknown to the controller [N m s/rad or N s/m]; K0, K1, KI:
+    the computed-torque gains of eq. 2.14 [1/s^2, 1/s, 1/s^3]. Joints a file leaves out get 0.
+    """
+
+    armature: tuple[tuple[str, float], ...]
+    friction: tuple[tuple[str, float], ...]
+    K0: float
+    K1: float
+    KI: float
+
+    def armature_of(self, joint: str) -> float:
+        return dict(self.armature).get(joint, 0.0)
+
+    def friction_of(self, joint: str) -> float:
+        return dict(self.friction).get(joint, 0.0)
+
+
+def drives(cell: CellFile | None = None) -> Drives:
+    """The drives of a cell (its cell file's ``drives``; without one: no armature, no plant
+    friction, the thesis cells' controller gains)."""
+    if cell is None or cell.drives_file is None:
+        d = _drives_file(DEFAULT_DRIVES)
+        return d if cell is None else dataclasses.replace(d, armature=(), friction=())
+    return _drives_file(cell.drives_file)
+
+
+@functools.lru_cache(maxsize=8)
+def _drives_file(path: Path) -> Drives:
+    d = read_yaml(path, "drives file")
+    check(d, "drives", path)
+    c = d["controller"]
+    return Drives(tuple((str(k), float(v)) for k, v in d.get("armature", {}).items()),
+                  tuple((str(k), float(v)) for k, v in d.get("plant_viscous_friction", {}).items()),
+                  float(c["K0"]), float(c["K1"]), float(c["KI"]))
 
 
 @dataclass
@@ -57,6 +100,7 @@ class SimScene:
     camera_id: int
     sensor: SensorModel
     scene_object: SceneObject | None
+    drives: Drives
 
 
 def _mujoco_urdf(config: CellConfig) -> str:
@@ -81,8 +125,8 @@ def _board_rgb(board: BoardSpec) -> np.ndarray:
 def build_scene(config: CellConfig, scene_object: SceneObject | None = None,
                 sensor: SensorModel | None = None, board: BoardSpec | None = None,
                 timestep: float = 0.001) -> SimScene:
-    sensor = sensor or motioncam_3d_m()
-    board = board or thesis_board()
+    sensor = sensor or cell_sensor(config.cell_file)
+    board = board or cell_board(config.cell_file)
     urdf = _mujoco_urdf(config)
     spec = mujoco.MjSpec.from_string(urdf)
     spec.option.timestep = timestep
@@ -152,14 +196,14 @@ def build_scene(config: CellConfig, scene_object: SceneObject | None = None,
     light.diffuse = [0.5, 0.5, 0.5]
     light.castshadow = False
 
-    d = drives()
+    d = drives(config.cell_file)
     joint_names = []
     movable = [j.name for j in spec.joints]
     effort = dict(zip(movable, limits_from_urdf(urdf, movable, config.cell_file.limits).effort, strict=True))
     for joint in spec.joints:
         joint_names.append(joint.name)
-        joint.armature = float(d["armature"].get(joint.name, 0.0))
-        joint.damping = [float(d["plant_viscous_friction"].get(joint.name, 0.0)), 0.0, 0.0]
+        joint.armature = d.armature_of(joint.name)
+        joint.damping = [d.friction_of(joint.name), 0.0, 0.0]
         act = spec.add_actuator()
         act.name = f"motor_{joint.name}"
         act.target = joint.name
@@ -183,7 +227,7 @@ def build_scene(config: CellConfig, scene_object: SceneObject | None = None,
     qpos_index = np.array([model.jnt_qposadr[model.joint(n).id] for n in names])
     dof_index = np.array([model.jnt_dofadr[model.joint(n).id] for n in names])
     return SimScene(model, names, qpos_index, dof_index, model.camera(CAMERA_NAME).id, sensor,
-                    scene_object)
+                    scene_object, d)
 
 
 class BoardSheet:

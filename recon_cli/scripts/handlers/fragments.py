@@ -11,9 +11,9 @@ import numpy as np
 from recon_cli.errors import FileError, ReconError
 from recon_cli.inputs.images import read_color, read_depth
 from recon_cli.inputs.meshes import read_cloud
-from recon_cli.perception.charuco import thesis_board
+from recon_cli.perception.charuco import cell_board
 from recon_cli.perception.rgbd import rgbd_cloud
-from recon_cli.perception.sensor import motioncam_3d_m
+from recon_cli.perception.sensor import cell_sensor
 from recon_cli.reconstruction.global_registration import global_pose
 from recon_cli.reconstruction.options import pair_voxel
 from recon_cli.reconstruction.pipeline import crop_box_marker, scan_cloud
@@ -33,7 +33,7 @@ def make_fragment(state: RunState, name: str, scan, report: CommandReport) -> No
 
     if state.fragment_box is None:
         state.fragment_box = crop_box_marker(state.config.registration, state.store.session())
-    pose = global_pose(scan, thesis_board(), state.cell.world_T_marker)
+    pose = global_pose(scan, cell_board(state.cell.config.cell_file), state.cell.world_T_marker)
     if pose is None:
         raise ReconError(f"scan {name}: no camera pose (neither the board nor the robot's kinematics gave one)",
                          hint="keep the board in view, or record the robot's joints with the scan")
@@ -138,10 +138,10 @@ def load(state: RunState, cmd: C.LoadFragment, report: CommandReport) -> None:
             raise FileError(f"{cmd.source}: depth {depth_path.name} ({depth.shape[1]}x{depth.shape[0]}) and colour "
                             f"{color_path.name} ({color.shape[1]}x{color.shape[0]}) do not match",
                             hint="give a single-channel depth image of the colour image's size")
-        sensor = motioncam_3d_m()
+        sensor = cell_sensor(state.cell.config.cell_file)
         K = sensor.intrinsics(depth.shape[1] / sensor.width)
         cloud = rgbd_cloud(cv2.cvtColor(color, cv2.COLOR_BGR2RGB), depth.astype(np.float64) / sensor.depth_scale, K)
-        report.message = "camera frame; intrinsics and depth scale of the MotionCam-3D M model"
+        report.message = f"camera frame; intrinsics and depth scale of the cell's sensor ({sensor.name})"
     state.fragments[cmd.name] = cloud
     report.details.update(points=len(cloud.points))
 

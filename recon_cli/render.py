@@ -7,6 +7,7 @@ import math
 import numpy as np
 from rich.table import Table
 
+from recon_cli.cell_check import CellCheck
 from recon_cli.geometry.transforms import invert
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.ik import IKResult
@@ -99,3 +100,39 @@ def ik_table(cell: Cell, result: IKResult) -> Table:
     table.add_row("clearance", *clear)
     table.add_row("self distance", *selfd)
     return table
+
+
+def cell_check_report(check: CellCheck) -> list:
+    """The tables and lines of ``recon cell check``."""
+    out: list = [f"cell {check.name} ({check.file})"]
+    joints = Table(title="planning joints (deg and deg/s, m and m/s for linear axes)")
+    for col in ("joint", "type", "lower", "upper", "soft lower", "soft upper", "velocity", "acceleration", "effort"):
+        joints.add_column(col, justify="left" if col in ("joint", "type") else "right")
+    for j in check.joints:
+        k = 1.0 if j.prismatic else 180.0 / math.pi
+        joints.add_row(j.name, "linear" if j.prismatic else "revolute",
+                       *(f"{v * k:.4g}" for v in (j.lower, j.upper, j.soft_lower, j.soft_upper, j.velocity,
+                                                  j.acceleration)), f"{j.effort:.4g}")
+    out.append(joints)
+    d = check.home_distance
+    home = "collision-free" if not check.home_collisions else \
+        f"IN COLLISION ({', '.join(_short(p) for p in check.home_collisions[:3])})"
+    out.append(f"home: {home}; limit margin {check.home_margin:.4g} (rad or m); clearance "
+               f"{d.environment * 1e3:.1f} mm ({_short(d.environment_pair)}), self distance "
+               f"{d.self_ * 1e3:.1f} mm ({_short(d.self_pair)})")
+    s = check.sensor
+    out.append(f"camera: {s.name}, {s.width} x {s.height} px, hfov {math.degrees(s.hfov):.1f} deg, range "
+               f"{s.z_min:g} ... {s.z_max:g} m, scan distance {s.default_distance:g} m")
+    for sight in (check.board_home, check.board_above):
+        if sight is None:
+            out.append("board: no collision-free view straight above it at the scan distance")
+            continue
+        out.append(f"board from {sight.where}: {sight.points_in_view} of 5 points (corners, centre) in view"
+                   f" at {sight.distance:.3f} m" + ("" if sight.seen else " (not all of it)"))
+    r = check.reach
+    share = r.counts / r.directions
+    out.append(f"reachability: {r.counts.size} points on the table top, {r.directions} directions each at "
+               f"{r.distance:g} m: {np.mean(share):.0%} of all views reachable; {np.count_nonzero(share >= 0.75)} "
+               f"points seen from >= 75 % of the directions; object position {r.object_count} of {r.directions}; "
+               f"IK median {r.ik_ms_median:.1f} ms")
+    return out

@@ -13,6 +13,8 @@ def all_commands() -> list[tuple[str, object]]:
 
     def walk(cmd, path):
         if hasattr(cmd, "list_commands"):
+            if getattr(cmd, "invoke_without_command", False):  # a group that is a command too (recon cell)
+                out.append((" ".join(path), cmd))
             for name in cmd.list_commands(None):
                 walk(cmd.get_command(None, name), (*path, name))
         else:

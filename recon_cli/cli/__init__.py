@@ -2,7 +2,7 @@
 
     app.py       the typer applications
     options.py   options shared by several commands, their parsers; defaults from the configuration
-    cell.py      recon cell, recon ik, recon objects
+    cell.py      recon cell, recon cell check, recon ik, recon objects
     scans.py     recon capture, recon register, recon evaluate
     scripts.py   recon validate, recon run
     autoscan.py  recon autoscan

@@ -9,7 +9,8 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from recon_cli.cli.app import app
+from recon_cli.cell_check import check_cell, reachability_png
+from recon_cli.cli.app import HELP, app
 from recon_cli.cli.options import (
     FOCUS,
     RADIUS,
@@ -18,6 +19,7 @@ from recon_cli.cli.options import (
     CellOpt,
     D,
     FocusOpt,
+    ForceOpt,
     FrameOpt,
     PhiOpt,
     RadiusOpt,
@@ -26,23 +28,32 @@ from recon_cli.cli.options import (
     ThetaOpt,
     make_cell,
     make_view,
+    output_folder,
 )
-from recon_cli.console import console
+from recon_cli.console import console, progress_bar
 from recon_cli.errors import ReconError
 from recon_cli.geometry.view import Frame
 from recon_cli.objects import available_objects, load_object
-from recon_cli.render import cell_tables, ik_table, pose_text
+from recon_cli.render import cell_check_report, cell_tables, ik_table, pose_text
 from recon_cli.robot.ik import IKOptions
 
+cell_app = typer.Typer(help="The cell: print it (recon cell [--cell NAME|FILE]) or check a cell file "
+                            "(recon cell check FILE).", invoke_without_command=True, rich_markup_mode=None,
+                       context_settings=HELP)
+app.add_typer(cell_app, name="cell")
 
-@app.command()
+
+@cell_app.callback()
 def cell(
+    ctx: typer.Context,
     cell: CellOpt = D.cell.kind,
     safety: SafetyOpt = None,
     urdf: Annotated[Path | None, typer.Option(help="Also write the expanded URDF to this file.")] = None,
 ) -> None:
     """Print the loaded cell: joints, limits, collision shapes, camera and marker frames."""
 
+    if ctx.invoked_subcommand is not None:
+        return
     c = make_cell(cell, safety)
     q_show, label = c.kin.neutral(), "q = 0"
     if "home" in dict(c.config.cell_file.poses):
@@ -56,6 +67,38 @@ def cell(
             raise ReconError(f"cannot write {urdf}: {exc.strerror}",
                              hint="choose a writable path for --urdf") from None
         console.print(f"expanded URDF written to {urdf}")
+
+
+@cell_app.command("check")
+def check(
+    file: Annotated[str, typer.Argument(metavar="FILE|NAME", help="A cell file (or a shipped cell's name).")],
+    safety: SafetyOpt = None,
+    step: Annotated[float, typer.Option(min=0.03, max=0.5, help="Spacing of the reachability grid over the "
+                                                                 "table top [m].")] = 0.1,
+    seed: SeedOpt = D.seed,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="Output folder (default runs/cell-check-<time>).")]
+    = None,
+    force: ForceOpt = False,
+) -> None:
+    """Check a cell file: joints and limits, the home pose (limits, collisions), the board in
+    view, and where on the table an object can be scanned from how many directions (a picture).
+    Exits 1 when the cell is not fit to scan with."""
+
+    c = make_cell(file, safety)
+    folder = output_folder(out, "cell check", force=force).path
+    with progress_bar() as update:
+        result = check_cell(c, np.random.default_rng(seed), step,
+                            progress=lambda i, n: update("reachability", i, n))
+    picture = folder / "reachability.png"
+    reachability_png(picture, result)
+    for item in cell_check_report(result):
+        console.print(item)
+    console.print(f"picture: {picture}")
+    if result.problems:
+        for problem in result.problems:
+            console.print(f"problem: {problem}")
+        raise typer.Exit(1)
+    console.print(f"{result.name}: fit to scan with")
 
 
 @app.command()

@@ -36,6 +36,7 @@ from recon_cli.robot.cell_file import (
     resolve,
     shipped_cells,
 )
+from recon_cli.robot.inflate import inflate_primitives
 
 
 class CellKind(StrEnum):
@@ -233,9 +234,12 @@ def mesh_capsules(config: CellConfig = CellConfig()) -> tuple[FittedCapsule, ...
 
 
 def _fitted(config: CellConfig) -> MeshFit:
-    # a plain URDF takes no xacro argument for the safety distance: the meshes' capsules take it here
+    # a description that takes no safety distance (a plain URDF, most vendors' xacros) gets its
+    # primitives inflated here, and the capsules fitted to its meshes take it too
     cell = config.cell_file
     urdf = _expand_file(cell, tuple(sorted(config.xacro_args().items())))
+    if not cell.settings.safety_distance:
+        urdf = inflate_primitives(urdf, config.safety_distance)
     return fit_mesh_collisions(urdf, cell.description, config.safety_distance)
 
 

@@ -384,3 +384,23 @@ def test_a_cell_file_naming_a_urdf_with_meshes_builds_a_cell(tmp_path):
     end = _elements(wider, "link_3", "collision")[-1]
     assert end.get("name") == "link_3_fit_capsule_end_b"
     assert float(end.find("geometry/sphere").get("radius")) == capsules["link_3"].radius + 0.05
+
+
+def test_a_plain_urdfs_primitives_are_inflated_by_the_safety_distance(tmp_path):
+    """A URDF takes no safety distance: recon inflates its primitives itself (boxes by sd on
+    every face, spheres by sd), so the table top's surface stays where the URDF puts it."""
+    from recon_cli.robot.cell import Cell
+    from recon_cli.robot.description import CellConfig, expand_urdf
+
+    _robot(tmp_path)
+    path = tmp_path / "toy.yaml"
+    path.write_text(CELL.format(robot=ROBOT_DIR, sd=SD))
+    for sd in (0.0, 0.03):
+        urdf = expand_urdf(CellConfig(kind=str(path), safety_distance=sd))
+        top = next(c for c in etree.fromstring(urdf.encode()).iter("collision") if c.get("name") == "table_top")
+        assert [float(v) for v in top.find("geometry/box").get("size").split()] == pytest.approx(
+            [0.4 + 2 * sd, 0.8 + 2 * sd, 0.4 + 2 * sd])
+        visual = next(v for v in etree.fromstring(urdf.encode()).iter("visual") if v.find("geometry/box") is not None)
+        assert visual.find("geometry/box").get("size") is not None  # visuals keep their real size
+        cell = Cell(CellConfig(kind=str(path), safety_distance=sd))
+        assert cell.table_surface_z == pytest.approx(0.4)

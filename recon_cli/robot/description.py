@@ -15,6 +15,7 @@ import functools
 import hashlib
 import io
 import math
+import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import StrEnum
@@ -24,6 +25,7 @@ import numpy as np
 
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.geometry.transforms import invert
+from recon_cli.inputs.files import file_errors, read_limited
 from recon_cli.robot.capsule_fit import FittedCapsule, MeshFit, fit_mesh_collisions
 from recon_cli.robot.cell_file import (
     ALIASES,
@@ -247,10 +249,64 @@ def _expand_file(cell: CellFile, args: tuple[tuple[str, str], ...]) -> str:
     return _expand(str(cell.description), args, _digest(cell.description))
 
 
+#: largest robot description file read (URDF or xacro) [bytes]
+MAX_DESCRIPTION_BYTES = 20_000_000
+#: xacro files a description may include, at most
+MAX_XACRO_FILES = 200
+_EXPRESSION = re.compile(r"\$\{([^}]*)\}|\$\(([^)]*)\)")
+_INCLUDE = re.compile(r"<xacro:include\b[^>]*\bfilename\s*=\s*[\"']([^\"']+)[\"']")
+
+
+def _read_description(path: Path) -> str:
+    """A description file's text, through the size guard every user file passes."""
+    refuse = file_errors(path, "robot description", "give the robot's URDF or xacro file",
+                         lambda size: (f"{size:,} bytes, more than {MAX_DESCRIPTION_BYTES:,}",
+                                       "give a URDF or xacro file of the robot without embedded data"))
+    data = read_limited(path, MAX_DESCRIPTION_BYTES, refuse, empty=False)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: the robot description is not UTF-8 text",
+                         hint="give the robot's URDF or xacro file") from None
+
+
+def guard_xacro(description: Path) -> None:
+    """Refuse a xacro description whose expressions could leave xacro's expression language.
+
+    xacro evaluates ``${...}`` with Python's eval over a dictionary of harmless names; a
+    dunder attribute (``().__class__...``) walks out of it, and ``$(eval ...)`` is plain
+    Python. A description file (and every file it includes) may use neither: one line naming
+    the file, line and expression."""
+    seen: set[Path] = set()
+    todo = [description.resolve()]
+    while todo:
+        path = todo.pop()
+        if path in seen:
+            continue
+        seen.add(path)
+        if len(seen) > MAX_XACRO_FILES:
+            raise InputError(f"{description}: the description includes more than {MAX_XACRO_FILES} xacro files",
+                             hint="give the robot's URDF instead")
+        text = _read_description(path)
+        for m in _EXPRESSION.finditer(text):
+            expression = m.group(0)
+            if "__" in expression or (m.group(2) or "").strip().startswith("eval"):
+                line = text.count("\n", 0, m.start()) + 1
+                raise InputError(f"{path}:{line}: the xacro expression {expression[:60]!r} is refused (dunder names "
+                                 "and $(eval ...) run Python beyond xacro's expression language)",
+                                 hint="use plain arithmetic and xacro properties, or give the expanded URDF")
+        for m in _INCLUDE.finditer(text):
+            name = m.group(1)
+            if "$" in name:
+                continue  # an include named by an expression: xacro resolves it (and refuses what it cannot)
+            todo.append((path.parent / name).resolve())
+
+
 @functools.lru_cache(maxsize=16)
 def _expand(description: str, args: tuple[tuple[str, str], ...], digest: str) -> str:
     if description.lower().endswith(".urdf"):
-        return Path(description).read_text(encoding="utf-8")
+        return _read_description(Path(description))
+    guard_xacro(Path(description))
     import xacro
 
     # xacro reports harmless notes on stderr; keep library output quiet

@@ -34,8 +34,8 @@ def _body(urdf: str) -> str:
     return re.sub(r"<!--.*?-->", "", urdf, flags=re.S)
 
 
-def test_the_shipped_cells_are_the_thesis_cells():
-    assert shipped_cells() == ("gantry", "ceiling")
+def test_the_shipped_cells_are_the_thesis_cells_first():
+    assert shipped_cells()[:2] == ("gantry", "ceiling")
     assert CellName.parse("9DOF") == "gantry" and CellName.parse("7dof") == "ceiling"
 
 
@@ -136,4 +136,54 @@ def test_a_cell_file_names_its_cell(tmp_path):
 def test_an_unknown_cell_names_the_shipped_ones():
     with pytest.raises(InputError, match="unknown cell 'scara'") as info:
         CellName.parse("scara")
-    assert "gantry, ceiling, a cell FILE.yaml" in info.value.hint
+    assert f"{', '.join(shipped_cells())}, a cell FILE.yaml" in info.value.hint
+    assert info.value.hint.startswith("choose one of: gantry, ceiling, ")
+
+
+def _edit_file(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert old in text, old
+    path.write_text(text.replace(old, new))
+
+
+@pytest.mark.parametrize("file, old, new, needle, message", [
+    ("robot/parts/iiwa14.xacro", 'xyz="0 0 0.1525"', 'xyz="0 0 ${().__class__}"', "__class__",
+     "the xacro expression '${().__class__}' is refused"),
+    ("robot/cell.urdf.xacro", '<xacro:arg name="sd" default="0.0"/>',
+     '<xacro:arg name="sd" default="$(eval 1)"/>', "$(eval", "the xacro expression '$(eval 1)' is refused"),
+    ("robot/camera.yaml", "z_max: 0.939", "z_max: 0.4", "z_max: 0.4", "the working range 0.497 ... 0.4 m is empty"),
+    ("robot/camera.yaml", "scan_distance: 0.55", "scan_distance: 0.2", "scan_distance: 0.2",
+     "0.2 m lies outside the working range"),
+    ("robot/camera.yaml", "hfov_deg: 49.3096", "hfov_deg: .nan", "hfov_deg", "not a finite number"),
+    ("robot/board.yaml", "marker_length: 0.025", "marker_length: 0.04", "marker_length: 0.04",
+     "marker_length 0.04 m is not smaller than square_length 0.035 m"),
+    ("robot/drives.yaml", "  K0: 1875.0", "  K0: -5", "K0: -5", "controller.K0 = -5"),
+])
+def test_a_mistake_in_a_file_the_cell_names_is_one_line_with_its_file_and_line(tmp_path, file, old, new, needle,
+                                                                                message):
+    """The description (and what it includes), the sensor, board and drives files of a cell are
+    user files too: a hostile or careless one is one line naming its own file and line."""
+    from recon_cli.backends.sim.scene import drives
+    from recon_cli.perception.charuco import cell_board
+    from recon_cli.perception.sensor import cell_sensor
+
+    path = _cell(tmp_path, lambda t: t)
+    target = tmp_path / file
+    _edit_file(target, old, new)
+    with pytest.raises(InputError) as info:
+        config = CellConfig(kind=str(path))
+        expand_urdf(config)
+        cell_sensor(config.cell_file)
+        cell_board(config.cell_file)
+        drives(config.cell_file)
+    text = info.value.one_line()
+    assert "\n" not in text
+    assert text.startswith(f"{target.resolve()}:{_line(target, needle)}"), text
+    assert message in text, text
+
+
+def test_ik_seeds_name_poses_of_the_cell(tmp_path):
+    path = _cell(tmp_path, lambda t: t.replace("safety_distance: 0.03", "safety_distance: 0.03\nik:\n  seeds: [nope]"))
+    with pytest.raises(InputError, match="IK seed nope is not a pose of the cell") as info:
+        load_cell(str(path))
+    assert info.value.one_line().startswith(f"{path.resolve()}:{_line(path, '  seeds: [nope]') + 0}")

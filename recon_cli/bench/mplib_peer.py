@@ -60,16 +60,20 @@ def srdf_for(urdf: str, cell: Cell) -> str:
     allowed = allowed_link_pairs(urdf, cell.kin)
     robot = etree.Element("robot", name="recon_cell")
     group = etree.SubElement(robot, "group", name="camera")
-    etree.SubElement(group, "chain", base_link="world", tip_link="camera")
+    etree.SubElement(group, "chain", base_link="world", tip_link=cell.config.cell_file.camera_frame)
     for a, b in itertools.combinations(links, 2):
         if frozenset((a, b)) in allowed or (body[a] == 0 and body[b] == 0):
             etree.SubElement(robot, "disable_collisions", link1=a, link2=b, reason="recon")
     return etree.tostring(robot, pretty_print=True).decode()
 
 
-def run_mplib(folder: Path, n: int, time_limit: float, ranges=(0.1, 1.5)) -> dict:
+def run_mplib(folder: Path, n: int, time_limit: float, ranges=(0.1, 1.5), cell: Cell | None = None,
+              pairs: list[tuple[np.ndarray, np.ndarray]] | None = None) -> dict:
+    """mplib on the Table 4.1 problem (``n`` requests), or on ``pairs`` of ``cell`` (once each)."""
     python = ensure_venv()
-    cell = Cell(CellConfig(), object_box=BENCH_CUBE)
+    cell = cell if cell is not None else Cell(CellConfig(), object_box=BENCH_CUBE)
+    box = cell.collision.object_box if pairs is not None else BENCH_CUBE
+    assert box is not None  # both problems have an object box
     (folder / "peer").mkdir(exist_ok=True)
     urdf_path = folder / "peer" / "cell.urdf"
     srdf_path = folder / "peer" / "cell.srdf"
@@ -78,8 +82,9 @@ def run_mplib(folder: Path, n: int, time_limit: float, ranges=(0.1, 1.5)) -> dic
     sd = cell.config.safety_distance
     problem = {
         "urdf": str(urdf_path), "srdf": str(srdf_path), "move_group": "camera",
-        "start": TABLE_4_1_START.tolist(), "goal": TABLE_4_1_GOAL.tolist(),
-        "box_center": list(BENCH_CUBE.center), "box_size": [s + 2 * sd for s in BENCH_CUBE.size],
+        **({"start": TABLE_4_1_START.tolist(), "goal": TABLE_4_1_GOAL.tolist()} if pairs is None
+           else {"pairs": [[a.tolist(), b.tolist()] for a, b in pairs]}),
+        "box_center": list(box.center), "box_size": [s + 2 * sd for s in box.size],
         "time_limit": time_limit, "n": n, "ranges": list(ranges),
         "velocity": cell.limits.velocity.tolist(), "acceleration": cell.limits.acceleration.tolist(),
         "velocity_scale": 0.15, "acceleration_scale": 0.3,
@@ -105,7 +110,9 @@ def run_mplib(folder: Path, n: int, time_limit: float, ranges=(0.1, 1.5)) -> dic
         "start_collisions": out["start_collisions"], "goal_collisions": out["goal_collisions"],
         "all_ranges": {k: {"time_median": float(np.median(v["planning"])),
                            "success_rate": float(np.mean(v["solved"]))} for k, v in out["results"].items()},
-        "times": times[solved].tolist(),
+        "times": times[solved].tolist(), "name": "mplib", "requests": len(solved),
+        "solved": int(solved.sum()),
+        "per_request": [float(t) if ok else None for t, ok in zip(times, solved, strict=True)],
     }
     (folder / "peer" / "mplib_results.json").write_text(json.dumps(out, indent=1))
     return summary

@@ -118,3 +118,28 @@ def planners_report(summary: dict, n: int, time_limit: float, thesis: dict, peer
         ours = summary["RRTConnect"]["time_median"]
         yield (f"RRTConnect median: recon {ours:.3f} s, mplib {peer['time_median']:.3f} s, "
                f"ratio recon/mplib {ours / peer['time_median']:.2f}")
+
+
+def cell_planners_report(result: dict) -> Iterator:
+    """``recon bench planners --cell NAME``: recon's planners and the peers on the same scan moves."""
+    meta = result["meta"]
+    table = _table(f"{meta['cell']} cell: {meta['requests']} scan moves at {meta['camera_distance']:g} m, "
+                   f"{meta['time_limit']:g} s each", ("planner", "solved", "median", "p90", "path length"))
+    for name, sm in result["summary"].items():
+        table.add_row(f"{name} (recon)", f"{sm['success_rate'] * 100:.1f} %", f"{sm['time_median'] * 1e3:.2f} ms",
+                      f"{sm['time_p90'] * 1e3:.2f} ms", f"{sm['path_length_median']:.2f}")
+    for peer in result["peers"]:
+        asked = peer.get("asked", peer.get("requests"))
+        table.add_row(f"RRTConnect ({peer['name']})", f"{peer['success_rate'] * 100:.1f} % of {asked}",
+                      f"{peer['time_median'] * 1e3:.2f} ms", "", f"{peer['path_length_median']:.2f}")
+    yield table
+    for name, r in result["ratios"].items():
+        yield (f"RRTConnect on the {r['requests']} requests both solved: recon {r['recon_median'] * 1e3:.2f} ms, "
+               f"{name} {r['peer_median'] * 1e3:.2f} ms (median); recon / {name} = {r['ratio']:.1f}")
+    for peer in result["peers"]:
+        if peer.get("invalid_start_or_goal"):
+            yield (f"{peer['name']}: {peer['invalid_start_or_goal']} of {peer['requests']} requests left out (start "
+                   "or goal invalid in its own robot model)")
+    if result["profile"]:
+        yield "where recon's planning time goes (cProfile, cumulative):"
+        yield from result["profile"]

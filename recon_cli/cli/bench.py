@@ -12,6 +12,7 @@ from typing import Annotated, Literal
 import typer
 
 from recon_cli.bench import render
+from recon_cli.bench.cell_planners import PEERS, run_cell_planners
 from recon_cli.bench.ik import IKBenchConfig, run_ik_bench
 from recon_cli.bench.mplib_peer import run_mplib
 from recon_cli.bench.planners import DEFAULT_PLANNERS, run_planner_bench, thesis_times, write_results
@@ -42,6 +43,7 @@ from recon_cli.cli.options import (
     split_names,
 )
 from recon_cli.console import console, progress_bar, write_json
+from recon_cli.errors import InputError
 from recon_cli.perception.sensor import cell_sensor
 from recon_cli.planning.options import PLANNERS
 from recon_cli.robot.description import CellConfig, CellName
@@ -53,7 +55,7 @@ OutOpt = Annotated[Path | None, typer.Option("--out", "-o", help="Output folder 
 #: which loads the planner, when a command line is parsed)
 SEQUENCE_CASES = ("A", "B", "C", "D", "A0")
 #: the peers ``recon bench planners`` can compare with
-Peer = Literal["none", "mplib"]
+Peer = Literal["none", "mplib", "vamp", "all"]
 
 
 def _sequence_cases() -> tuple[str, ...]:
@@ -210,8 +212,10 @@ def bench_planners(
                                                "table in docs/benchmarks.md).")] = "default",
     time_limit: PlanningTimeOpt = D.planner.time_limit,
     quick: Annotated[bool, typer.Option("--quick", help="CI mode: 10 requests of RRTConnect and RRT.")] = False,
-    peer: Annotated[Peer, typer.Option(help="Also run a peer on the same problem: 'mplib' or 'none'.")]
+    peer: Annotated[Peer, typer.Option(help="Also run a peer on the same requests: 'mplib', 'vamp' (Franka cells; "
+                                            "RECON_VAMP_VENV names its environment), 'all' or 'none'.")]
     = "none",
+    cell: CellOpt = D.cell.kind,
     peer_n: Annotated[int, typer.Option("--peer-requests", min=1, max=10_000,
                                         help="Requests for the peer (per RRT range tried).")] = 200,
     simplify: Annotated[SimplificationName, typer.Option(help="Path simplification.")] = D.planner.simplify,
@@ -221,12 +225,28 @@ def bench_planners(
     out: OutOpt = None,
     force: ForceOpt = False,
 ) -> None:
-    """The Table 4.1 planning benchmark (thesis 4.1): success, plan times, path lengths."""
+    """Planning benchmark: the Table 4.1 problem on the thesis' gantry cell (thesis 4.1), the
+    moves of a scan on any other cell; success, plan times, path lengths, peers side by side."""
 
     options = replace(D.planner, simplify=simplify, shortcut_rounds=shortcut_rounds)
     names = list(DEFAULT_PLANNERS) if planners.strip() == "default" else split_names(planners)
     if quick:
         names, n = ["RRTConnect", "RRT"], min(n, 10)
+    config = CellConfig(kind=CellName.parse(cell))
+    if config.name != "gantry":
+        peers = PEERS if peer == "all" else (() if peer == "none" else (peer,))
+        folder = output_folder(out, "bench planners", force=force).path
+        with progress_bar() as update:
+            result = run_cell_planners(folder, config, names, n, time_limit, seed, peers, options, update,
+                                       status=lambda text: console.print(text))
+        for item in render.cell_planners_report(result):
+            console.print(item)
+        console.print(f"results: {folder / 'bench_planners.json'}, {folder / 'requests.csv'}, "
+                      f"profile: {folder / 'profile.txt'}, plot: {folder / 'plan_times.png'}")
+        return
+    if peer in ("vamp", "all"):
+        raise InputError("VAMP plans for its compiled Panda, not the thesis' gantry cell",
+                         hint="use --peer mplib here, or --cell fr3 --peer vamp")
     folder = output_folder(out, "bench planners", force=force).path
     with progress_bar() as update:
         rows = run_planner_bench(names, n, time_limit, seed, update, options)

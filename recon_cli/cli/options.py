@@ -176,7 +176,8 @@ def _cell_metavar() -> str:
 
 CellOpt = Annotated[str, typer.Option("--cell", metavar=_cell_metavar(), callback=_cell,
                                       help="The cell: a shipped cell (gantry: 9 DoF with linear axes, ceiling: "
-                                           "7 DoF) or a cell FILE.yaml.")]
+                                           "7 DoF, fr3: Franka FR3, ur5e: UR5e) or a cell FILE.yaml "
+                                           "(docs/cells.md).")]
 SafetyOpt = Annotated[float | None, typer.Option("--safety", min=SAFETY_RANGE[0], max=SAFETY_RANGE[1],
                                                  help="Safety distance [m] that inflates every collision shape "
                                                       "(default: the cell file's).")]

@@ -15,11 +15,13 @@ assumed camera, nominal by default), not the actual one.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
 from recon_cli.backends.base import RGBDFrame
 from recon_cli.backends.sim.scene import SimScene, mujoco
+from recon_cli.errors import InputError
 from recon_cli.perception import sensor as sensor_effects
 from recon_cli.perception.camera_model import (
     Intrinsics,
@@ -27,7 +29,8 @@ from recon_cli.perception.camera_model import (
     intrinsics_from_fovy,
     opencv_from_opengl,
 )
-from recon_cli.realism import IDEAL, DepthArtefacts, RealismProfile
+from recon_cli.perception.sensor import SensorModel
+from recon_cli.realism import IDEAL, CameraSpec, DepthArtefacts, RealismProfile
 
 #: [m] a 3 x 3 depth neighbourhood spanning less is a smooth surface (bilinear resampling)
 SMOOTH_DEPTH_RANGE = 0.003
@@ -81,6 +84,27 @@ def resample_rgbd(color: np.ndarray, depth: np.ndarray, map_x: np.ndarray, map_y
     return color_out, np.where(smooth > 0, linear, near)
 
 
+#: a realism profile's camera may differ from the cell's sensor in field of view by this share
+#: at most (calibration errors are fractions of a percent; more is another camera)
+CAMERA_FIT = 0.05
+
+
+def _check_camera_fits(realism: RealismProfile, role: str, spec: CameraSpec | None, sensor: SensorModel) -> None:
+    """Refuse a profile camera that is another camera than the cell's sensor (a profile written
+    for another cell): its horizontal field of view or aspect ratio differs by more than
+    :data:`CAMERA_FIT`."""
+    if spec is None:
+        return
+    fov = 2.0 * math.atan(spec.width / (2.0 * spec.fx))
+    aspect, own = spec.width / spec.height, sensor.width / sensor.height
+    if abs(fov / sensor.hfov - 1.0) > CAMERA_FIT or abs(aspect / own - 1.0) > CAMERA_FIT:
+        raise InputError(
+            f"realism profile {realism.name}: camera.{role} ({spec.width} x {spec.height} px, "
+            f"{math.degrees(fov):.1f} deg wide) is not the cell's sensor {sensor.name} ({sensor.width} x "
+            f"{sensor.height} px, {math.degrees(sensor.hfov):.1f} deg wide)",
+            hint="write a profile for this cell's camera (docs/simulation.md), or use --realism ideal")
+
+
 class SimCamera:
     """CameraBackend of the simulation: renders the flange camera of a SimScene.
 
@@ -110,6 +134,8 @@ class SimCamera:
         render = self.intrinsics  # the pinhole MuJoCo renders
         w, h = render.width, render.height
         cam = realism.camera
+        for role, spec in (("actual", cam.actual), ("assumed", cam.assumed)):
+            _check_camera_fits(realism, role, spec, self.scene.sensor)
         self.render_intrinsics = render
         self.actual_intrinsics = cam.actual.intrinsics(w, h) if cam.actual is not None else render
         self._maps = None if cam.actual is None else distorted_pixel_maps(self.actual_intrinsics,

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from recon_cli.errors import ReconError
+from recon_cli.errors import InputError, ReconError
 from recon_cli.geometry.transforms import invert, transform_points
 from recon_cli.geometry.view import View
 from recon_cli.perception.charuco import cell_board
@@ -35,6 +35,8 @@ from recon_cli.perception.sensor import SensorModel, cell_sensor
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.collision import DistanceReport
 from recon_cli.robot.ik import IKOptions
+from recon_cli.robot.shapes import CollisionShape
+from recon_cli.robot.urdf import attribute, child
 
 #: polar angles of the checked viewing directions [deg] (0: looking straight down)
 THETAS = (20.0, 40.0, 60.0)
@@ -113,6 +115,73 @@ class CellCheck:
     problems: tuple[str, ...]
 
 
+#: [m] how far the board's top face may lie from the table top's surface
+BOARD_HEIGHT_TOLERANCE = 0.02
+
+
+def _inside(shape: CollisionShape, world_T_shape: np.ndarray, point: np.ndarray, shrink: float) -> bool:
+    """Is a world point inside a primitive shrunk by ``shrink`` on every side (the real shape
+    within its safety inflation)?"""
+    p = transform_points(invert(world_T_shape), point[None, :])[0]
+    d = np.asarray(shape.dims, dtype=float)
+    if shape.kind == "box":
+        return bool(np.all(np.abs(p) < d / 2.0 - shrink))
+    if shape.kind == "sphere":
+        return bool(np.linalg.norm(p) < d[0] - shrink)
+    r, length = d[0] - shrink, d[1] / 2.0
+    if shape.kind == "cylinder":
+        return bool(np.hypot(p[0], p[1]) < r and abs(p[2]) < length - shrink)
+    axial = np.clip(p[2], -length, length)  # capsule: distance to its segment
+    return bool(np.linalg.norm(p - np.array([0.0, 0.0, axial])) < r)
+
+
+def check_layout(cell: Cell) -> None:
+    """Refuse a cell whose board lies off its table top, or whose camera's optical centre lies
+    inside a link of the robot at home (one line naming the cell file's line)."""
+    cf = cell.config.cell_file
+    x0, x1, y0, y1, z = table_top(cell)
+    corners = board_corners(cell)[:4]
+    margin = 1e-3
+    off = [c for c in corners if not (x0 - margin <= c[0] <= x1 + margin and y0 - margin <= c[1] <= y1 + margin)]
+    if off or np.max(np.abs(corners[:, 2] - z)) > BOARD_HEIGHT_TOLERANCE:
+        c = off[0] if off else corners[int(np.argmax(np.abs(corners[:, 2] - z)))]
+        raise InputError(f"{cf.where('board.frame')}: the board ({board_corners(cell)[0, 2]:.3f} m high) lies off the "
+                         f"table top {cf.table_shape} (x {x0:.3f} ... {x1:.3f}, y {y0:.3f} ... {y1:.3f} m, surface "
+                         f"at {z:.3f} m): its corner ({c[0]:.3f}, {c[1]:.3f}, {c[2]:.3f}) m",
+                         hint="place the board's link on the table top in the description, or name the right "
+                              "board.frame and table.shape")
+    home = cf.pose("home", cell.joint_names) if "home" in dict(cf.poses) else cell.kin.neutral()
+    optical = cell.kin.world_T_camera(home)[:3, 3]
+    own = set(camera_links(cell))
+    poses = cell.collision.shape_poses(home)
+    for shape, T in zip(cell.collision.robot_shapes, poses, strict=True):
+        if shape.link not in own and _inside(shape, T, optical, cell.config.safety_distance):
+            raise InputError(f"{cf.where('camera.frame')}: the camera's optical centre lies inside "
+                             f"{shape.label} (at home)",
+                             hint="check the camera mount in the description (camera_xyz / camera_pose): the "
+                                  "optical frame belongs in front of the camera, outside the robot's links")
+
+
+def camera_links(cell: Cell) -> tuple[str, ...]:
+    """The links from the flange (excluded) down to the camera frame: the camera's own parts,
+    and every link fixed under them (bracket, housing)."""
+    from lxml import etree
+
+    root = etree.fromstring(cell.urdf.encode())
+    children: dict[str, list[str]] = {}
+    for j in root.iter("joint"):
+        if j.get("type") == "fixed":
+            children.setdefault(attribute(child(j, "parent"), "link"), []).append(attribute(child(j, "child"), "link"))
+    flange = cell.config.cell_file.flange_link
+    out: list[str] = []
+    todo = list(children.get(flange, []))
+    while todo:
+        link = todo.pop()
+        out.append(link)
+        todo += children.get(link, [])
+    return tuple(out)
+
+
 def joint_rows(cell: Cell) -> tuple[JointRow, ...]:
     lim = cell.limits
     return tuple(JointRow(n, bool(lim.prismatic[i]), float(lim.lower[i]), float(lim.upper[i]),
@@ -175,6 +244,7 @@ def check_cell(cell: Cell, rng: np.random.Generator, step: float = 0.1, focus_he
                progress: Callable[[int, int], None] | None = None) -> CellCheck:
     """Check a cell (see the module docstring); ``step`` [m] is the reachability grid's spacing."""
     cf = cell.config.cell_file
+    check_layout(cell)
     sensor = cell_sensor(cf)
     home = cf.pose("home", cell.joint_names) if "home" in dict(cf.poses) else cell.kin.neutral()
     margin = float(np.min(cell.limits.margin_to_soft(home)))

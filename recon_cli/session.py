@@ -31,6 +31,7 @@ from recon_cli.backends.base import Backend, Capabilities, Station  # noqa: F401
 from recon_cli.backends.hardware.station import AdapterStation, preflight
 from recon_cli.backends.sim.station import SimStation
 from recon_cli.backends.station_file import load_station
+from recon_cli.cell_check import check_layout
 from recon_cli.config import DEFAULTS, Config, write_config
 from recon_cli.console import write_json
 from recon_cli.errors import FileError, HardwareUnavailable, InputError
@@ -105,6 +106,7 @@ class Session:
             resolve_object_name(cfg.scene.object_name), cfg.scene.object_scale, cfg.cell.cell_file.object_position)
         self.object_box = None if spec.board_only else self._object_box()
         self.cell = Cell(cfg.cell, object_box=self.object_box)
+        check_layout(self.cell)
         self.start = named_configuration(cfg.cell.kind, "home", self.cell.joint_names)
         self.station: Station | None = None  # these three once the session is open (not with plan_only)
         self.store: ScanStore | None = None

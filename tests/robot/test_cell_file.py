@@ -187,3 +187,25 @@ def test_ik_seeds_name_poses_of_the_cell(tmp_path):
     with pytest.raises(InputError, match="IK seed nope is not a pose of the cell") as info:
         load_cell(str(path))
     assert info.value.one_line().startswith(f"{path.resolve()}:{_line(path, '  seeds: [nope]') + 0}")
+
+
+@pytest.mark.parametrize("file, old, new, needle, message", [
+    ("robot/parts/board.xacro", 'origin xyz="0.1225 -0.1925 0.003"', 'origin xyz="1.5 -0.1925 0.003"', "frame: marker",
+     "lies off the table top table_top"),
+    ("robot/parts/board.xacro", 'origin xyz="0.1225 -0.1925 0.003"', 'origin xyz="0.1225 -0.1925 0.2"',
+     "frame: marker", "lies off the table top table_top"),
+    ("robot/cell.urdf.xacro", 'default="-0.0288531 -0.1731820 0.0608131"', 'default="0 0 -0.1"', "frame: camera",
+     "the camera's optical centre lies inside arm_link_6/arm_link_6_capsule"),
+])
+def test_a_board_off_the_table_or_a_camera_inside_a_link_is_one_line(tmp_path, file, old, new, needle, message):
+    """What only the built cell shows: where the board lies and where the camera looks from;
+    ``recon cell check`` and every session refuse such a cell with the cell file's line."""
+    from recon_cli.cell_check import check_layout
+
+    path = _cell(tmp_path, lambda t: t)
+    _edit_file(tmp_path / file, old, new)
+    with pytest.raises(InputError) as info:
+        check_layout(Cell(CellConfig(kind=str(path))))
+    text = info.value.one_line()
+    assert "\n" not in text and text.startswith(f"{path.resolve()}:{_line(path, needle)}: "), text
+    assert message in text, text

@@ -26,6 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from lxml import etree
 
 from recon_cli.errors import InputError, ReconError
 from recon_cli.geometry.transforms import invert, transform_points
@@ -165,8 +166,6 @@ def check_layout(cell: Cell) -> None:
 def camera_links(cell: Cell) -> tuple[str, ...]:
     """The links from the flange (excluded) down to the camera frame: the camera's own parts,
     and every link fixed under them (bracket, housing)."""
-    from lxml import etree
-
     root = etree.fromstring(cell.urdf.encode())
     children: dict[str, list[str]] = {}
     for j in root.iter("joint"):

@@ -138,8 +138,13 @@ def test_bench_planners_bad_names(capsys):
     assert code == 2 and "Invalid value for '--peer': 'moveit' is not one of 'none', 'mplib'" in err
 
 
-def test_version_short_help_and_completion(capsys):
+def test_version_short_help_and_completion(capsys, monkeypatch):
+    import typer.completion
+
     from recon_cli import __version__
+
+    # typer takes the shell from the process tree (the test runner's parent may be any shell)
+    monkeypatch.setattr(typer.completion, "_get_shell_name", lambda: "bash")
 
     code, out, _ = run(capsys, "--version")
     assert code == 0 and out.strip() == f"recon {__version__}"
@@ -147,8 +152,8 @@ def test_version_short_help_and_completion(capsys):
                  ["station", "check", "-h"]):
         code, out, _ = run(capsys, *argv)
         assert code == 0 and out.startswith("Usage: recon"), argv
-    code, out, _ = run(capsys, "--show-completion", "bash")
-    assert code == 0 and "_RECON_COMPLETE=complete_bash" in out
+    code, out, err = run(capsys, "--show-completion", "bash")
+    assert code == 0 and "_RECON_COMPLETE=complete_bash" in out, err
 
 
 def test_completion_offers_commands_and_options():

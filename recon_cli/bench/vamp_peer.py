@@ -24,7 +24,6 @@ import subprocess
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from recon_cli.bench.scan_moves import ScanMoves
 from recon_cli.errors import ReconError
@@ -52,6 +51,8 @@ def vamp_python() -> Path:
 def cuboids(cell: Cell, extra: float) -> list[list[list[float]]]:
     """The cell's environment boxes (and the object box) as VAMP cuboids (centre, Euler XYZ,
     half extents) in the robot base frame, each grown by ``extra`` [m] on every face."""
+    from scipy.spatial.transform import Rotation
+
     cf = cell.config.cell_file
     home = cf.pose("home", cell.joint_names)
     base_T_world = invert(cell.kin.frame_pose(home, cf.base_link))

@@ -125,6 +125,8 @@ class CellFile:
     allowed_shapes: tuple[tuple[str, str], ...]
     #: named poses tried as IK seeds before random ones (posture preferences, e.g. elbow up)
     ik_seeds: tuple[str, ...] = ()
+    #: configurations of the IK's seed library (0: none)
+    ik_library: int = 0
     lines: tuple[tuple[str, str], ...] = field(default=(), compare=False, repr=False)
 
     def where(self, key: str) -> str:
@@ -267,7 +269,8 @@ def _parse(path: Path) -> CellFile:
         board_frame=str(doc["board"]["frame"]), board_file=board,
         object_position=tuple(_numbers(doc["objects"]["position"])),  # type: ignore[arg-type]
         drives_file=drives, limits=limits, safety_distance=float(doc["safety_distance"]), poses=tuple(poses),
-        allowed_links=allowed, allowed_shapes=shapes, ik_seeds=seeds, lines=tuple(lines.rows.items()))
+        allowed_links=allowed, allowed_shapes=shapes, ik_seeds=seeds,
+        ik_library=int((doc.get("ik") or {}).get("library", 0)), lines=tuple(lines.rows.items()))
 
 
 def _argument(value: Any) -> str:

@@ -5,9 +5,11 @@ world_T_goal)`` with pinocchio's Jacobians, from several seeds, projected onto t
 joint limits. Converged solutions are kept when they are collision-free and differ from
 the ones already found, so the caller gets several distinct goal configurations (the
 redundancy of the 9-DoF chain gives infinitely many). Seeds: the caller's seed first, then
-the cell file's posture seeds (``ik.seeds``: named poses such as an elbow-up home), then
-random configurations within the soft limits whose linear axes (if any) put the arm's base
-near the camera.
+the cell file's posture seeds (``ik.seeds``: named poses such as an elbow-up home), then the
+nearest configurations of the cell's seed library (``ik.library``: that many configurations
+drawn once, uniformly within the soft limits, with their camera poses; nearest in camera
+position plus :data:`LIBRARY_ROTATION_WEIGHT` x rotation angle), then random configurations
+within the soft limits whose linear axes (if any) put the arm's base near the camera.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from recon_cli.lazy import lazy_module
+from recon_cli.robot.batch_fk import BatchFK
 from recon_cli.robot.collision import CollisionModel
 from recon_cli.robot.kinematics import Kinematics
 
@@ -32,6 +35,12 @@ else:
 #: [m] a goal farther than this from the world origin (or not finite) is out of reach of any
 #: cell without a descent
 MAX_GOAL_DISTANCE = 1000.0
+#: [m/rad] the seed library's pose distance: position error plus this times the rotation angle
+LIBRARY_ROTATION_WEIGHT = 0.2
+#: descents started from the seed library at most, per solve
+LIBRARY_SEEDS = 6
+#: the seed library's configurations are drawn with this seed: part of the cell, not of a run
+LIBRARY_DRAW_SEED = 20250101
 
 
 class IKStatus(StrEnum):
@@ -121,6 +130,30 @@ class IKSolver:
         self._orthonormal = bool(np.allclose(gram, np.eye(len(self._linear)), atol=1e-9))
         self._posture_seeds = tuple(np.clip(kin.cell.pose(name, names), self._lo, self._hi)
                                     for name in kin.cell.ik_seeds)
+        self._nearest: list[npt.NDArray[np.float64]] | None = None
+        self._library: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
+
+    # ------------------------------------------------------------------ seed library
+    def _seed_library(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """(configurations (N, n), camera positions (N, 3), camera rotations (N, 3, 3)), made once."""
+        if self._library is None:
+            model = self.kin.model
+            frame = model.frames[self.kin.camera_frame_id]
+            Q = np.random.default_rng(LIBRARY_DRAW_SEED).uniform(self._lo, self._hi,
+                                                               size=(self.kin.cell.ik_library, model.nq))
+            T = BatchFK(model).joint_poses(Q)[:, int(frame.parentJoint)] @ frame.placement.homogeneous
+            self._library = (Q, T[:, :3, 3].copy(), T[:, :3, :3].copy())
+        return self._library
+
+    def library_seeds(self, world_T_goal: npt.NDArray[np.float64], k: int) -> list[npt.NDArray[np.float64]]:
+        """The ``k`` library configurations whose camera pose is nearest the goal's."""
+        if self.kin.cell.ik_library == 0 or k <= 0:
+            return []
+        Q, p, R = self._seed_library()
+        cos = (np.einsum("nij,ij->n", R, world_T_goal[:3, :3]) - 1.0) / 2.0
+        d = np.linalg.norm(p - world_T_goal[:3, 3], axis=1) + LIBRARY_ROTATION_WEIGHT * np.arccos(np.clip(cos, -1, 1))
+        nearest = np.argsort(d, kind="stable")[:k]
+        return [Q[i].copy() for i in nearest]
 
     # ------------------------------------------------------------------ seeds
     def random_seed(self, world_T_goal: npt.NDArray[np.float64], rng: np.random.Generator) -> npt.NDArray[np.float64]:
@@ -157,6 +190,11 @@ class IKSolver:
             attempt -= 1
         if attempt < len(self._posture_seeds):
             return self._posture_seeds[attempt].copy()
+        attempt -= len(self._posture_seeds)
+        if attempt < LIBRARY_SEEDS and self.kin.cell.ik_library:
+            if attempt == 0 or self._nearest is None:
+                self._nearest = self.library_seeds(world_T_goal, LIBRARY_SEEDS)
+            return self._nearest[attempt]
         return self.random_seed(world_T_goal, rng)
 
     # ------------------------------------------------------------------ one descent

@@ -21,7 +21,7 @@ import numpy as np
 from recon_cli.bench.mplib_peer import run_mplib
 from recon_cli.bench.planners import RequestRow, summarize
 from recon_cli.bench.scan_moves import ScanMoves, run_scan_moves
-from recon_cli.bench.vamp_peer import run_vamp
+from recon_cli.bench.vamp_peer import run_vamp, vamp_valid
 from recon_cli.planning.planner import PlanOptions
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.description import CellConfig
@@ -32,8 +32,12 @@ PEERS = ("mplib", "vamp")
 def run_cell_planners(folder: Path, config: CellConfig, planners: list[str], n: int, time_limit: float,
                       seed: int, peers: tuple[str, ...], options: PlanOptions,
                       progress: Callable[[str, int, int], None] | None = None,
-                      status: Callable[[str], None] | None = None) -> dict:
-    problem, rows, profile = run_scan_moves(config, planners, n, time_limit, seed, progress, options)
+                      status: Callable[[str], None] | None = None, distance: float | None = None) -> dict:
+    # with VAMP, the goals are those its own Panda model takes as valid too (its hand and
+    # fingers reach past the flange where the cell's camera sits): the same requests for all
+    accept = vamp_valid if "vamp" in peers else None
+    problem, rows, profile = run_scan_moves(config, planners, n, time_limit, seed, progress, options, accept,
+                                            distance)
     (folder / "profile.txt").write_text(profile)
     peer_results = []
     cell = Cell(config, object_box=problem.object_box)

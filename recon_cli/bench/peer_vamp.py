@@ -27,6 +27,9 @@ def main(problem_path: str) -> None:
     env = vamp.Environment()
     for center, euler, half in p["cuboids"]:
         env.add_cuboid(vamp.Cuboid(list(center), list(euler), list(half)))
+    if "validate" in p:  # which configurations are valid (collision-free among the cuboids)
+        print(json.dumps({"valid": [bool(module.validate(np.asarray(q, dtype=float), env)) for q in p["validate"]]}))
+        return
     sampler = module.halton()
     lower, upper = np.asarray(module.lower_bounds()), np.asarray(module.upper_bounds())
     rows = []

@@ -59,45 +59,54 @@ class ScanMoves:
     distance: float
 
 
-def scan_moves(cell: Cell, n: int, seed: int) -> ScanMoves:
-    """``n`` requests of a scan around the cell's object position (see the module docstring)."""
+def scan_moves(cell: Cell, n: int, seed: int,
+               accept: Callable[[list[np.ndarray]], list[bool]] | None = None,
+               distance: float | None = None) -> ScanMoves:
+    """``n`` requests of a scan around the cell's object position (see the module docstring).
+    ``accept`` (optional) keeps only the goals every peer's own robot model takes as valid
+    (asked for a batch of candidates at a time), so that every planner gets the same requests."""
     cf = cell.config.cell_file
     rng = np.random.default_rng(seed)
     position = np.asarray(cf.object_position, dtype=float)
     box = ObjectBox.on_table(OBJECT_BOX, (float(position[0]), float(position[1])), table_top_z=float(position[2]))
     cell.set_object_box(box)
-    distance = cell_sensor(cf).default_distance
+    distance = cell_sensor(cf).default_distance if distance is None else distance
     focus = tuple(float(v) for v in position + np.array([0.0, 0.0, FOCUS_HEIGHT]))
     home = cf.pose("home", cell.joint_names)
     goals: list[np.ndarray] = []
     views: list[View] = []
     tries = 0
     while len(goals) < n:
-        tries += 1
-        if tries > 50 * n:
-            raise ReconError(f"the {cf.name} cell reaches too few views around its object position "
-                             f"({len(goals)} of {tries} drawn)",
-                             hint="check the cell with recon cell check")
-        view = View(focus, distance, math.radians(rng.uniform(*THETA_RANGE)),  # type: ignore[arg-type]
-                    math.radians(rng.uniform(0.0, 360.0)))
-        try:
-            result = cell.solve_view(view, rng, seed=goals[-1] if goals else home,
-                                     options=IKOptions(max_solutions=1))
-        except ReconError:
-            continue
-        goals.append(result.solutions[0].q)
-        views.append(view)
+        batch: list[tuple[np.ndarray, View]] = []
+        while len(batch) < n - len(goals) + (0 if accept is None else n):
+            tries += 1
+            if tries > 50 * n:
+                raise ReconError(f"the {cf.name} cell reaches too few views around its object position "
+                                 f"({len(goals)} of {tries} drawn)", hint="check the cell with recon cell check")
+            view = View(focus, distance, math.radians(rng.uniform(*THETA_RANGE)),  # type: ignore[arg-type]
+                        math.radians(rng.uniform(0.0, 360.0)))
+            try:
+                result = cell.solve_view(view, rng, seed=home, options=IKOptions(max_solutions=1))
+            except ReconError:
+                continue
+            batch.append((result.solutions[0].q, view))
+        keep = [True] * len(batch) if accept is None else accept([q for q, _ in batch])
+        for (q, view), ok in zip(batch, keep, strict=True):
+            if ok and len(goals) < n:
+                goals.append(q)
+                views.append(view)
     starts = [home, *goals[:-1]]
     return ScanMoves(cf.name, tuple(zip(starts, goals, strict=True)), box, tuple(views), distance)
 
 
 def run_scan_moves(config: CellConfig, planners: list[str], n: int, time_limit: float, seed: int,
                    progress: Callable[[str, int, int], None] | None = None,
-                   options: PlanOptions = PlanOptions()  # noqa: B008
-                   ) -> tuple[ScanMoves, list[RequestRow], str]:
+                   options: PlanOptions = PlanOptions(),  # noqa: B008
+                   accept: Callable[[Cell, list[np.ndarray]], list[bool]] | None = None,
+                   distance: float | None = None) -> tuple[ScanMoves, list[RequestRow], str]:
     """The scan-move requests for each planner, and the profile of recon's planning (text)."""
     cell = Cell(config)
-    problem = scan_moves(cell, n, seed)
+    problem = scan_moves(cell, n, seed, None if accept is None else (lambda qs: accept(cell, qs)), distance)
     seeds = request_seeds(seed, n)
     rows: list[RequestRow] = []
     profiler = cProfile.Profile()

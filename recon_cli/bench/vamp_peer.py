@@ -21,14 +21,17 @@ from __future__ import annotations
 import json
 import os
 import subprocess
+import tempfile
 from pathlib import Path
 
 import numpy as np
+from lxml import etree
 
 from recon_cli.bench.scan_moves import ScanMoves
 from recon_cli.errors import ReconError
 from recon_cli.geometry.transforms import invert
 from recon_cli.robot.cell import Cell
+from recon_cli.robot.urdf import attribute, child
 
 PEER_SCRIPT = Path(__file__).with_name("peer_vamp.py")
 VENV_VARIABLE = "RECON_VAMP_VENV"
@@ -48,16 +51,58 @@ def vamp_python() -> Path:
     return python
 
 
+#: [m] half width of the square left out of the surface the robot base stands on: VAMP checks
+#: its base link's sphere (0.08 m around a point 0.05 m above the base) against the
+#: environment, which recon never does (the base does not move)
+BASE_HOLE = 0.1
+
+
+def _robot_links(cell: Cell) -> set[str]:
+    """The arm's base link and every link under it (their shapes are VAMP's spheres)."""
+    root = etree.fromstring(cell.urdf.encode())
+    children: dict[str, list[str]] = {}
+    for j in root.iter("joint"):
+        children.setdefault(attribute(child(j, "parent"), "link"), []).append(attribute(child(j, "child"), "link"))
+    out, todo = set(), [cell.config.cell_file.base_link]
+    while todo:
+        link = todo.pop()
+        out.add(link)
+        todo += children.get(link, [])
+    return out
+
+
+def _around_base(center: np.ndarray, half: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """An axis-aligned box the base stands on, as up to four boxes around a square hole of
+    half width :data:`BASE_HOLE` at the base (x = y = 0 of the base frame)."""
+    lo, hi = center - half, center + half
+    if not (lo[0] < 0 < hi[0] and lo[1] < 0 < hi[1] and abs(hi[2]) < 0.1):
+        return [(center, half)]
+    h = BASE_HOLE
+    pieces = [((lo[0], -h), (lo[1], hi[1])), ((h, hi[0]), (lo[1], hi[1])),
+              ((-h, h), (lo[1], -h)), ((-h, h), (h, hi[1]))]
+    out = []
+    for (x0, x1), (y0, y1) in pieces:
+        if x1 > x0 and y1 > y0:
+            a, b = np.array([x0, y0, lo[2]]), np.array([x1, y1, hi[2]])
+            out.append(((a + b) / 2.0, (b - a) / 2.0))
+    return out
+
+
 def cuboids(cell: Cell, extra: float) -> list[list[list[float]]]:
     """The cell's environment boxes (and the object box) as VAMP cuboids (centre, Euler XYZ,
-    half extents) in the robot base frame, each grown by ``extra`` [m] on every face."""
+    half extents) in the robot base frame, each grown by ``extra`` [m] on every face; the
+    robot's own fixed links left out, the surface under the base with a hole for VAMP's base
+    sphere (:data:`BASE_HOLE`)."""
     from scipy.spatial.transform import Rotation
 
     cf = cell.config.cell_file
     home = cf.pose("home", cell.joint_names)
     base_T_world = invert(cell.kin.frame_pose(home, cf.base_link))
+    robot = _robot_links(cell)
     out = []
     for shape in cell.collision.env_shapes:
+        if shape.link in robot:
+            continue
         T = base_T_world @ shape.joint_T_shape
         if shape.kind == "box":
             half = np.asarray(shape.dims) / 2.0 + extra
@@ -67,8 +112,29 @@ def cuboids(cell: Cell, extra: float) -> list[list[list[float]]]:
         else:  # sphere
             half = np.full(3, shape.dims[0] + extra)
         euler = Rotation.from_matrix(T[:3, :3]).as_euler("xyz")  # R = Rz(e2) Ry(e1) Rx(e0), as VAMP's
+        aligned = shape.kind == "box" and np.allclose(np.abs(T[:3, :3]), np.eye(3), atol=1e-9)
+        if aligned:  # the table top under the base: around the base
+            half = np.abs(T[:3, :3]) @ half
+            for c, h in _around_base(T[:3, 3], half):
+                out.append([c.tolist(), [0.0, 0.0, 0.0], h.tolist()])
+            continue
         out.append([T[:3, 3].tolist(), euler.tolist(), half.tolist()])
     return out
+
+
+def vamp_valid(cell: Cell, configurations: list[np.ndarray]) -> list[bool]:
+    """Which configurations VAMP's Panda takes as valid among the cell's obstacles."""
+    python = vamp_python()
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "validate.json"
+        path.write_text(json.dumps({"robot": "panda", "planner": "rrtc",
+                                    "validate": [q.tolist() for q in configurations],
+                                    "cuboids": cuboids(cell, cell.config.safety_distance)}))
+        proc = subprocess.run([str(python), str(PEER_SCRIPT), str(path)], capture_output=True, text=True)
+    if proc.returncode != 0:
+        tail = proc.stderr.strip().splitlines()[-1:] or ["?"]
+        raise ReconError(f"the VAMP peer failed ({tail[0]})", hint="check RECON_VAMP_VENV")
+    return [bool(v) for v in json.loads(proc.stdout.strip().splitlines()[-1])["valid"]]
 
 
 def run_vamp(folder: Path, cell: Cell, problem: ScanMoves) -> dict:

@@ -216,6 +216,9 @@ def bench_planners(
                                             "RECON_VAMP_VENV names its environment), 'all' or 'none'.")]
     = "none",
     cell: CellOpt = D.cell.kind,
+    view_distance: Annotated[float | None, typer.Option(min=0.05, max=2.0, help="Camera distance of the scan "
+                                                       "moves' views on a cell other than the gantry [m] "
+                                                       "(default: the cell camera's scan distance).")] = None,
     peer_n: Annotated[int, typer.Option("--peer-requests", min=1, max=10_000,
                                         help="Requests for the peer (per RRT range tried).")] = 200,
     simplify: Annotated[SimplificationName, typer.Option(help="Path simplification.")] = D.planner.simplify,
@@ -238,7 +241,7 @@ def bench_planners(
         folder = output_folder(out, "bench planners", force=force).path
         with progress_bar() as update:
             result = run_cell_planners(folder, config, names, n, time_limit, seed, peers, options, update,
-                                       status=lambda text: console.print(text))
+                                       status=lambda text: console.print(text), distance=view_distance)
         for item in render.cell_planners_report(result):
             console.print(item)
         console.print(f"results: {folder / 'bench_planners.json'}, {folder / 'requests.csv'}, "

@@ -35,6 +35,8 @@ else:
 #: [m] a goal farther than this from the world origin (or not finite) is out of reach of any
 #: cell without a descent
 MAX_GOAL_DISTANCE = 1000.0
+#: damping put back when a singular Jacobian meets a damping decayed to (numerically) nothing
+SINGULAR_DAMPING = 1e-6
 #: [m/rad] the seed library's pose distance: position error plus this times the rotation angle
 LIBRARY_ROTATION_WEIGHT = 0.2
 #: descents started from the seed library at most, per solve
@@ -222,7 +224,12 @@ class IKSolver:
             J = pin.Jlog6(cMg.inverse()) @ J
             JJt = J @ J.T
             JJt[np.diag_indices(6)] += lam
-            Jpinv = J.T @ np.linalg.inv(JJt)
+            try:
+                Jpinv = J.T @ np.linalg.inv(JJt)
+            except np.linalg.LinAlgError:  # a singular chain (a wrist at 0) with a vanished damping
+                lam = max(lam, SINGULAR_DAMPING)
+                JJt[np.diag_indices(6)] += lam
+                Jpinv = J.T @ np.linalg.inv(JJt)
             dq = Jpinv @ err
             if options.limit_avoidance > 0.0 and ep + er > 1e-3:
                 # secondary task in the null space while far from the goal: pull joints toward

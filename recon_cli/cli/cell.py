@@ -110,7 +110,8 @@ def ik(
     alpha: AlphaOpt = 0.0,
     frame: FrameOpt = Frame.WORLD,
     object_box: Annotated[
-        str | None, typer.Option(help="Object bounding box on the table centre, sx,sy,sz [m]; 'none' for no box.")
+        str | None, typer.Option(help="Object bounding box where the cell's objects stand, sx,sy,sz [m]; "
+                                      "'none' for no box.")
     ] = "0.3,0.3,0.3",
     solutions: Annotated[int, typer.Option(min=1, max=32, help="How many distinct solutions to look for.")]
     = D.planner.ik_solutions,

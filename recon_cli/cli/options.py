@@ -288,7 +288,8 @@ def make_cell(cell: str, safety: float | None, object_box: str | None = None):
         if max(size) > MAX_BOX_EDGE:
             raise InputError(f"--object-box '{object_box}' has an edge beyond {MAX_BOX_EDGE:g} m",
                              hint="give the box edges in metres, e.g. 0.3,0.3,0.3")
-        c.set_object_box(ObjectBox.on_table(size, table_top_z=c.table_surface_z))
+        x, y, _ = c.config.cell_file.object_position  # the box stands where the cell's objects stand
+        c.set_object_box(ObjectBox.on_table(size, (x, y), table_top_z=c.table_surface_z))
     return c
 
 

@@ -208,16 +208,15 @@ def _rigid(values: Iterable[float], what: str) -> tuple[float, ...]:
 
 
 def _digest(description: Path) -> str:
-    """Content of a URDF file, or of every description file in a xacro's folder tree."""
+    """Content of a URDF file, or of a xacro file and every file it includes or loads (the
+    files :func:`guard_xacro` reads)."""
     h = hashlib.sha256()
     if description.suffix.lower() == ".urdf":
-        h.update(description.read_bytes())
+        h.update(_read_description(description).encode())
         return h.hexdigest()
-    folder = description.parent
-    for path in sorted(folder.rglob("*")):
-        if path.is_file() and path.suffix in {".xacro", ".yaml", ".urdf"}:
-            h.update(str(path.relative_to(folder)).encode())
-            h.update(path.read_bytes())
+    for path, text in sorted(guard_xacro(description).items()):
+        h.update(str(path).encode())
+        h.update(text.encode())
     return h.hexdigest()
 
 
@@ -254,6 +253,7 @@ MAX_DESCRIPTION_BYTES = 20_000_000
 #: xacro files a description may include, at most
 MAX_XACRO_FILES = 200
 _EXPRESSION = re.compile(r"\$\{([^}]*)\}|\$\(([^)]*)\)")
+_LOAD_YAML = re.compile(r"load_yaml\(\s*[\"']([^\"']+)[\"']")
 _INCLUDE = re.compile(r"<xacro:include\b[^>]*\bfilename\s*=\s*[\"']([^\"']+)[\"']")
 
 
@@ -270,24 +270,26 @@ def _read_description(path: Path) -> str:
                          hint="give the robot's URDF or xacro file") from None
 
 
-def guard_xacro(description: Path) -> None:
-    """Refuse a xacro description whose expressions could leave xacro's expression language.
+def guard_xacro(description: Path) -> dict[Path, str]:
+    """Refuse a xacro description whose expressions could leave xacro's expression language;
+    the text of every file it includes or loads (``xacro.load_yaml``), by path.
 
     xacro evaluates ``${...}`` with Python's eval over a dictionary of harmless names; a
     dunder attribute (``().__class__...``) walks out of it, and ``$(eval ...)`` is plain
     Python. A description file (and every file it includes) may use neither: one line naming
     the file, line and expression."""
-    seen: set[Path] = set()
+    seen: dict[Path, str] = {}
     todo = [description.resolve()]
     while todo:
         path = todo.pop()
         if path in seen:
             continue
-        seen.add(path)
-        if len(seen) > MAX_XACRO_FILES:
-            raise InputError(f"{description}: the description includes more than {MAX_XACRO_FILES} xacro files",
+        if len(seen) >= MAX_XACRO_FILES:
+            raise InputError(f"{description}: the description includes more than {MAX_XACRO_FILES} files",
                              hint="give the robot's URDF instead")
-        text = _read_description(path)
+        text = seen[path] = _read_description(path)
+        if path.suffix.lower() in (".yaml", ".yml"):
+            continue
         for m in _EXPRESSION.finditer(text):
             expression = m.group(0)
             if "__" in expression or (m.group(2) or "").strip().startswith("eval"):
@@ -295,18 +297,18 @@ def guard_xacro(description: Path) -> None:
                 raise InputError(f"{path}:{line}: the xacro expression {expression[:60]!r} is refused (dunder names "
                                  "and $(eval ...) run Python beyond xacro's expression language)",
                                  hint="use plain arithmetic and xacro properties, or give the expanded URDF")
-        for m in _INCLUDE.finditer(text):
+        for m in (*_INCLUDE.finditer(text), *_LOAD_YAML.finditer(text)):
             name = m.group(1)
             if "$" in name:
-                continue  # an include named by an expression: xacro resolves it (and refuses what it cannot)
+                continue  # a file named by an expression: xacro resolves it (and refuses what it cannot)
             todo.append((path.parent / name).resolve())
+    return seen
 
 
 @functools.lru_cache(maxsize=16)
 def _expand(description: str, args: tuple[tuple[str, str], ...], digest: str) -> str:
     if description.lower().endswith(".urdf"):
         return _read_description(Path(description))
-    guard_xacro(Path(description))
     import xacro
 
     # xacro reports harmless notes on stderr; keep library output quiet

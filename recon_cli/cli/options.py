@@ -157,6 +157,15 @@ def _realism_metavar() -> str:
     return "<" + "|".join((*BUILT_IN, "FILE.yaml")) + ">"
 
 
+def cell_metavar() -> str:
+    return _cell_metavar()
+
+
+def cell_option(value: str | None) -> str | None:
+    """--cell where it is optional (overrides): the same check as CellOpt's."""
+    return _cell(value)
+
+
 def _cell(value: str | None) -> str | None:
     """--cell: a shipped cell's name or a cell FILE.yaml (read when the command runs)."""
 

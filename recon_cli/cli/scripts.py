@@ -15,6 +15,8 @@ from recon_cli.cli.options import (
     ForceOpt,
     RecordOpt,
     SeedOpt,
+    cell_metavar,
+    cell_option,
     check_record,
     object_metavar,
     object_option,
@@ -81,6 +83,10 @@ def run_script(
                                                       "(docs/hardware.md); default: the simulation.")] = None,
     realism: Annotated[str | None, realism_option(REALISM_HELP + " Overrides the script's <cell realism=...>.")]
     = None,
+    cell: Annotated[str | None, typer.Option("--cell", metavar=cell_metavar(), callback=cell_option,
+                                             help="Run the script on this cell (overrides the script's <cell "
+                                                  "kind=...>, with the cell's own safety distance): a shipped "
+                                                  "cell or a cell FILE.yaml (docs/cells.md).")] = None,
     record: RecordOpt = False,
     force: ForceOpt = False,
     config_file: ConfigOpt = None,
@@ -101,6 +107,7 @@ def run_script(
     backend = None if backend is None else Backend(backend)
     dry_run = base.pick("dry_run", dry_run, base.stored("dry_run", dry_run))
     object_name = base.pick("object_name", object_name, base.stored("object_override"))
+    cell = base.pick("cell", cell, base.stored("cell_override"))
     optimize = base.pick("optimize", optimize, base.stored("optimize"))
     sequence_method = SequenceMethod(base.pick("sequence_method", sequence_method,
                                                base.stored("sequence_method", sequence_method)))
@@ -109,7 +116,7 @@ def run_script(
     stored_realism = base.stored("realism_override")
     check_record(record)
     s = load_script(script)
-    check_script(s, object_override=object_name)  # before the output folder is made
+    check_script(s, object_override=object_name, cell_override=cell)  # before the output folder is made
     check_backend(s, backend, station, dry_run)
     if realism is not None:
         profile = realism_profile(realism)
@@ -122,9 +129,9 @@ def run_script(
                            inputs=(script, station, None if realism is None else Path(realism))).path
     config = base.config.with_values(base.picked(seed=("seed", seed)))
     run = {"dry_run": dry_run, "backend_override": backend, "object_override": object_name, "optimize": optimize,
-           "sequence_method": sequence_method, "realism_override": realism or stored_realism}
+           "sequence_method": sequence_method, "realism_override": realism or stored_realism, "cell_override": cell}
     options = RunOptions(folder, backend, config, dry_run, object_name, optimize, sequence_method, append, station,
-                         profile, record, run=run)
+                         profile, cell, record, run=run)
     with stop_signals(), progress_bar() as update:
         result = ScriptRunner(s, options, update).run()
     counts: dict[str, int] = {}

@@ -122,10 +122,10 @@ def _check_object(script: C.Script, cmd: C.SetObject) -> None:
                       hint="choose one of: " + ", ".join([*available_objects(), "auto", "<mesh file>"]))
 
 
-def check_script(script: C.Script, *, object_override: str | None = None) -> None:
+def check_script(script: C.Script, *, object_override: str | None = None, cell_override: str | None = None) -> None:
     """Raise a ScriptError (file:line: what; what to do) for the first problem found."""
     started: C.Command | None = None
-    kind = DEFAULT_CELL
+    kind = cell_override or DEFAULT_CELL
     scans = 0
     registered = reconstructed = False
     names: dict[str, C.Source] = {}
@@ -137,7 +137,7 @@ def check_script(script: C.Script, *, object_override: str | None = None) -> Non
             raise ScriptError(f"{cmd.source}: <{tag(cmd)}> after the first move or scan ({started.source})",
                               hint="choose the cell and the object at the top of the script")
         if isinstance(cmd, C.SetCell):
-            kind = cmd.kind
+            kind = cell_override or cmd.kind
             _check_realism(script, cmd)
         elif isinstance(cmd, C.SetObject) and object_override is None:
             _check_object(script, cmd)

@@ -76,6 +76,7 @@ class RunOptions:
     append: bool = False  # add scans to the scan store already in ``out``
     station: Path | None = None  # a station file: robot and camera adapters (and the cell)
     realism: RealismProfile | None = None  # overrides the script's <cell realism=...>
+    cell: str | None = None  # a shipped cell's name or a cell file: overrides the script's <cell kind=...>
     record: bool = False  # write a 3D recording of the run (recording.rrd in ``out``)
     page: bool = True  # write the run's report page (report.html) at its end
     run: dict = field(default_factory=dict)  # what config.yaml's run: section records to repeat the run

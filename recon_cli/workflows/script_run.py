@@ -77,7 +77,7 @@ class RunResult:
 
 class ScriptRunner:
     def __init__(self, script: C.Script, options: RunOptions, progress: Progress | None = None) -> None:
-        check_script(script, object_override=options.object_name)
+        check_script(script, object_override=options.object_name, cell_override=options.cell)
         self.script = script
         self.options = options
         self.progress = progress or (lambda *a: None)

@@ -148,3 +148,30 @@ def test_scan_name_and_append(tmp_path, capsys):
     assert len(ScanStore(out / "scans")) == 2
     assert json.loads((out / "run_report.json").read_text())["append"] is True
     assert json.loads((out / "run_report-1.json").read_text())["append"] is False  # the first run's report
+
+
+def test_the_cell_option_runs_a_script_on_another_cell(tmp_path):
+    """``recon run --cell`` puts the script on another cell (its own safety distance), and the
+    views given in the marker frame find the board there: the FR3 script on a copy of the
+    FR3's cell file, two views only."""
+    import shutil
+
+    from recon_cli.paths import CELLS_DIR, ROBOT_DIR
+
+    shutil.copytree(ROBOT_DIR, tmp_path / "robot", ignore=shutil.ignore_patterns("realism"))
+    (tmp_path / "cells").mkdir()
+    cell = tmp_path / "cells" / "lab.yaml"
+    cell.write_text((CELLS_DIR / "fr3.yaml").read_text().replace("name: fr3", "name: lab"))
+    script = tmp_path / "two.xml"
+    script.write_text(HEAD + '<recon name="two" on_failure="skip">\n  <cell kind="gantry" resolution="0.25"/>\n'
+                      '  <object name="bottle"/>\n  <box/>\n'
+                      '  <move focus="0.1925 0.1225 0.08" radius="0.22" theta="60" phi="180" frame="marker"/>\n'
+                      '  <scan/>\n'
+                      '  <move focus="0.1925 0.1225 0.08" radius="0.22" theta="35" phi="250" frame="marker"/>\n'
+                      '  <scan/>\n</recon>\n')
+    out = tmp_path / "run"
+    assert main(["run", str(script), "--cell", str(cell), "--out", str(out)]) == 0
+    session = json.loads((out / "scans" / "session.json").read_text())
+    assert session["cell"]["kind"] == str(cell.resolve()) and session["cell"]["safety_distance"] == 0.02
+    assert session["board"]["squares_x"] == 11 and session["sensor"] == "Intel RealSense D405"
+    assert len(ScanStore(out / "scans")) == 2

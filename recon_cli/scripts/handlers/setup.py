@@ -20,7 +20,10 @@ from recon_cli.session import Backend
 def set_cell(state: RunState, cmd: C.SetCell, report: CommandReport) -> None:
 
     realism = state.options.realism or load_profile(script_realism(state.script, cmd))
-    state.set_config(cell=CellConfig(kind=CellName.parse(cmd.kind), safety_distance=cmd.safety_distance),
+    # --cell runs the script on another cell, with that cell's own safety distance
+    cell = (CellConfig(kind=CellName.parse(state.options.cell)) if state.options.cell is not None
+            else CellConfig(kind=CellName.parse(cmd.kind), safety_distance=cmd.safety_distance))
+    state.set_config(cell=cell,
                      sensor=SensorConfig(noise=cmd.noise, resolution=cmd.resolution), realism=realism)
     state.backend = state.options.backend or Backend(cmd.backend)
 

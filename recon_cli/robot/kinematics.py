@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from recon_cli.lazy import lazy_module
-from recon_cli.robot.cell_file import DEFAULT_CELL, CellFile, load_cell
+from recon_cli.robot.cell_file import CellFile
 from recon_cli.robot.limits import JointLimits, limits_from_urdf
 
 if TYPE_CHECKING:
@@ -28,11 +28,11 @@ else:
 class Kinematics:
     """Forward kinematics and Jacobians of one cell. Not thread-safe (one pinocchio Data).
 
-    ``cell``: the cell file the URDF was expanded from (frames, limits); None: the default cell's.
+    ``cell``: the cell file the URDF was expanded from (frames, limits).
     """
 
-    def __init__(self, urdf: str, cell: CellFile | None = None) -> None:
-        self.cell: CellFile = cell if cell is not None else load_cell(DEFAULT_CELL)
+    def __init__(self, urdf: str, cell: CellFile) -> None:
+        self.cell: CellFile = cell
         self.model: pin.Model = pin.buildModelFromXML(urdf)
         self.data: pin.Data = self.model.createData()
         self.joint_names: tuple[str, ...] = tuple(self.model.names[1:])

@@ -229,7 +229,7 @@ def _model_kinematics(scans: Path, station_file, config: Config):
         if info.cell_kind is not None:
             cell = replace(cell, kind=CellName.parse(info.cell_kind),
                            table_lift=info.table_lift if info.table_lift is not None else cell.table_lift)
-    return Kinematics(expand_urdf(cell))
+    return Kinematics(expand_urdf(cell), cell.cell_file)
 
 
 def _truth_flange_T_camera(scans: Path, model: np.ndarray) -> np.ndarray | None:

@@ -33,6 +33,10 @@ class CropBox:
         return CropBox(new_T_frame @ self.frame_T_box, self.size, self.support_margin)
 
 
+#: the support plane's points lie within this many noise standard deviations of it
+PLANE_NOISE_SIGMAS = 4.0
+#: [m] the points within this distance of the support plane measure its noise
+PLANE_NOISE_WINDOW = 0.004
 PLANE_SLAB = 0.006  # [m] above the box's bottom face, where crop_cloud looks for the support plane
 #: the fixed seed of the support plane's RANSAC: a scan is cropped alike in every run
 PLANE_RANSAC_SEED = 0
@@ -67,7 +71,10 @@ def crop_cloud(cloud, box: CropBox, plane_slab: float = PLANE_SLAB, plane_tolera
     above the box's bottom face; so the support plane is also found in the data: RANSAC on
     the points within ``plane_slab`` of the bottom face, and the points within
     ``plane_tolerance`` of (or below) a plane found there that is nearly parallel to the
-    bottom face are removed."""
+    bottom face are removed. A sensor noisier than that tolerance (a stereo camera seeing the
+    table obliquely) scatters table points farther: the tolerance grows to
+    :data:`PLANE_NOISE_SIGMAS` times the noise measured on the plane itself (its points'
+    robust standard deviation about it)."""
     pts = np.asarray(cloud.points)
     local = transform_points(invert(box.frame_T_box), pts)
     half = np.asarray(box.size) / 2.0
@@ -87,5 +94,8 @@ def crop_cloud(cloud, box: CropBox, plane_slab: float = PLANE_SLAB, plane_tolera
         if len(inliers) >= 100 and abs(n[2]) > np.cos(np.radians(5.0)):
             a, b, c, d = (v / np.linalg.norm(n) * np.sign(n[2]) for v in plane)
             height = local @ np.array([a, b, c]) + d  # above the plane (+z side of the box)
-            keep = inside & (height > plane_tolerance) & (local[:, 2] <= half[2])
+            on_plane = height[slab][np.abs(height[slab]) < PLANE_NOISE_WINDOW]
+            sigma = 1.4826 * float(np.median(np.abs(on_plane))) if len(on_plane) >= 100 else 0.0
+            tolerance = max(plane_tolerance, PLANE_NOISE_SIGMAS * sigma)
+            keep = inside & (height > tolerance) & (local[:, 2] <= half[2])
     return cloud.select_by_index(np.nonzero(keep)[0])

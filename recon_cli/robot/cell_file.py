@@ -127,6 +127,8 @@ class CellFile:
     ik_seeds: tuple[str, ...] = ()
     #: configurations of the IK's seed library (0: none)
     ik_library: int = 0
+    #: every file the cell file names (description, sensor, board, drives, limits, collision)
+    sources: tuple[Path, ...] = ()
     lines: tuple[tuple[str, str], ...] = field(default=(), compare=False, repr=False)
 
     def where(self, key: str) -> str:
@@ -180,6 +182,7 @@ class _Lines:
     def __init__(self, path: Path) -> None:
         self.path = path
         self.rows: dict[str, str] = {}
+        self.read: list[Path] = []  # the section files read beside the document
 
     def at(self, container: Any, key: Any, name: str) -> str:
         line = line_of(container, key)
@@ -270,7 +273,9 @@ def _parse(path: Path) -> CellFile:
         object_position=tuple(_numbers(doc["objects"]["position"])),  # type: ignore[arg-type]
         drives_file=drives, limits=limits, safety_distance=float(doc["safety_distance"]), poses=tuple(poses),
         allowed_links=allowed, allowed_shapes=shapes, ik_seeds=seeds,
-        ik_library=int((doc.get("ik") or {}).get("library", 0)), lines=tuple(lines.rows.items()))
+        ik_library=int((doc.get("ik") or {}).get("library", 0)),
+        sources=tuple(dict.fromkeys(p for p in (description, sensor, board, drives, *lines.read) if p is not None)),
+        lines=tuple(lines.rows.items()))
 
 
 def _argument(value: Any) -> str:
@@ -288,6 +293,7 @@ def _inline_or_file(doc: Any, lines: _Lines, key: str) -> tuple[Any, _Lines]:
     if not isinstance(section, str):
         return section, lines
     source = _file(lines, doc, key, key, f"{key} file")
+    lines.read.append(source)
     section = read_yaml(source, f"{key} file")
     check(section, "cell", source, part=key)
     return section, _Lines(source)

@@ -18,9 +18,15 @@ from recon_cli.config import SensorConfig
 from recon_cli.errors import InputError, ScriptError
 from recon_cli.geometry.view import Frame, View
 from recon_cli.planning.options import PLANNERS
-from recon_cli.robot.cell_file import load_cell
+from recon_cli.robot.cell_file import load_cell, shipped_cells
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.sandbox import LIMITS
+
+
+def _cell_safety(kind: str) -> float | None:
+    """The default safety distance of a shipped cell (a cell file's is read when the script
+    runs, by the script's reading rules)."""
+    return load_cell(kind).safety_distance if kind in shipped_cells() else None
 
 
 def as_bool(text: str | None, default: bool = False) -> bool:
@@ -115,7 +121,7 @@ def build_recon(el, src: C.Source) -> list[C.Command]:
             raise ScriptError(f"{src}: <cell resolution> {exc.message}", hint=exc.hint) from None
         return [C.SetCell(src, a.get("kind", D.cell.kind.value),
                           float(a["safety_distance"]) if "safety_distance" in a
-                          else load_cell(a.get("kind", D.cell.kind.value)).safety_distance, a.get("backend", "sim"),
+                          else _cell_safety(a.get("kind", D.cell.kind.value)), a.get("backend", "sim"),
                           resolution, as_bool(a.get("noise"), D.sensor.noise), a.get("realism", D.realism.name))]
     if tag == "object":
         return [C.SetObject(src, a["name"], float(a.get("scale", D.scene.object_scale)))]

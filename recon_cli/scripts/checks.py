@@ -25,12 +25,13 @@ import numpy as np
 from recon_cli.backends.base import Backend
 from recon_cli.errors import HardwareUnavailable, JointLimitError, ReconError, ScriptError
 from recon_cli.objects import BUILTIN, available_objects, ycb_names
+from recon_cli.paths import CELLS_DIR, ROBOT_DIR
 from recon_cli.realism import BUILT_IN, load_profile
-from recon_cli.robot.cell_file import DEFAULT_CELL
-from recon_cli.robot.description import CellConfig, CellName, expand_urdf
+from recon_cli.robot.cell_file import DEFAULT_CELL, load_cell
+from recon_cli.robot.description import CellConfig, CellName, expand_urdf, guard_xacro
 from recon_cli.robot.limits import limits_from_urdf
 from recon_cli.scripts import commands as C
-from recon_cli.scripts.readable import readable
+from recon_cli.scripts.readable import readable, readable_roots
 
 if TYPE_CHECKING:
     from recon_cli.robot.limits import JointLimits
@@ -63,6 +64,33 @@ def script_realism(script: C.Script, cmd: C.SetCell) -> str | Path:
                           hint=f"choose one of: {', '.join(BUILT_IN)}, or a profile FILE.yaml beside the script",
                           source=str(cmd.source))
     return readable_file(script, cmd.realism, cmd.source, "realism profile")
+
+
+def script_cell(script: C.Script, cmd: C.SetCell) -> str:
+    """The cell of a ``<cell kind=...>``: a shipped cell's name, or the real path of a cell file
+    the script may read (:func:`readable_file`) whose every file, xacro includes and loads
+    too, lies inside the script's folder, scripts_xml/ or recon's shipped cells and robot
+    descriptions: a script reads nothing else."""
+    if not is_file_name(cmd.kind):
+        return cmd.kind
+    path = readable_file(script, cmd.kind, cmd.source, "cell file")
+    roots = (*readable_roots(Path(script.path).resolve().parent), CELLS_DIR.resolve(), ROBOT_DIR.resolve())
+    try:
+        cell = load_cell(str(path))
+        files = list(cell.sources)
+        if cell.description.suffix.lower() != ".urdf":
+            files += list(guard_xacro(cell.description))
+    except ScriptError:
+        raise
+    except ReconError as exc:
+        raise ScriptError(f"{cmd.source}: {exc.message}", hint=exc.hint, source=str(cmd.source)) from None
+    for name in files:
+        if not any(Path(name).resolve().is_relative_to(r) for r in roots):
+            raise ScriptError(f"{cmd.source}: the cell file {cmd.kind} names {name}, outside the script's folder, "
+                              "scripts_xml/ and recon's shipped cells", source=str(cmd.source),
+                              hint="keep the cell file and the files it names beside the script, or run the "
+                                   "script with recon run --cell FILE")
+    return str(path)
 
 
 def _check_realism(script: C.Script, cmd: C.SetCell) -> None:
@@ -137,7 +165,7 @@ def check_script(script: C.Script, *, object_override: str | None = None, cell_o
             raise ScriptError(f"{cmd.source}: <{tag(cmd)}> after the first move or scan ({started.source})",
                               hint="choose the cell and the object at the top of the script")
         if isinstance(cmd, C.SetCell):
-            kind = cell_override or cmd.kind
+            kind = cell_override or script_cell(script, cmd)
             _check_realism(script, cmd)
         elif isinstance(cmd, C.SetObject) and object_override is None:
             _check_object(script, cmd)

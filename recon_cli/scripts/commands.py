@@ -44,14 +44,15 @@ class SetCell(Command):
     """Defaults of the attributes: recon_cli.config.DEFAULTS (the builder fills them in)."""
 
     kind: str
-    safety_distance: float
+    safety_distance: float | None  # None: the cell file's
     backend: str
     resolution: float
     noise: bool
     realism: str  # realism profile of the simulation: a built-in name or a YAML file
 
     def describe(self) -> str:
-        return (f"cell {self.kind}, safety distance {self.safety_distance:g} m, backend {self.backend}, "
+        safety = "the cell file's" if self.safety_distance is None else f"{self.safety_distance:g} m"
+        return (f"cell {self.kind}, safety distance {safety}, backend {self.backend}, "
                 f"image scale {self.resolution:g}, noise {'on' if self.noise else 'off'}, realism {self.realism}")
 
 

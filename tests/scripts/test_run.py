@@ -175,3 +175,49 @@ def test_the_cell_option_runs_a_script_on_another_cell(tmp_path):
     assert session["cell"]["kind"] == str(cell.resolve()) and session["cell"]["safety_distance"] == 0.02
     assert session["board"]["squares_x"] == 11 and session["sensor"] == "Intel RealSense D405"
     assert len(ScanStore(out / "scans")) == 2
+
+
+def _lab_cell(folder: Path, name: str = "lab.yaml") -> Path:
+    """The FR3 cell file copied into ``folder`` with its robot files beside it."""
+    import shutil
+
+    from recon_cli.paths import CELLS_DIR, ROBOT_DIR
+
+    shutil.copytree(ROBOT_DIR, folder / "robot", ignore=shutil.ignore_patterns("realism"))
+    (folder / "cells").mkdir()
+    cell = folder / "cells" / name
+    cell.write_text((CELLS_DIR / "fr3.yaml").read_text().replace("name: fr3", "name: lab"))
+    return cell
+
+
+def test_a_script_names_a_cell_file_beside_it(tmp_path):
+    """<cell kind="cells/lab.yaml">: the cell file and everything it names lie in the script's
+    folder; the run happens on that cell with its own safety distance."""
+    _lab_cell(tmp_path)
+    script = tmp_path / "lab.xml"
+    script.write_text(HEAD + '<recon name="lab" on_failure="skip">\n  <cell kind="cells/lab.yaml" resolution="0.25"/>\n'
+                      '  <object name="bottle"/>\n  <box/>\n'
+                      '  <move focus="0.1925 0.1225 0.08" radius="0.22" theta="60" phi="180" frame="marker"/>\n'
+                      '  <scan/>\n</recon>\n')
+    out = tmp_path / "run"
+    assert main(["run", str(script), "--out", str(out)]) == 0
+    session = json.loads((out / "scans" / "session.json").read_text())
+    assert session["cell"]["kind"] == str((tmp_path / "cells" / "lab.yaml").resolve())
+    assert session["cell"]["safety_distance"] == 0.02 and len(ScanStore(out / "scans")) == 1
+
+
+def test_a_script_cell_file_that_names_files_elsewhere_is_refused(tmp_path, capsys):
+    """A script reads only its own folder (and scripts_xml/): a cell file beside it whose
+    description lies elsewhere is one line naming the script's line, before anything runs."""
+    cell = _lab_cell(tmp_path / "elsewhere")
+    here = tmp_path / "here"
+    (here / "cells").mkdir(parents=True)
+    text = cell.read_text().replace("../robot/", str(tmp_path / "elsewhere" / "robot") + "/")
+    (here / "cells" / "lab.yaml").write_text(text)
+    script = here / "lab.xml"
+    script.write_text(HEAD + '<recon name="lab">\n  <cell kind="cells/lab.yaml"/>\n  <object name="bottle"/>\n'
+                      '</recon>\n')
+    assert main(["run", str(script), "--out", str(tmp_path / "run")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "lab.xml:3: the cell file cells/lab.yaml names" in err
+    assert "outside the script's folder" in err and not (tmp_path / "run").exists()

@@ -10,7 +10,7 @@ from recon_cli.planning.planner import MotionPlanner
 from recon_cli.realism import load_profile
 from recon_cli.robot.description import CellConfig, CellName
 from recon_cli.scripts import commands as C
-from recon_cli.scripts.checks import is_file_name, readable_file, script_realism
+from recon_cli.scripts.checks import is_file_name, readable_file, script_cell, script_realism
 from recon_cli.scripts.handlers import handles
 from recon_cli.scripts.state import CommandReport, RunState
 from recon_cli.session import Backend
@@ -21,8 +21,12 @@ def set_cell(state: RunState, cmd: C.SetCell, report: CommandReport) -> None:
 
     realism = state.options.realism or load_profile(script_realism(state.script, cmd))
     # --cell runs the script on another cell, with that cell's own safety distance
-    cell = (CellConfig(kind=CellName.parse(state.options.cell)) if state.options.cell is not None
-            else CellConfig(kind=CellName.parse(cmd.kind), safety_distance=cmd.safety_distance))
+    if state.options.cell is not None:
+        cell = CellConfig(kind=CellName.parse(state.options.cell))
+    elif cmd.safety_distance is None:
+        cell = CellConfig(kind=CellName.parse(script_cell(state.script, cmd)))
+    else:
+        cell = CellConfig(kind=CellName.parse(script_cell(state.script, cmd)), safety_distance=cmd.safety_distance)
     state.set_config(cell=cell,
                      sensor=SensorConfig(noise=cmd.noise, resolution=cmd.resolution), realism=realism)
     state.backend = state.options.backend or Backend(cmd.backend)

@@ -53,6 +53,16 @@ Refuse = Callable[[Refusal], Exception]
 """The caller's wording: a refusal -> the exception to raise."""
 
 
+def version_stamp(path: Path) -> tuple[int, int]:
+    """(modification time [ns], size) of a file, for caches keyed by a file's version; (0, 0)
+    when it cannot be stat'ed (the reader then names the problem)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return (0, 0)
+    return (st.st_mtime_ns, st.st_size)
+
+
 def checked_size(path: Path, limit: int, refuse: Refuse, *, empty: bool = True) -> int:
     """The size of ``path``, a regular file of at most ``limit`` bytes (and not empty
     unless ``empty``), from its stat, or ``refuse``'s exception."""

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from recon_cli.errors import InputError
+from recon_cli.inputs.files import version_stamp
 from recon_cli.inputs.schema import check
 from recon_cli.inputs.yamlfile import line_of, read_yaml
 from recon_cli.lazy import lazy_module
@@ -80,12 +81,7 @@ def cell_board(cell: CellFile) -> BoardSpec:
 
 def board_file(path: Path) -> BoardSpec:
     """A board file, read and checked (one line naming ``file:line`` when it is wrong)."""
-    try:
-        st = path.stat()
-        stamp = (st.st_mtime_ns, st.st_size)
-    except OSError:
-        stamp = (0, 0)  # read_yaml names the problem
-    return _board_file(path.resolve(), stamp)
+    return _board_file(path.resolve(), version_stamp(path))
 
 
 @functools.lru_cache(maxsize=8)

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from recon_cli.errors import InputError
+from recon_cli.inputs.files import version_stamp
 from recon_cli.inputs.schema import check
 from recon_cli.inputs.yamlfile import line_of, read_yaml
 from recon_cli.paths import ROBOT_DIR
@@ -126,12 +127,7 @@ def cell_sensor(cell: CellFile) -> SensorModel:
 
 def sensor_file(path: Path) -> SensorModel:
     """A sensor file, read and checked (one line naming ``file:line`` when it is wrong)."""
-    try:
-        st = path.stat()
-        stamp = (st.st_mtime_ns, st.st_size)
-    except OSError:
-        stamp = (0, 0)  # read_yaml names the problem
-    return _sensor_file(path.resolve(), stamp)
+    return _sensor_file(path.resolve(), version_stamp(path))
 
 
 @functools.lru_cache(maxsize=8)

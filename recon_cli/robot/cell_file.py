@@ -28,6 +28,7 @@ from lxml import etree
 
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.geometry.transforms import pose_from_xyz_rpy
+from recon_cli.inputs.files import version_stamp
 from recon_cli.inputs.schema import check
 from recon_cli.inputs.yamlfile import line_of, read_yaml
 from recon_cli.paths import CELLS_DIR
@@ -168,12 +169,7 @@ def _load_cached(path: Path, stamp: tuple[int, int]) -> CellFile:
 
 
 def _load(path: Path) -> CellFile:
-    try:
-        st = path.stat()
-        stamp = (st.st_mtime_ns, st.st_size)
-    except OSError:
-        stamp = (0, 0)  # read_yaml names the problem
-    return _load_cached(path, stamp)
+    return _load_cached(path, version_stamp(path))
 
 
 class _Lines:

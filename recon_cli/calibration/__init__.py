@@ -8,6 +8,8 @@
     intrinsics.py      camera calibration from ChArUco corners, its figure
     camera_file.py     a calibrated camera and its YAML file (and a realism profile using it)
     station_update.py  the hand-eye result written into a station file
+    dataset.py         a data set made by anyone: images and robot poses (index, CSV, pose files), the mapping
+    setups.py          eye-in-hand and eye-to-hand as one chain, refined by the corners' reprojection error
 
 The workflows that record, calibrate and write are in recon_cli/workflows/calibrate.py.
 """

@@ -9,8 +9,10 @@ from typing import Annotated
 import numpy as np
 import typer
 
+from recon_cli.calibration.dataset import AngleUnit, LengthUnit, MatrixOrder, PoseFormat, QuaternionOrder
 from recon_cli.calibration.handeye import HandEyeMethod
 from recon_cli.calibration.intrinsics import DistortionModel
+from recon_cli.calibration.setups import Setup
 from recon_cli.calibration.views import BoardViewOptions
 from recon_cli.cli.app import app
 from recon_cli.cli.options import (
@@ -23,6 +25,7 @@ from recon_cli.cli.options import (
     SeedOpt,
     cell_config,
     output_folder,
+    parse_vector,
     realism_option,
     realism_profile,
 )
@@ -31,6 +34,7 @@ from recon_cli.console import console, progress_bar, styled
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.perception.charuco import BoardSpec
 from recon_cli.workflows.calibrate import HandEyeOptions, IntrinsicsOptions, check_pattern, run_handeye, run_intrinsics
+from recon_cli.workflows.handeye_dataset import DatasetHandEyeOptions, DatasetHandEyeResult, run_handeye_dataset
 
 calibrate_app = typer.Typer(help="Calibration from views of the ChArUco board: camera intrinsics and distortion, "
                                  "the hand-eye transform.", no_args_is_help=True, rich_markup_mode=None)
@@ -41,6 +45,13 @@ BoardOpt = Annotated[str | None, typer.Option(
                          "DICTIONARY, e.g. 5,7,0.04,0.02,DICT_6X6_250 (lengths in metres): 2 ... 100 squares per "
                          "side, no more markers (squares_x * squares_y // 2) than the dictionary holds, lengths in "
                          "(0, 1] m, the marker smaller than the square.")]
+
+
+def _metavar(enum) -> str:
+    """<a|b|c>: the choices of an option that may be left out (None: the mapping's)."""
+    return "<" + "|".join(m.value for m in enum) + ">"
+
+
 #: squares per side of a --board-spec, and the range of its square and marker lengths [m]
 BOARD_SQUARES = (2, 100)
 BOARD_LENGTH = 1.0
@@ -100,12 +111,56 @@ def handeye(
                                                        "(calibrateHandEye) or shah, li (calibrateRobotWorldHandEye); "
                                                        "all are computed and compared, this one is written.")]
     = HandEyeMethod.TSAI,
-    refine: Annotated[bool, typer.Option("--refine/--no-refine", help="Refine the solution together with the "
-                                                                      "robot base's error (docs/calibration.md).")]
+    refine: Annotated[bool, typer.Option("--refine/--no-refine", help="Refine the solution: together with the "
+                                                                      "robot base's error (recorded views, "
+                                                                      "--scan-store), by the board corners' "
+                                                                      "reprojection error (--dataset); "
+                                                                      "docs/calibration.md.")]
     = True,
     intrinsics: Annotated[Path | None, typer.Option("--camera-file", help="Calibrated camera (intrinsics.yaml of "
                                                                            "recon calibrate intrinsics); default: "
                                                                            "the scans' own intrinsics.")] = None,
+    dataset: Annotated[Path | None, typer.Option("--dataset", help="Calibrate from a data set made by anyone: a "
+                                                                   "folder of board images and the robot pose of "
+                                                                   "each (pose files by stem, one CSV file, or an "
+                                                                   "index file like cal_data.yaml), or that index "
+                                                                   "or CSV file (docs/calibration.md).")] = None,
+    mapping: Annotated[Path | None, typer.Option("--mapping", help="With --dataset: a mapping FILE.yaml saying "
+                                                                   "where the images and poses are, which key "
+                                                                   "holds what and the units; the options below "
+                                                                   "override it.")] = None,
+    setup: Annotated[Setup | None, typer.Option("--setup", metavar=_metavar(Setup),
+                                                help="With --dataset: eye-in-hand (the camera on the flange: "
+                                                     "flange_T_camera, base_T_board) or eye-to-hand (the camera "
+                                                     "fixed, the board on the flange: base_T_camera, "
+                                                     "flange_T_board); default: the mapping's, the index file's "
+                                                     "static_camera, else eye-in-hand.")] = None,
+    pinhole: Annotated[str | None, typer.Option("--intrinsics", help="With --dataset: pinhole intrinsics "
+                                                                     "fx,fy,cx,cy [px] of the images, without "
+                                                                     "distortion (else --camera-file, the "
+                                                                     "mapping's or the index file's).")] = None,
+    pose_format: Annotated[PoseFormat | None, typer.Option("--pose-format", metavar=_metavar(PoseFormat),
+                                                           help="With --dataset: what a pose is: xyz + quaternion, "
+                                                                "xyz + roll-pitch-yaw, a 4x4 matrix or joint "
+                                                                "positions (forward kinematics of --cell); default: "
+                                                                "the mapping's, else told by the keys.")] = None,
+    length_unit: Annotated[LengthUnit | None, typer.Option("--length-unit", metavar=_metavar(LengthUnit),
+                                                           help="With --dataset: the poses' lengths (default m).")]
+    = None,
+    angle_unit: Annotated[AngleUnit | None, typer.Option("--angle-unit", metavar=_metavar(AngleUnit),
+                                                         help="With --dataset: the poses' angles (default rad).")]
+    = None,
+    quaternion_order: Annotated[QuaternionOrder | None, typer.Option(
+        "--quaternion-order", metavar=_metavar(QuaternionOrder),
+        help="With --dataset: the order of a quaternion's numbers (default xyzw).")] = None,
+    matrix_order: Annotated[MatrixOrder | None, typer.Option(
+        "--matrix-order", metavar=_metavar(MatrixOrder),
+        help="With --dataset: a 4x4 matrix's 16 numbers row by row or column by column (libfranka's O_T_EE; "
+             "default row).")] = None,
+    drop_outliers: Annotated[bool, typer.Option("--drop-outliers", help="With --dataset: calibrate again without "
+                                                                        "the views flagged as outliers (chain "
+                                                                        "residual over 3 times the median, or over "
+                                                                        "50 mm or 5 deg).")] = False,
     station: Annotated[Path | None, typer.Option(help="Station file: record with its adapters and cell, and write "
                                                       "the result into its hand_eye (old file kept as .bak).")]
     = None,
@@ -123,12 +178,33 @@ def handeye(
     realism: RealismOpt = D.realism.name,
     force: ForceOpt = False,
 ) -> None:
-    """Hand-eye calibration: flange_T_camera (and the board in the world) from board views."""
+    """Hand-eye calibration: flange_T_camera (and the board in the world) from board views, or either set-up from
+    a data set of board images and robot poses (--dataset)."""
 
 
     config = D.replace(cell=cell_config(cell, safety),
                        sensor=SensorConfig(noise, resolution), seed=seed, realism=realism_profile(realism))
     spec = parse_board(board)
+    if dataset is not None:
+        if scans is not None or station is not None:
+            raise InputError("--dataset is calibrated on its own, without --scan-store or --station",
+                             hint="give one source of board views")
+        numbers = parse_vector(pinhole, 4, "--intrinsics", "pixels") if pinhole is not None else None
+        folder = output_folder(out, "calibrate handeye", default="handeye", force=force,
+                               inputs=(dataset, mapping, intrinsics)).path
+        opts = DatasetHandEyeOptions(dataset, folder, mapping, setup, method, refine, intrinsics, numbers, spec,
+                                     config.cell, pose_format, length_unit, angle_unit, quaternion_order,
+                                     matrix_order, drop_outliers)
+        with progress_bar() as update:
+            _print_dataset(run_handeye_dataset(opts, update))
+        return
+    dataset_only = {"--mapping": mapping, "--setup": setup, "--intrinsics": pinhole, "--pose-format": pose_format,
+                    "--length-unit": length_unit, "--angle-unit": angle_unit, "--quaternion-order": quaternion_order,
+                    "--matrix-order": matrix_order, "--drop-outliers": drop_outliers or None}
+    given = [name for name, value in dataset_only.items() if value is not None]
+    if given:
+        raise InputError(f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} read with --dataset only",
+                         hint="pass --dataset DIR, or leave them out")
     folder = output_folder(out, "calibrate handeye", default="handeye", force=force,
                            inputs=(scans, intrinsics, station, Path(realism))).path
     options = HandEyeOptions(folder, config, scans, BoardViewOptions(n=views), method, refine,
@@ -173,6 +249,49 @@ def handeye(
                                                       "warnings); record more views or pass --force-write"))
     console.print(f"report: {r.folder / 'handeye.json'}\nhand_eye block: {r.folder / 'hand_eye.yaml'}\n"
                   f"figure: {r.folder / 'handeye_residuals.png'}")
+
+
+def _print_dataset(r: DatasetHandEyeResult) -> None:
+    """The terminal summary of a calibration from a data set."""
+    console.print(f"data set: {r.layout}; set-up {r.setup.value} ({r.sources['setup']}); board "
+                  f"{','.join(map(str, r.board.as_tuple()))} ({r.sources['board']}); camera: {r.sources['camera']}")
+    console.print("poses read as " + ", ".join(f"{k}: {v}" for k, v in r.mapping.to_dict().items()))
+    for s in r.skipped:
+        console.print(styled(f"{s.name} not used:", "yellow", f" {s.reason}"))
+    for name, why in r.outliers.items():
+        what = "left out" if name in r.dropped else "kept (--drop-outliers leaves it out)"
+        console.print(styled(f"{name} outlier:", "yellow", f" {why}; {what}"))
+    fixed = r.setup.fixed
+    console.print(f"view                      corners  PnP [px]  reproj [px]  {fixed} in base [mm]  [deg]  "
+                  "vs own PnP [mm]  [deg]")
+    for v in r.views:
+        mark = "" if v.used else "  (left out)"
+        console.print(f"{v.name[:25]:25s} {v.corners:7d} {v.pnp_rms:9.2f} {v.reprojection_rms:12.2f} "
+                      f"{v.chain.translation * 1e3:18.2f} {np.degrees(v.chain.rotation):6.3f} "
+                      f"{v.pnp_difference[0] * 1e3:16.2f} {np.degrees(v.pnp_difference[1]):6.3f}{mark}")
+    t, a = r.chain_rms
+    tm, am = r.chain_max
+    pt, pa = r.pnp_mean
+    converged = "" if r.refinement is None else ", converged" if r.converged else ", NOT converged"
+    console.print(f"{len(r.used)} views{converged}; reprojection RMS {r.reprojection_rms:.3f} px "
+                  f"(industrial_calibration's cost per residual {r.cost_per_residual:.3f} px)")
+    console.print(f"consistency ({fixed} in the base frame over the views): RMS {t * 1e3:.2f} mm (max "
+                  f"{tm * 1e3:.2f}), {np.degrees(a):.3f}° (max {np.degrees(am):.3f}); against each image's own board "
+                  f"pose: mean {pt * 1e3:.2f} mm, {np.degrees(pa):.3f}°")
+    console.print(f"method      {fixed} RMS [mm]  [deg]  reproj [px]  vs written [mm]  [deg]")
+    for m, row in r.methods.items():
+        console.print(f"{m.value:11s} {row.chain_rms[0] * 1e3:14.2f} {np.degrees(row.chain_rms[1]):6.3f} "
+                      f"{row.reprojection_rms:12.2f} {row.vs_written[0] * 1e3:16.2f} "
+                      f"{np.degrees(row.vs_written[1]):6.3f}")
+    label = r.solution.method.value + (" refined" if r.solution.refined else "")
+    for name, T in r.solution.named().items():
+        console.print(f"{name} ({label}):")
+        for row in T[:3]:
+            console.print("  [" + ", ".join(f"{v: .6f}" for v in row) + "]")
+    for _, message in r.diversity.issues:
+        console.print(styled("warning:", "yellow", f" {message}"))
+    names = ["handeye.json"] + (["hand_eye.yaml"] if r.setup is Setup.EYE_IN_HAND else []) + ["handeye_residuals.png"]
+    console.print("written: " + ", ".join(str(r.folder / n) for n in names))
 
 
 @calibrate_app.command("intrinsics")

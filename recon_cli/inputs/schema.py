@@ -25,7 +25,7 @@ from recon_cli.inputs.yamlfile import line_of
 from recon_cli.paths import SCHEMA_DIR
 
 #: the YAML file kinds with a schema (schemas/KIND.schema.json)
-KINDS = ("station", "realism", "camera", "batch", "config", "cell", "sensor", "board", "drives")
+KINDS = ("station", "realism", "camera", "batch", "config", "cell", "sensor", "board", "drives", "handeye_dataset")
 
 
 @cache

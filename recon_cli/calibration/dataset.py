@@ -1,0 +1,835 @@
+"""A hand-eye data set made by anyone: board images and the robot pose of each image, in the
+forms people log them (docs/calibration.md, "Calibrating from your own data").
+
+Where the poses are (:func:`read_dataset`; the first that applies):
+
+    an index file        a YAML/JSON list of {image, pose} pairs (``data:``), the pose a file
+                         or inline values, e.g. ros-industrial's cal_data.yaml (its
+                         ``intrinsics``, ``target_finder`` and ``static_camera`` are read too)
+    one CSV file         a row per image, a column naming the image
+    one file per image   poses/3.yaml (or .yml, .json) for images/3.png, matched by stem
+
+What a pose is (:class:`PoseMapping`, from a mapping file, CLI options or the keys of the
+first pose): joint positions (forward kinematics of a cell to its flange), a 4x4 matrix
+(row- or column-major: libfranka's O_T_EE is column-major), xyz + quaternion (xyzw or wxyz)
+or xyz + roll-pitch-yaw (URDF's: R = Rz(yaw) Ry(pitch) Rx(roll)); lengths in m or mm,
+angles in rad or deg. Every pose becomes ``base_T_flange`` (4, 4) [m].
+
+A view that cannot be used (no pose file, no board in the image, a quaternion that is not
+normalised, a translation that looks like millimetres when the mapping says metres, ...) is
+skipped with one line naming its file and what to do; the others still calibrate.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import re
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields, replace
+from enum import StrEnum
+from pathlib import Path, PurePath
+from typing import Any
+
+import numpy as np
+
+from recon_cli.calibration.camera_file import CameraCalibration
+from recon_cli.calibration.intrinsics import SkippedImage
+from recon_cli.calibration.setups import CornerView, Setup
+from recon_cli.errors import FileError, InputError, ReconError
+from recon_cli.geometry.transforms import invert, rpy_to_matrix
+from recon_cli.inputs import files
+from recon_cli.inputs.images import read_color
+from recon_cli.inputs.jsonfile import load_json
+from recon_cli.inputs.schema import check
+from recon_cli.inputs.yamlfile import line_of, read_yaml
+from recon_cli.perception.camera_model import Intrinsics
+from recon_cli.perception.charuco import BoardSpec, board_file, detect, estimate_pose
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+POSE_SUFFIXES = (".yaml", ".yml", ".json")
+#: columns that name the image in a CSV file, when the mapping names none
+IMAGE_COLUMNS = ("image", "image_file", "filename", "file", "img", "name")
+#: bytes of one pose file, of the index and of a CSV file
+MAX_POSE_BYTES = 1_000_000
+MAX_CSV_BYTES = 16 * 2**20
+#: views in one data set
+MAX_VIEWS = 10_000
+#: [m] a robot pose further from the base than this is not in metres
+MAX_TRANSLATION = 10.0
+#: a quaternion whose norm is off 1 by more than this is refused; less is normalised
+QUATERNION_TOLERANCE = 1e-3
+#: largest |R^T R - I| of a matrix's rotation part that is orthonormalised, not refused
+ROTATION_TOLERANCE = 1e-3
+#: [rad] an angle beyond this, in a mapping that says radians, is in degrees
+MAX_RADIANS = 2 * math.pi + 1e-6
+MIN_CORNERS = 8
+MAPPING_HINT = "see docs/calibration.md, Calibrating from your own data"
+
+
+class PoseFormat(StrEnum):
+    """What a robot pose of the data set is."""
+
+    XYZ_QUAT = "xyz-quat"  #: position and a unit quaternion
+    XYZ_RPY = "xyz-rpy"  #: position and roll, pitch, yaw (URDF's fixed axes x, y, z)
+    MATRIX = "matrix"  #: a 4x4 homogeneous matrix (16 numbers)
+    JOINTS = "joints"  #: joint positions: the flange by forward kinematics of the cell
+
+
+class LengthUnit(StrEnum):
+    M = "m"
+    MM = "mm"
+
+    @property
+    def metres(self) -> float:
+        return 1.0 if self is LengthUnit.M else 1e-3
+
+
+class AngleUnit(StrEnum):
+    RAD = "rad"
+    DEG = "deg"
+
+    @property
+    def radians(self) -> float:
+        return 1.0 if self is AngleUnit.RAD else math.pi / 180.0
+
+
+class QuaternionOrder(StrEnum):
+    XYZW = "xyzw"  #: ROS, Eigen's coeffs(), scipy
+    WXYZ = "wxyz"  #: Eigen's constructor, MuJoCo, many robot controllers
+
+
+class MatrixOrder(StrEnum):
+    ROW = "row"  #: 16 numbers row by row (numpy, most logs)
+    COLUMN = "column"  #: column by column (libfranka's O_T_EE, OpenGL, Eigen's data())
+
+
+#: (field, its enum) of the mapping's choices, for parsing from text
+_CHOICES: dict[str, type[StrEnum]] = {"pose_format": PoseFormat, "length_unit": LengthUnit, "angle_unit": AngleUnit,
+                                      "quaternion_order": QuaternionOrder, "matrix_order": MatrixOrder}
+
+
+@dataclass(frozen=True)
+class PoseMapping:
+    """Which key of a pose holds what, and its units. A key is a name (``x``), a dotted path
+    into nested values (``position.x``) or a CSV column; one key may hold all the numbers as
+    a list (``t: [x, y, z]``). pose_format None: told by the keys of the first pose."""
+
+    pose_format: PoseFormat | None = None
+    position: tuple[str, ...] = ("x", "y", "z")
+    quaternion: tuple[str, ...] | None = None  # None: qx, qy, qz, qw in quaternion_order's sequence
+    quaternion_order: QuaternionOrder = QuaternionOrder.XYZW
+    rpy: tuple[str, ...] = ("roll", "pitch", "yaw")
+    matrix: tuple[str, ...] = ("matrix",)
+    matrix_order: MatrixOrder = MatrixOrder.ROW
+    joints: tuple[str, ...] = ("joints",)
+    length_unit: LengthUnit = LengthUnit.M
+    angle_unit: AngleUnit = AngleUnit.RAD
+
+    @property
+    def quaternion_keys(self) -> tuple[str, ...]:
+        if self.quaternion is not None:
+            return self.quaternion
+        return tuple(f"q{c}" for c in self.quaternion_order.value)
+
+    def keys(self) -> dict[str, tuple[str, ...]]:
+        """The keys this mapping reads, by what they hold."""
+        f = self.pose_format
+        if f is PoseFormat.XYZ_QUAT:
+            return {"position": self.position, "quaternion": self.quaternion_keys}
+        if f is PoseFormat.XYZ_RPY:
+            return {"position": self.position, "rpy": self.rpy}
+        if f is PoseFormat.MATRIX:
+            return {"matrix": self.matrix}
+        if f is PoseFormat.JOINTS:
+            return {"joints": self.joints}
+        return {}
+
+    def overridden(self, **values: Any) -> PoseMapping:
+        """This mapping with the values that are not None (CLI options over the mapping file)."""
+        return replace(self, **{k: v for k, v in values.items() if v is not None})
+
+    def to_dict(self) -> dict:
+        out: dict[str, Any] = {"pose_format": None if self.pose_format is None else self.pose_format.value}
+        out.update({k: list(v) for k, v in self.keys().items()})
+        if self.pose_format is PoseFormat.XYZ_QUAT:
+            out["quaternion_order"] = self.quaternion_order.value
+        if self.pose_format is PoseFormat.MATRIX:
+            out["matrix_order"] = self.matrix_order.value
+        out["length_unit"], out["angle_unit"] = self.length_unit.value, self.angle_unit.value
+        return out
+
+
+def parse_choice(kind: str, value: str) -> StrEnum:
+    """A mapping choice (``pose_format``, ``length_unit``, ...) from text."""
+    enum = _CHOICES[kind]
+    try:
+        return enum(str(value).strip().lower())
+    except ValueError:
+        raise InputError(f"{kind} {value!r} is not one of {', '.join(m.value for m in enum)}",
+                         hint=MAPPING_HINT) from None
+
+
+@dataclass(frozen=True)
+class CameraNumbers:
+    """Intrinsics [px] and distortion (k1, k2, p1, p2, k3) given without an image size: those
+    of the images as they are."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    distortion: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def at_size(self, width: int, height: int) -> CameraCalibration:
+        return CameraCalibration(Intrinsics(width, height, self.fx, self.fy, self.cx, self.cy), self.distortion)
+
+
+CameraSource = CameraCalibration | CameraNumbers
+
+
+@dataclass(frozen=True)
+class DatasetSpec:
+    """What a mapping file says (every field optional; docs/calibration.md).
+
+    images, poses, index: paths inside the data set folder (a folder of images; a folder of
+        pose files or a CSV file; an index file)
+    image_column: the CSV column that names the image
+    """
+
+    mapping: PoseMapping = field(default_factory=PoseMapping)
+    setup: Setup | None = None
+    images: str | None = None
+    poses: str | None = None
+    index: str | None = None
+    image_column: str | None = None
+    board: BoardSpec | None = None
+    camera: CameraNumbers | None = None
+    source: Path | None = None  # the mapping file
+
+
+def _keys(value: Any) -> tuple[str, ...]:
+    return (str(value),) if isinstance(value, str) else tuple(str(v) for v in value)
+
+
+def read_mapping(path: Path) -> DatasetSpec:
+    """Read and check a mapping file (schemas/handeye_dataset.schema.json)."""
+    path = Path(path)
+    doc = read_yaml(path, "mapping file", hint=MAPPING_HINT)
+    if doc is None:
+        return DatasetSpec(source=path)
+    check(doc, "handeye_dataset", path)
+    values: dict[str, Any] = {}
+    for f in fields(PoseMapping):
+        if f.name not in doc:
+            continue
+        v = doc[f.name]
+        values[f.name] = _CHOICES[f.name](v) if f.name in _CHOICES else _keys(v)
+    board = None
+    if "board" in doc:
+        b = doc["board"]
+        if isinstance(b, str):
+            board = board_file(_beside(path, b))
+        else:
+            check(b, "board", path)
+            if float(b["marker_length"]) >= float(b["square_length"]):
+                raise InputError(f"{path}:{line_of(doc, 'board') or 1}: board.marker_length is not smaller than "
+                                 "board.square_length", hint="a ChArUco marker sits inside its square")
+            board = BoardSpec(int(b["squares_x"]), int(b["squares_y"]), float(b["square_length"]),
+                              float(b["marker_length"]), str(b["dictionary"]))
+    camera = None
+    if "camera" in doc:
+        c = doc["camera"]
+        dist = [float(x) for x in c.get("distortion", [])]
+        camera = CameraNumbers(float(c["fx"]), float(c["fy"]), float(c["cx"]), float(c["cy"]),
+                               tuple(dist + [0.0] * (5 - len(dist))))
+    return DatasetSpec(PoseMapping(**values), Setup(doc["setup"]) if "setup" in doc else None,
+                       doc.get("images"), doc.get("poses"), doc.get("index"), doc.get("image_column"), board, camera,
+                       path)
+
+
+def _beside(path: Path, name: str) -> Path:
+    p = Path(name)
+    return p if p.is_absolute() else path.parent / p
+
+
+# --------------------------------------------------------------------- one pose
+def _lookup(record: Any, key: str) -> tuple[Any, bool]:
+    """The value at ``key`` (a name, or a dotted path into nested mappings and lists)."""
+    if isinstance(record, dict) and key in record:
+        return record[key], True
+    node = record
+    for part in key.split("."):
+        if isinstance(node, dict) and part in node:
+            node = node[part]
+        elif isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        else:
+            return None, False
+    return node, True
+
+
+def _key_list(record: Any) -> str:
+    names = list(record) if isinstance(record, dict) else []
+    return ", ".join(map(str, names[:12])) + (", ..." if len(names) > 12 else "") if names else "none"
+
+
+def _number(value: Any, what: str, where: str) -> float:
+    if isinstance(value, str):  # CSV cells
+        try:
+            value = float(value.strip())
+        except ValueError:
+            raise InputError(f"{where}: {what} is {value!r}, not a number", hint="write plain numbers") from None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise InputError(f"{where}: {what} is {value!r}, not a finite number", hint="write plain numbers")
+    return float(value)
+
+
+def _flat(value: Any) -> list[Any]:
+    if isinstance(value, list):
+        return [x for v in value for x in _flat(v)]
+    return [value]
+
+
+def _numbers(record: Any, keys: tuple[str, ...], n: int | None, where: str, role: str) -> np.ndarray:
+    """The numbers of ``keys``: one key holding a list (nested lists are read row by row), or
+    one key per number. ``n`` None: as many as there are."""
+    if len(keys) == 1:
+        value, found = _lookup(record, keys[0])
+        if not found:
+            raise InputError(f"{where}: no key {keys[0]!r} (the {role}; keys: {_key_list(record)})",
+                             hint=f"name the keys in a mapping file or the options ({MAPPING_HINT})")
+        items = _flat(value)
+        if n is not None and len(items) != n:
+            raise InputError(f"{where}: {keys[0]} holds {len(items)} numbers, the {role} takes {n}",
+                             hint=f"check the pose format and its keys ({MAPPING_HINT})")
+        return np.array([_number(v, f"{keys[0]}[{i}]", where) for i, v in enumerate(items)])
+    if n is not None and len(keys) != n:
+        raise InputError(f"{where}: the mapping names {len(keys)} keys for the {role}, which takes {n}",
+                         hint=MAPPING_HINT)
+    out = []
+    for k in keys:
+        value, found = _lookup(record, k)
+        if not found:
+            raise InputError(f"{where}: no key {k!r} (the {role}; keys: {_key_list(record)})",
+                             hint=f"name the keys in a mapping file or the options ({MAPPING_HINT})")
+        out.append(_number(value, k, where))
+    return np.array(out)
+
+
+def _translation(values: np.ndarray, mapping: PoseMapping, where: str) -> np.ndarray:
+    t = values * mapping.length_unit.metres
+    norm = float(np.linalg.norm(t))
+    if norm > MAX_TRANSLATION:
+        if mapping.length_unit is LengthUnit.M:
+            raise InputError(f"{where}: the translation is {norm:.4g} m from the base, more than "
+                             f"{MAX_TRANSLATION:g} m: it looks like millimetres while the mapping says metres",
+                             hint="set length_unit: mm in the mapping file (or --length-unit mm)")
+        raise InputError(f"{where}: the translation is {norm:.4g} m from the base, more than {MAX_TRANSLATION:g} m",
+                         hint="check the position keys and length_unit")
+    return t
+
+
+def _angles(values: np.ndarray, mapping: PoseMapping, where: str, what: str) -> np.ndarray:
+    if mapping.angle_unit is AngleUnit.RAD and np.any(np.abs(values) > MAX_RADIANS):
+        big = float(np.max(np.abs(values)))
+        raise InputError(f"{where}: {what} {big:.4g} is more than 2 pi: it looks like degrees while the mapping "
+                         "says radians", hint="set angle_unit: deg in the mapping file (or --angle-unit deg)")
+    return values * mapping.angle_unit.radians
+
+
+def _quaternion_matrix(values: np.ndarray, mapping: PoseMapping, where: str) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    q = values if mapping.quaternion_order is QuaternionOrder.XYZW else np.r_[values[1:], values[0]]
+    norm = float(np.linalg.norm(q))
+    if abs(norm - 1.0) > QUATERNION_TOLERANCE:
+        raise InputError(f"{where}: the quaternion's norm is {norm:.6g}, off 1 by {abs(norm - 1.0):.3g} (more than "
+                         f"{QUATERNION_TOLERANCE:g}); this view is not used",
+                         hint="log unit quaternions, or check the keys and quaternion_order (xyzw or wxyz)")
+    return Rotation.from_quat(q / norm).as_matrix()
+
+
+def _matrix(values: np.ndarray, mapping: PoseMapping, where: str) -> np.ndarray:
+    M = values.reshape(4, 4)
+    if mapping.matrix_order is MatrixOrder.COLUMN:
+        M = M.T
+    bottom = np.array([0.0, 0.0, 0.0, 1.0])
+    if not np.allclose(M[3], bottom, atol=1e-6):
+        other = "column" if mapping.matrix_order is MatrixOrder.ROW else "row"
+        if np.allclose(M[:, 3], bottom, atol=1e-6):
+            raise InputError(f"{where}: the matrix's last row is {np.round(M[3], 6).tolist()}, not [0, 0, 0, 1]: it "
+                             f"looks {other}-major while the mapping says {mapping.matrix_order.value}-major",
+                             hint=f"set matrix_order: {other} in the mapping file (or --matrix-order {other})")
+        raise InputError(f"{where}: the matrix's last row is {np.round(M[3], 6).tolist()}, not [0, 0, 0, 1]",
+                         hint="give a 4x4 homogeneous transform")
+    R = M[:3, :3]
+    off = float(np.max(np.abs(R.T @ R - np.eye(3))))
+    if off > ROTATION_TOLERANCE or np.linalg.det(R) < 0:
+        raise InputError(f"{where}: the matrix's rotation part is not a rotation (|R^T R - I| = {off:.3g}, det "
+                         f"{np.linalg.det(R):.3g})",
+                         hint="check the matrix and matrix_order (row or column); lengths in the last column")
+    U, _, Vt = np.linalg.svd(R)
+    out = np.eye(4)
+    out[:3, :3] = U @ Vt
+    out[:3, 3] = _translation(M[:3, 3], mapping, where)
+    return out
+
+
+def robot_pose(record: Any, where: str, mapping: PoseMapping, kin=None) -> np.ndarray:
+    """``base_T_flange`` (4, 4) [m] of one pose record (a mapping of keys to values) as the
+    mapping reads it; ``kin``: the cell's Kinematics, for joint positions. One InputError
+    naming ``where`` when it cannot be read."""
+    f = mapping.pose_format
+    if f is None:
+        raise InputError(f"{where}: the pose format is not known", hint=MAPPING_HINT)
+    T = np.eye(4)
+    if f is PoseFormat.MATRIX:
+        return _matrix(_numbers(record, mapping.matrix, 16, where, "4x4 matrix"), mapping, where)
+    if f is PoseFormat.JOINTS:
+        if kin is None:
+            raise InputError(f"{where}: joint positions need the robot's kinematics", hint="pass --cell NAME|FILE")
+        return _joints_pose(record, where, mapping, kin)
+    t = _translation(_numbers(record, mapping.position, 3, where, "position"), mapping, where)
+    if f is PoseFormat.XYZ_QUAT:
+        T[:3, :3] = _quaternion_matrix(_numbers(record, mapping.quaternion_keys, 4, where, "quaternion"), mapping,
+                                       where)
+    else:
+        rpy = _angles(_numbers(record, mapping.rpy, 3, where, "roll, pitch, yaw"), mapping, where, "an angle of")
+        T[:3, :3] = rpy_to_matrix(*rpy)
+    T[:3, 3] = t
+    return T
+
+
+def _joints_pose(record: Any, where: str, mapping: PoseMapping, kin) -> np.ndarray:
+    names = tuple(kin.joint_names)
+    q = _numbers(record, mapping.joints, None, where, "joint positions")
+    if len(q) != len(names):
+        raise InputError(f"{where}: {len(q)} joint positions, the cell {kin.cell.name} has {len(names)} joints "
+                         f"({', '.join(names)})", hint="pass the --cell the poses were logged with")
+    linear = set(kin.cell.linear_joints)
+    out = np.empty(len(q))
+    for i, (name, v) in enumerate(zip(names, q, strict=True)):
+        if name in linear:
+            out[i] = v * mapping.length_unit.metres
+            if abs(out[i]) > MAX_TRANSLATION:
+                raise InputError(f"{where}: joint {name} at {out[i]:.4g} m: it looks like millimetres",
+                                 hint="set length_unit: mm (or --length-unit mm)")
+        else:
+            out[i] = _angles(np.array([v]), mapping, where, f"joint {name} at")[0]
+    return kin.frame_pose(out, kin.cell.flange_link)
+
+
+def detect_format(record: Any, mapping: PoseMapping, where: str) -> PoseMapping:
+    """The mapping with its pose format (and keys) told by the keys of a pose, when it has
+    none: O_T_EE (libfranka, column-major), x y z qx qy qz qw, position.{x,y,z} +
+    orientation.{x,y,z,w} (a ROS Pose), x y z roll pitch yaw, matrix, joints."""
+    if mapping.pose_format is not None:
+        return mapping
+
+    def has(*keys: str) -> bool:
+        return all(_lookup(record, k)[1] for k in keys)
+
+    if has("O_T_EE"):
+        return replace(mapping, pose_format=PoseFormat.MATRIX, matrix=("O_T_EE",), matrix_order=MatrixOrder.COLUMN)
+    if has("x", "y", "z", "qx", "qy", "qz", "qw"):
+        return replace(mapping, pose_format=PoseFormat.XYZ_QUAT, quaternion=("qx", "qy", "qz", "qw"),
+                       quaternion_order=QuaternionOrder.XYZW)
+    if has("position.x", "position.y", "position.z", "orientation.x", "orientation.y", "orientation.z",
+           "orientation.w"):
+        return replace(mapping, pose_format=PoseFormat.XYZ_QUAT, position=("position.x", "position.y", "position.z"),
+                       quaternion=("orientation.x", "orientation.y", "orientation.z", "orientation.w"),
+                       quaternion_order=QuaternionOrder.XYZW)
+    if has("x", "y", "z", "roll", "pitch", "yaw"):
+        return replace(mapping, pose_format=PoseFormat.XYZ_RPY)
+    for key in mapping.matrix if len(mapping.matrix) == 1 else ():
+        if has(key):
+            return replace(mapping, pose_format=PoseFormat.MATRIX)
+    if len(mapping.joints) == 1 and has(mapping.joints[0]):
+        return replace(mapping, pose_format=PoseFormat.JOINTS)
+    raise InputError(f"{where}: the pose's form cannot be told from its keys ({_key_list(record)})",
+                     hint="write a mapping file naming the keys and units, or pass --pose-format and name the keys "
+                          f"in a mapping file ({MAPPING_HINT})")
+
+
+# --------------------------------------------------------------------- the data set's files
+@dataclass(frozen=True)
+class DatasetView:
+    """One image and its pose as the data set holds them: ``record`` the pose's values by
+    key (None when the pose could not be read: ``problem`` says why), ``where`` the file
+    (and line) they came from."""
+
+    name: str
+    image: Path
+    record: Any
+    where: str
+
+
+@dataclass(frozen=True)
+class IndexHints:
+    """What an index file of ros-industrial's industrial_calibration says beside the pairs."""
+
+    camera: CameraNumbers | None = None
+    board: BoardSpec | None = None
+    setup: Setup | None = None
+
+
+@dataclass(frozen=True)
+class Dataset:
+    folder: Path
+    layout: str  # how the pairs were found, for the report
+    views: list[DatasetView]
+    skipped: list[SkippedImage]
+    hints: IndexHints = field(default_factory=IndexHints)
+
+
+def _natural(name: str) -> list:
+    return [int(p) if p.isdigit() else p.lower() for p in re.split(r"(\d+)", name)]
+
+
+def _refuse_file(what: str, path: Path, limit: int) -> files.Refuse:
+    return files.file_errors(path, what, "check the data set", lambda size: (
+        f"{size:,} bytes, more than the {limit:,} recon reads", "this is not a pose file recon reads"))
+
+
+def _inside(root: Path, base: Path, name: str, where: str) -> Path:
+    """``base / name``, a path the data set names, refused unless it stays inside ``root``."""
+    p = PurePath(str(name))
+    if not str(name).strip() or p.is_absolute() or ".." in p.parts or str(name).startswith("~"):
+        raise InputError(f"{where}: {name!r} leaves the data set folder", hint="name files inside it, without '..'")
+    path = base / p
+    try:
+        target = path.resolve(strict=True)
+    except (OSError, RuntimeError, ValueError):  # ValueError: a NUL byte
+        raise InputError(f"{where}: {path} does not exist", hint="check the name, or add the file") from None
+    if not target.is_relative_to(root):
+        raise InputError(f"{where}: {path} is a link leading out of the data set folder",
+                         hint="copy the file into the folder")
+    return path
+
+
+def _read_record(path: Path) -> Any:
+    if path.suffix.lower() == ".json":
+        return load_json(path, "pose file", max_bytes=MAX_POSE_BYTES)
+    return read_yaml(path, "pose file", hint="check the data set")
+
+
+def _dictionary_name(value: Any) -> str | None:
+    import cv2
+
+    names = {int(getattr(cv2.aruco, n)): n for n in dir(cv2.aruco) if n.startswith("DICT_") and not n.endswith("_SIZE")}
+    if isinstance(value, str):
+        return value.upper() if value.upper() in names.values() else None
+    if isinstance(value, int) and not isinstance(value, bool):
+        return names.get(value)
+    return None
+
+
+def _index_hints(doc: Any, where: str) -> IndexHints:
+    """intrinsics {fx, fy, cx, cy}, target_finder (a ChArUco grid: rows, cols, chessboard_dim,
+    aruco_marker_dim, dictionary) and static_camera of an industrial_calibration cal_data.yaml."""
+    if not isinstance(doc, dict):
+        return IndexHints()
+    camera = board = setup = None
+    intr = doc.get("intrinsics")
+    if isinstance(intr, dict) and all(k in intr for k in ("fx", "fy", "cx", "cy")):
+        v = [_number(intr[k], f"intrinsics.{k}", where) for k in ("fx", "fy", "cx", "cy")]
+        if min(v[:2]) <= 0:
+            raise InputError(f"{where}: intrinsics fx, fy must be positive", hint="check the index file")
+        dist = intr.get("distortion", [])
+        d = [_number(x, "intrinsics.distortion", where) for x in dist] if isinstance(dist, list) else []
+        camera = CameraNumbers(v[0], v[1], v[2], v[3], tuple((d + [0.0] * 5)[:5]))
+    tf = doc.get("target_finder")
+    if isinstance(tf, dict) and "Charuco" in str(tf.get("type", "")):
+        try:
+            rows, cols = int(tf["rows"]), int(tf["cols"])
+            square, marker = float(tf["chessboard_dim"]), float(tf["aruco_marker_dim"])
+            name = _dictionary_name(tf["dictionary"])
+        except (KeyError, TypeError, ValueError):
+            name = None
+        if name is not None and 2 <= rows <= 100 and 2 <= cols <= 100 and 0 < marker < square <= 1:
+            board = BoardSpec(cols, rows, square, marker, name)  # OpenCV's CharucoBoard((cols, rows), ...)
+    if isinstance(doc.get("static_camera"), bool):
+        setup = Setup.EYE_TO_HAND if doc["static_camera"] else Setup.EYE_IN_HAND
+    return IndexHints(camera, board, setup)
+
+
+def _from_index(index: Path, root: Path) -> Dataset:
+    if index.suffix.lower() == ".json":
+        doc = load_json(index, "index file", max_bytes=MAX_POSE_BYTES)
+    else:
+        doc = read_yaml(index, "index file", hint="check the data set")
+    entries = doc.get("data") if isinstance(doc, dict) else doc
+    if not isinstance(entries, list):
+        raise InputError(f"{index}: no list of {{image, pose}} pairs (under data:)",
+                         hint="write data: [{image: images/0.png, pose: poses/0.yaml}, ...]")
+    if len(entries) > MAX_VIEWS:
+        raise InputError(f"{index}: {len(entries):,} pairs, more than {MAX_VIEWS:,}", hint="split the data set")
+    views: list[DatasetView] = []
+    skipped: list[SkippedImage] = []
+    base = index.parent
+    for k, e in enumerate(entries):
+        line = line_of(entries, k)
+        where = f"{index}:{line}" if line else f"{index}: entry {k + 1}"
+        if not isinstance(e, dict) or "image" not in e or "pose" not in e:
+            skipped.append(SkippedImage(f"entry {k + 1}", f"{where}: not an {{image, pose}} pair"))
+            continue
+        name = str(e["image"])
+        if any(v.name == name for v in views):
+            skipped.append(SkippedImage(name, f"{where}: {name} is listed twice; the first entry is used"))
+            continue
+        try:
+            image = _inside(root, base, name, where)
+            if isinstance(e["pose"], dict):
+                record, at = e["pose"], where
+            else:
+                pose_path = _inside(root, base, str(e["pose"]), where)
+                record, at = _read_record(pose_path), str(pose_path)
+        except ReconError as exc:
+            skipped.append(SkippedImage(name, exc.one_line()))
+            continue
+        views.append(DatasetView(name, image, record, at))
+    return Dataset(base, f"index {index}", views, skipped, _index_hints(doc, str(index)))
+
+
+def _from_csv(path: Path, root: Path, images_dir: Path, column: str | None) -> Dataset:
+    data = files.read_limited(path, MAX_CSV_BYTES, _refuse_file("pose CSV file", path, MAX_CSV_BYTES))
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise FileError(f"{path} is not UTF-8 text (byte {exc.start})", hint="save it as UTF-8 CSV") from None
+    first = text.split("\n", 1)[0]
+    delimiter = next((d for d in (",", ";", "\t") if d in first), ",")
+    reader = csv.reader(io.StringIO(text), delimiter=delimiter)
+    try:
+        header = [h.strip() for h in next(reader)]
+    except (StopIteration, csv.Error):
+        raise InputError(f"{path}: no header row", hint="the first row names the columns, one of them the image") \
+            from None
+    if len(set(header)) != len(header):
+        twice = sorted({h for h in header if header.count(h) > 1})
+        raise InputError(f"{path}:1: column {twice[0]!r} appears twice", hint="give every column its own name")
+    col = column or next((c for c in IMAGE_COLUMNS if c in header), None)
+    if col is None or col not in header:
+        raise InputError(f"{path}:1: no column naming the image ({'no ' + repr(column) if column else 'none of '}"
+                         f"{'' if column else ', '.join(IMAGE_COLUMNS)}; columns: {', '.join(header)})",
+                         hint="name it with image_column in the mapping file")
+    views: list[DatasetView] = []
+    skipped: list[SkippedImage] = []
+    try:
+        for row in reader:
+            if not any(cell.strip() for cell in row):
+                continue
+            where = f"{path}:{reader.line_num}"
+            if len(views) + len(skipped) >= MAX_VIEWS:
+                raise InputError(f"{path}: more than {MAX_VIEWS:,} rows", hint="split the data set")
+            if len(row) != len(header):
+                skipped.append(SkippedImage(f"row {reader.line_num}", f"{where}: {len(row)} cells, the header has "
+                                                                      f"{len(header)}"))
+                continue
+            record = dict(zip(header, (c.strip() for c in row), strict=True))
+            name = record[col]
+            try:
+                try:
+                    image = _inside(root, path.parent, name, where)
+                except InputError:
+                    image = _inside(root, images_dir, name, where)
+            except ReconError as exc:
+                skipped.append(SkippedImage(name, exc.one_line()))
+                continue
+            if any(v.name == name for v in views):
+                skipped.append(SkippedImage(name, f"{where}: {name} is listed twice; the first row is used"))
+                continue
+            views.append(DatasetView(name, image, record, where))
+    except csv.Error as exc:
+        raise InputError(f"{path}:{reader.line_num}: not valid CSV ({exc})", hint="check the quotes") from None
+    return Dataset(path.parent, f"CSV {path}", views, skipped)
+
+
+def _images_in(folder: Path, root: Path, skipped: list[SkippedImage]) -> list[Path]:
+    """The images of a folder in natural order (2.png before 10.png); links leading out of
+    the data set go into ``skipped``."""
+    if not folder.is_dir():
+        raise FileError(f"{folder} is not a folder", hint="name the images' folder with images: in the mapping file")
+    found = sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()),
+                   key=lambda p: _natural(p.name))
+    if len(found) > MAX_VIEWS:
+        raise InputError(f"{folder}: {len(found):,} images, more than {MAX_VIEWS:,}", hint="split the data set")
+    kept = []
+    for p in found:
+        if p.resolve().is_relative_to(root):
+            kept.append(p)
+        else:
+            skipped.append(SkippedImage(p.name, f"{p} is a link leading out of the data set folder; not read"))
+    return kept
+
+
+def _from_pose_files(folder: Path, root: Path, images_dir: Path, poses_dir: Path) -> Dataset:
+    views: list[DatasetView] = []
+    skipped: list[SkippedImage] = []
+    images = _images_in(images_dir, root, skipped)
+    if not images:
+        raise FileError(f"{images_dir} holds no images ({', '.join(IMAGE_SUFFIXES)})",
+                        hint="pass the data set folder (images/ and poses/, or images and pose files side by side)")
+    if not poses_dir.is_dir():
+        raise FileError(f"{poses_dir} is not a folder", hint="name the pose files' folder with poses: in the mapping")
+    by_stem: dict[str, list[Path]] = {}
+    for p in poses_dir.iterdir():
+        if p.suffix.lower() in POSE_SUFFIXES and p.is_file():
+            by_stem.setdefault(p.stem, []).append(p)
+    stems = set()
+    for image in images:
+        stems.add(image.stem)
+        name = str(image.relative_to(folder))
+        candidates = sorted(by_stem.get(image.stem, []))
+        if not candidates:
+            skipped.append(SkippedImage(name, f"no pose file {poses_dir / image.stem}.yaml (or .yml, .json) for "
+                                              f"{image}; add it or remove the image"))
+            continue
+        if len(candidates) > 1:
+            skipped.append(SkippedImage(name, f"{len(candidates)} pose files for {image}: "
+                                              f"{', '.join(p.name for p in candidates)}; keep one"))
+            continue
+        pose = candidates[0]
+        try:
+            if not pose.resolve().is_relative_to(root):
+                raise InputError(f"{pose} is a link leading out of the data set folder",
+                                 hint="copy the file into the folder")
+            record = _read_record(pose)
+        except ReconError as exc:
+            skipped.append(SkippedImage(name, exc.one_line()))
+            continue
+        views.append(DatasetView(name, image, record, str(pose)))
+    if poses_dir != images_dir:  # a folder of pose files: name those without an image
+        for stem in sorted(set(by_stem) - stems, key=_natural):
+            skipped.append(SkippedImage(by_stem[stem][0].name, f"{by_stem[stem][0]}: no image {stem}.* in "
+                                                               f"{images_dir}"))
+    return Dataset(folder, f"pose files in {poses_dir}", views, skipped)
+
+
+def _is_index(path: Path) -> bool:
+    """A YAML/JSON file at the top of a data set that lists {image, pose} pairs."""
+    try:
+        doc = load_json(path, "index file", max_bytes=MAX_POSE_BYTES) if path.suffix.lower() == ".json" \
+            else read_yaml(path, "index file")
+    except ReconError:
+        return False
+    entries = doc.get("data") if isinstance(doc, dict) else doc
+    return isinstance(entries, list) and bool(entries) and all(isinstance(e, dict) and "image" in e for e in entries)
+
+
+def read_dataset(source: Path, spec: DatasetSpec = DatasetSpec()) -> Dataset:  # noqa: B008 (frozen)
+    """The (image, pose) pairs of a data set folder (or of an index or CSV file): the index
+    the mapping names, else one found at the top of the folder, else the CSV file (the
+    mapping's ``poses`` or the only one at the top), else one pose file per image by stem
+    (``images``/``poses`` of the mapping, else images/ and poses/ when they exist, else the
+    folder itself)."""
+    source = Path(source)
+    if source.is_file():
+        folder = source.parent
+        root = folder.resolve()
+        if source.suffix.lower() == ".csv":
+            return _from_csv(source, root, folder / (spec.images or "images"), spec.image_column)
+        return _from_index(source, root)
+    if not source.is_dir():
+        raise FileError(f"data set {source} does not exist", hint="pass the folder of the images and their poses")
+    folder, root = source, source.resolve()
+
+    def inside(name: str, what: str) -> Path:
+        try:
+            return _inside(root, folder, name, f"mapping {spec.source or ''} {what}".replace("  ", " "))
+        except InputError as exc:
+            raise InputError(exc.message, hint=f"{what}: a path inside {folder}") from None
+
+    images_dir = inside(spec.images, "images") if spec.images else (
+        folder / "images" if (folder / "images").is_dir() else folder)
+    if spec.index:
+        return _from_index(inside(spec.index, "index"), root)
+    if spec.poses and spec.poses.lower().endswith(".csv"):
+        return _from_csv(inside(spec.poses, "poses"), root, images_dir, spec.image_column)
+    if not spec.poses:
+        image_stems = {p.stem for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES}
+        mapping = spec.source.resolve() if spec.source is not None else None
+        tops = sorted((p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in POSE_SUFFIXES
+                       and p.stem not in image_stems and p.resolve() != mapping), key=lambda p: p.name)
+        indexes = [p for p in tops if _is_index(p)]
+        if len(indexes) > 1:
+            raise InputError(f"{folder} holds {len(indexes)} index files ({', '.join(p.name for p in indexes)})",
+                             hint="name one with index: in a mapping file")
+        if indexes:
+            return _from_index(indexes[0], root)
+        csvs = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() == ".csv")
+        if len(csvs) > 1:
+            raise InputError(f"{folder} holds {len(csvs)} CSV files ({', '.join(p.name for p in csvs)})",
+                             hint="name the poses' one with poses: in a mapping file")
+        if csvs:
+            return _from_csv(csvs[0], root, images_dir, spec.image_column)
+    poses_dir = inside(spec.poses, "poses") if spec.poses else (
+        folder / "poses" if (folder / "poses").is_dir() else images_dir)
+    return _from_pose_files(folder, root, images_dir, poses_dir)
+
+
+# --------------------------------------------------------------------- views of the board
+def _board_reason(det, min_corners: int) -> str:
+    if det.n_corners == 0 and det.marker_count >= 4:
+        return (f"board not found ({det.marker_count} markers but no chessboard corners: squares_x and squares_y "
+                "swapped, or a board of OpenCV's legacy pattern, made before 4.6 with an even number of rows?)")
+    return f"board not found ({det.n_corners} corners, {min_corners} needed)"
+
+
+def corner_view(name: str, rgb: np.ndarray, base_T_flange: np.ndarray, board: BoardSpec, camera: CameraSource,
+                min_corners: int = MIN_CORNERS, where: str = "") -> CornerView | SkippedImage:
+    """The board's corners and pose in one image (RGB), or why the image cannot be used."""
+    h, w = rgb.shape[:2]
+    cam = camera.at_size(w, h)
+    det = detect(rgb, board)
+    pose = estimate_pose(det, board, cam.intrinsics, cam.distortion_array, min_corners=min_corners)
+    if pose is None:
+        return SkippedImage(name, _board_reason(det, min_corners))
+    obj, img = board.board().matchImagePoints(det.corners.reshape(-1, 1, 2).astype(np.float32),  # type: ignore[call-overload]
+                                              det.ids.reshape(-1, 1).astype(np.int32))
+    marker_T_cv = invert(board.opencv_board_T_marker())
+    pts = np.asarray(obj, dtype=np.float64).reshape(-1, 3) @ marker_T_cv[:3, :3].T + marker_T_cv[:3, 3]
+    return CornerView(name, np.asarray(base_T_flange, dtype=np.float64), pose.camera_T_marker, pts,
+                      np.asarray(img, dtype=np.float64).reshape(-1, 2), cam, pose.reprojection_rms, where)
+
+
+@dataclass(frozen=True)
+class DatasetViews:
+    """The usable views, the skipped ones with their reasons, and the mapping that read the
+    poses (with the pose format told by the keys, when the mapping had none)."""
+
+    views: list[CornerView]
+    skipped: list[SkippedImage]
+    mapping: PoseMapping
+
+
+def dataset_views(dataset: Dataset, mapping: PoseMapping, board: BoardSpec, camera: CameraSource, kin=None,
+                  min_corners: int = MIN_CORNERS, progress: Callable[[str, int, int], None] | None = None
+                  ) -> DatasetViews:
+    """Every pair of the data set read: its pose through the mapping, its image, the board's
+    corners in it; a pair that cannot be used is skipped with its reason."""
+    import cv2
+
+    views: list[CornerView] = []
+    skipped = list(dataset.skipped)
+    n = len(dataset.views)
+    for k, v in enumerate(dataset.views, start=1):
+        try:
+            if mapping.pose_format is None:
+                mapping = detect_format(v.record, mapping, v.where)
+            base_T_flange = robot_pose(v.record, v.where, mapping, kin)
+            bgr = read_color(v.image, "board image", hint="replace or remove the image")
+        except ReconError as exc:
+            skipped.append(SkippedImage(v.name, exc.one_line()))
+        else:
+            found = corner_view(v.name, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), base_T_flange, board, camera,
+                                min_corners, v.where)
+            if isinstance(found, SkippedImage):
+                skipped.append(found)
+            else:
+                views.append(found)
+        if progress:
+            progress("board images", k, n)
+    return DatasetViews(views, skipped, mapping)

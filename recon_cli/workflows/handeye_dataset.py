@@ -1,0 +1,364 @@
+"""``recon calibrate handeye --dataset DIR``: hand-eye calibration from a data set made by
+anyone (board images and the robot pose of each; recon_cli.calibration.dataset), eye-in-hand
+or eye-to-hand (recon_cli.calibration.setups).
+
+Writes into the run folder::
+
+    <out>/handeye.json            the calibration, every view (reprojection, chain residual,
+                                  agreement with its own board pose, outlier), every OpenCV
+                                  method, the mapping and the sources of board and camera
+    <out>/hand_eye.yaml           eye-in-hand: flange_T_camera as a station file's hand_eye block
+    <out>/handeye_residuals.png   per view: reprojection RMS, chain residual [mm], [deg]
+
+Nothing is written when fewer than 3 views are usable.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from recon_cli.calibration.camera_file import load_camera_file
+from recon_cli.calibration.dataset import (
+    AngleUnit,
+    CameraNumbers,
+    CameraSource,
+    DatasetSpec,
+    LengthUnit,
+    MatrixOrder,
+    PoseFormat,
+    PoseMapping,
+    QuaternionOrder,
+    dataset_views,
+    detect_format,
+    read_dataset,
+    read_mapping,
+)
+from recon_cli.calibration.handeye import MIN_VIEWS, Diversity, HandEyeMethod, ViewResidual, pose_diversity
+from recon_cli.calibration.intrinsics import SkippedImage
+from recon_cli.calibration.setups import (
+    CornerView,
+    Refinement,
+    Setup,
+    SetupSolution,
+    chain_residuals,
+    outlier_views,
+    pnp_agreement,
+    refine,
+    reprojection_errors,
+    rms,
+    solve,
+)
+from recon_cli.calibration.station_update import hand_eye_block
+from recon_cli.config import CellConfig
+from recon_cli.console import write_json
+from recon_cli.errors import InputError, ReconError
+from recon_cli.geometry.transforms import pose_error
+from recon_cli.outputs import atomic_write, atomic_write_text
+from recon_cli.perception.charuco import BoardSpec, cell_board
+from recon_cli.robot.description import expand_urdf
+from recon_cli.robot.kinematics import Kinematics
+
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True)
+class DatasetHandEyeOptions:
+    """What ``recon calibrate handeye --dataset`` does.
+
+    dataset: the data set folder (or its index or CSV file)
+    mapping: a mapping file (schemas/handeye_dataset.schema.json); the options below override it
+    setup: None: the mapping's, else the index file's (static_camera), else eye-in-hand
+    camera_file / intrinsics (fx, fy, cx, cy [px]): the camera; None: the mapping's or the index file's
+    board: None: the mapping's, else the index file's, else the cell's
+    cell: the cell whose kinematics turn joint positions into flange poses
+    drop_outliers: calibrate again without the views flagged as outliers
+    """
+
+    dataset: Path
+    out: Path
+    mapping: Path | None = None
+    setup: Setup | None = None
+    method: HandEyeMethod = HandEyeMethod.TSAI
+    refine: bool = True
+    camera_file: Path | None = None
+    intrinsics: tuple[float, ...] | None = None  # fx, fy, cx, cy
+    board: BoardSpec | None = None
+    cell: CellConfig = field(default_factory=CellConfig)
+    pose_format: PoseFormat | None = None
+    length_unit: LengthUnit | None = None
+    angle_unit: AngleUnit | None = None
+    quaternion_order: QuaternionOrder | None = None
+    matrix_order: MatrixOrder | None = None
+    drop_outliers: bool = False
+    min_corners: int = 8
+
+
+@dataclass(frozen=True)
+class ViewReport:
+    """One usable view under the written calibration: its corners' reprojection RMS [px],
+    chain residual (translation [m], rotation [rad]), its own board pose against the
+    calibration's (translation [m], rotation [rad]); whether it took part."""
+
+    name: str
+    corners: int
+    pnp_rms: float
+    reprojection_rms: float
+    chain: ViewResidual
+    pnp_difference: tuple[float, float]
+    used: bool
+    outlier: str | None
+    pose_source: str
+
+
+@dataclass(frozen=True)
+class MethodReport:
+    """An OpenCV method's own solution on the views used: chain residual RMS [m, rad],
+    reprojection RMS [px], and its difference from the written solution in X [m, rad]."""
+
+    solution: SetupSolution
+    chain_rms: tuple[float, float]
+    reprojection_rms: float
+    vs_written: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class DatasetHandEyeResult:
+    folder: Path
+    dataset: Path
+    layout: str
+    setup: Setup
+    solution: SetupSolution  # written
+    refinement: Refinement | None
+    views: list[ViewReport]
+    methods: dict[HandEyeMethod, MethodReport]
+    diversity: Diversity
+    skipped: list[SkippedImage]
+    mapping: PoseMapping
+    board: BoardSpec
+    sources: dict[str, str]  # where the set-up, board and camera came from
+    seconds: float
+
+    @property
+    def used(self) -> list[ViewReport]:
+        return [v for v in self.views if v.used]
+
+    @property
+    def dropped(self) -> list[str]:
+        return [v.name for v in self.views if not v.used]
+
+    @property
+    def outliers(self) -> dict[str, str]:
+        return {v.name: v.outlier for v in self.views if v.outlier is not None}
+
+    @property
+    def converged(self) -> bool:
+        """The refinement stopped on its tolerances (without refinement: True)."""
+        return self.refinement is None or self.refinement.converged
+
+    @property
+    def reprojection_rms(self) -> float:
+        """RMS over every corner of the views used [px] (the distance in the image)."""
+        used = self.used
+        return float(np.sqrt(sum(v.reprojection_rms**2 * v.corners for v in used) / max(sum(v.corners for v in used),
+                                                                                          1)))
+
+    @property
+    def cost_per_residual(self) -> float:
+        """ros-industrial/industrial_calibration's reported error: sqrt(Ceres' final cost
+        (half the sum of squares) per scalar residual (two per corner)) = RMS / 2 [px]."""
+        return self.reprojection_rms / 2.0
+
+    @property
+    def chain_rms(self) -> tuple[float, float]:
+        t = np.array([v.chain.translation for v in self.used])
+        r = np.array([v.chain.rotation for v in self.used])
+        return float(np.sqrt(np.mean(t**2))), float(np.sqrt(np.mean(r**2)))
+
+    @property
+    def chain_max(self) -> tuple[float, float]:
+        return max(v.chain.translation for v in self.used), max(v.chain.rotation for v in self.used)
+
+    @property
+    def pnp_mean(self) -> tuple[float, float]:
+        """Mean over the views used of the calibration's camera_T_board against each image's
+        own (solvePnP) [m, rad]: industrial_calibration's check."""
+        used = self.used
+        return (float(np.mean([v.pnp_difference[0] for v in used])),
+                float(np.mean([v.pnp_difference[1] for v in used])))
+
+    def to_dict(self) -> dict:
+        t, r = self.chain_rms
+        tm, rm = self.chain_max
+        pt, pr = self.pnp_mean
+        return {
+            "setup": self.setup.value, "method": self.solution.method.value, "refined": self.solution.refined,
+            "dataset": str(self.dataset), "layout": self.layout, "sources": self.sources,
+            **{name: T for name, T in self.solution.named().items()},
+            "views_used": len(self.used), "dropped": self.dropped,
+            "refinement": None if self.refinement is None else {
+                "converged": self.refinement.converged, "message": self.refinement.message,
+                "evaluations": self.refinement.evaluations, "rms_before_px": self.refinement.rms_before,
+                "rms_after_px": self.refinement.rms_after},
+            "reprojection": {"rms_px": self.reprojection_rms, "cost_per_residual_px": self.cost_per_residual},
+            "consistency": {"fixed": self.setup.fixed, "translation_rms_m": t, "rotation_rms_rad": r,
+                            "translation_max_m": tm, "rotation_max_rad": rm},
+            "pnp_agreement": {"translation_mean_m": pt, "rotation_mean_rad": pr},
+            "views": [{"name": v.name, "used": v.used, "corners": v.corners, "pose": v.pose_source,
+                       "pnp_rms_px": v.pnp_rms, "reprojection_rms_px": v.reprojection_rms,
+                       "chain_translation_m": v.chain.translation, "chain_rotation_rad": v.chain.rotation,
+                       "pnp_translation_m": v.pnp_difference[0], "pnp_rotation_rad": v.pnp_difference[1],
+                       "outlier": v.outlier} for v in self.views],
+            "methods": {m.value: {**{name: T for name, T in s.solution.named().items()},
+                                  "chain_rms_m_rad": list(s.chain_rms), "reprojection_rms_px": s.reprojection_rms,
+                                  "vs_written_m_rad": list(s.vs_written)} for m, s in self.methods.items()},
+            "diversity": self.diversity.to_dict(),
+            "skipped": [{"name": s.name, "reason": s.reason} for s in self.skipped],
+            "mapping": self.mapping.to_dict(), "board": dataclasses.asdict(self.board),
+            "seconds": self.seconds,
+        }
+
+
+def _camera(opt: DatasetHandEyeOptions, spec: DatasetSpec, hint: CameraNumbers | None) -> tuple[CameraSource, str]:
+    if opt.camera_file is not None:
+        return load_camera_file(opt.camera_file), f"--camera-file {opt.camera_file}"
+    if opt.intrinsics is not None:
+        fx, fy, cx, cy = opt.intrinsics[:4]
+        if fx <= 0 or fy <= 0:
+            raise InputError(f"--intrinsics: fx and fy must be positive, not {fx:g}, {fy:g}",
+                             hint="give fx,fy,cx,cy in pixels")
+        return CameraNumbers(fx, fy, cx, cy), "--intrinsics (no distortion)"
+    if spec.camera is not None:
+        return spec.camera, f"the mapping {spec.source}"
+    if hint is not None:
+        return hint, "the index file's intrinsics"
+    raise InputError("the camera's intrinsics are not known for the data set",
+                     hint="pass --camera-file FILE (recon calibrate intrinsics writes one) or --intrinsics "
+                          "fx,fy,cx,cy, or give camera: in the mapping file")
+
+
+def _views_report(views: list[CornerView], solution: SetupSolution, used: set[str],
+                  outliers: dict[str, str]) -> list[ViewReport]:
+    errors = reprojection_errors(views, solution)
+    chain = chain_residuals(views, solution)
+    pnp = pnp_agreement(views, solution)
+    return [ViewReport(v.name, v.corners, v.pnp_rms, rms(e), c, p, v.name in used, outliers.get(v.name), v.pose_source)
+            for v, e, c, p in zip(views, errors, chain, pnp, strict=True)]
+
+
+def _method_report(views: list[CornerView], s: SetupSolution, written: SetupSolution) -> MethodReport:
+    chain = chain_residuals(views, s)
+    t = float(np.sqrt(np.mean([c.translation**2 for c in chain])))
+    r = float(np.sqrt(np.mean([c.rotation**2 for c in chain])))
+    return MethodReport(s, (t, r), rms(reprojection_errors(views, s)), pose_error(s.X, written.X))
+
+
+def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = None) -> DatasetHandEyeResult:
+    """Read the data set, calibrate, report, write (see the module docstring)."""
+    t0 = time.perf_counter()
+    spec = read_mapping(opt.mapping) if opt.mapping is not None else DatasetSpec()
+    mapping = spec.mapping.overridden(pose_format=opt.pose_format, length_unit=opt.length_unit,
+                                      angle_unit=opt.angle_unit, quaternion_order=opt.quaternion_order,
+                                      matrix_order=opt.matrix_order)
+    dataset = read_dataset(opt.dataset, spec)
+    hints = dataset.hints
+    sources = {}
+    setup = opt.setup or spec.setup or hints.setup or Setup.EYE_IN_HAND
+    sources["setup"] = ("--setup" if opt.setup else "the mapping" if spec.setup else
+                        "the index file (static_camera)" if hints.setup else "the default")
+    if opt.board is not None:
+        board, sources["board"] = opt.board, "--board-spec"
+    elif spec.board is not None:
+        board, sources["board"] = spec.board, f"the mapping {spec.source}"
+    elif hints.board is not None:
+        board, sources["board"] = hints.board, "the index file's target_finder"
+    else:
+        board = cell_board(opt.cell.cell_file)
+        sources["board"] = f"the cell {opt.cell.cell_file.name}'s ({opt.cell.cell_file.board_file})"
+    camera, sources["camera"] = _camera(opt, spec, hints.camera)
+    if mapping.pose_format is None and dataset.views:
+        try:
+            mapping = detect_format(dataset.views[0].record, mapping, dataset.views[0].where)
+        except ReconError:
+            pass  # every view says why
+    kin = None
+    if mapping.pose_format is PoseFormat.JOINTS:
+        kin = Kinematics(expand_urdf(opt.cell), opt.cell.cell_file)
+        sources["kinematics"] = f"the cell {opt.cell.cell_file.name}, flange {opt.cell.cell_file.flange_link}"
+    found = dataset_views(dataset, mapping, board, camera, kin, opt.min_corners, progress)
+    views = found.views
+    if len(views) < MIN_VIEWS:
+        why = "; ".join(f"{s.name}: {s.reason}" for s in found.skipped[:3])
+        raise InputError(f"{len(views)} of the {len(dataset.views) + len(dataset.skipped)} views of {opt.dataset} are "
+                         f"usable; hand-eye calibration needs {MIN_VIEWS} or more" + (f" ({why})" if why else ""),
+                         hint="fix what the reasons say (docs/calibration.md, Calibrating from your own data)")
+    # outliers by the closed chains of OpenCV's solution: the refinement would spread one bad
+    # view's error over all of them
+    methods = {m: solve(views, setup, m) for m in HandEyeMethod}
+    outliers = outlier_views(chain_residuals(views, methods[opt.method]))
+    kept = views
+    if opt.drop_outliers and outliers:
+        kept = [v for v in views if v.name not in outliers]
+        if len(kept) < MIN_VIEWS:
+            raise InputError(f"dropping the {len(outliers)} outlier views leaves {len(kept)} of {len(views)}; "
+                             f"hand-eye calibration needs {MIN_VIEWS} or more",
+                             hint="calibrate without --drop-outliers, or add views")
+        methods = {m: solve(kept, setup, m) for m in HandEyeMethod}
+    refinement = refine(kept, methods[opt.method]) if opt.refine else None
+    solution = refinement.solution if refinement is not None else methods[opt.method]
+    used = {v.name for v in kept}
+    reports = _views_report(views, solution, used, outliers)
+    method_reports = {m: _method_report(kept, s, solution) for m, s in methods.items()}
+    diversity = pose_diversity([setup.chain_pose(v.base_T_flange) for v in kept])
+    result = DatasetHandEyeResult(Path(opt.out), Path(opt.dataset), dataset.layout, setup, solution, refinement,
+                                  reports, method_reports, diversity, found.skipped, found.mapping, board, sources,
+                                  time.perf_counter() - t0)
+    out = Path(opt.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "handeye.json", result.to_dict())
+    if setup is Setup.EYE_IN_HAND:
+        comment = (f"recon calibrate handeye --dataset, {time.strftime('%Y-%m-%d %H:%M')}, {opt.method.value}"
+                   f"{' refined' if solution.refined else ''}, {len(kept)} views, reprojection RMS "
+                   f"{result.reprojection_rms:.2f} px")
+        atomic_write_text(out / "hand_eye.yaml", hand_eye_block(solution.X, comment))
+    atomic_write(out / "handeye_residuals.png", lambda tmp: plot_dataset_residuals(result, tmp))
+    return result
+
+
+def plot_dataset_residuals(result: DatasetHandEyeResult, path: Path) -> None:
+    """Per view: reprojection RMS [px], chain residual [mm] and [deg]; outliers red, views
+    left out hatched."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    views = result.views
+    x = range(len(views))
+    colours = ["tab:red" if v.outlier else "tab:blue" for v in views]
+    hatches = ["" if v.used else "//" for v in views]
+    fig, axes = plt.subplots(3, 1, figsize=(max(6.0, 0.35 * len(views) + 2), 6.5), sharex=True)
+    panels = [([v.reprojection_rms for v in views], "reprojection RMS [px]"),
+              ([v.chain.translation * 1e3 for v in views], f"{result.setup.fixed} in base [mm]"),
+              ([np.degrees(v.chain.rotation) for v in views], f"{result.setup.fixed} in base [deg]")]
+    for ax, (values, label) in zip(axes, panels, strict=True):
+        bars = ax.bar(x, values, color=colours, edgecolor="black", linewidth=0.3)
+        for bar, hatch in zip(bars, hatches, strict=True):
+            bar.set_hatch(hatch)
+        ax.set_ylabel(label, fontsize=8)
+    axes[-1].set_xticks(list(x))
+    axes[-1].set_xticklabels([v.name for v in views], rotation=60, ha="right", fontsize=7)
+    axes[-1].set_xlabel("view (red: outlier; hatched: left out)")
+    t, r = result.chain_rms
+    label = result.solution.method.value + (" refined" if result.solution.refined else "")
+    fig.suptitle(f"hand-eye {result.setup.value} ({label}, {len(result.used)} views)\nreprojection RMS "
+                 f"{result.reprojection_rms:.2f} px; {result.setup.fixed} in the base frame: RMS {t * 1e3:.2f} mm / "
+                 f"{np.degrees(r):.3f}°", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -22,6 +22,7 @@ from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
+from lxml import etree
 
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.geometry.transforms import invert
@@ -308,11 +309,23 @@ def guard_xacro(description: Path) -> dict[Path, str]:
 @functools.lru_cache(maxsize=16)
 def _expand(description: str, args: tuple[tuple[str, str], ...], digest: str) -> str:
     if description.lower().endswith(".urdf"):
-        return _read_description(Path(description))
+        text = _read_description(Path(description))
+        try:
+            etree.fromstring(text.encode())
+        except etree.XMLSyntaxError as exc:
+            raise InputError(f"{description}:{exc.lineno or 1}: the robot description is not XML ({exc.msg})",
+                             hint="give the robot's URDF file") from None
+        return text
     import xacro
 
     # xacro reports harmless notes on stderr; keep library output quiet
-    with contextlib.redirect_stderr(io.StringIO()):
-        doc = xacro.process_file(description, mappings=dict(args))
-    text: str = doc.toprettyxml(indent="  ")
-    return text
+    try:
+        with contextlib.redirect_stderr(io.StringIO()):
+            doc = xacro.process_file(description, mappings=dict(args))
+    except Exception as exc:  # xacro's errors (XML, expressions, missing includes) are the file's mistakes
+        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise InputError(f"{description}: xacro cannot expand the robot description ({reason})",
+                         hint="check the xacro file (run xacro on it to see where), or give the expanded "
+                              "URDF") from None
+    text = doc.toprettyxml(indent="  ")
+    return str(text)

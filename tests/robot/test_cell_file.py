@@ -209,3 +209,19 @@ def test_a_board_off_the_table_or_a_camera_inside_a_link_is_one_line(tmp_path, f
     text = info.value.one_line()
     assert "\n" not in text and text.startswith(f"{path.resolve()}:{_line(path, needle)}: "), text
     assert message in text, text
+
+
+@pytest.mark.parametrize("text, message", [
+    ("hello <robot", "the robot description is not XML"),
+    (b"\xff\xfe\x00garbage", "the robot description is not UTF-8 text"),
+])
+def test_a_description_that_is_no_urdf_is_one_line(tmp_path, text, message):
+    """A cell file naming a URDF that is not one (binary, not XML) is refused in one line."""
+    path = _cell(tmp_path, lambda t: t.replace("file: ../robot/cell.urdf.xacro", "file: ../robot/broken.urdf").replace(
+        "  arguments: {cell: gantry}\n", "").split("  # the xacro arguments")[0] + "joints:" + t.split("\njoints:", 1)[1])
+    target = tmp_path / "robot" / "broken.urdf"
+    target.write_bytes(text if isinstance(text, bytes) else text.encode())
+    with pytest.raises(InputError) as info:
+        expand_urdf(CellConfig(kind=str(path)))
+    line = info.value.one_line()
+    assert "\n" not in line and str(target) in line and message in line, line

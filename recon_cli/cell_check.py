@@ -26,7 +26,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from lxml import etree
 
 from recon_cli.errors import InputError, ReconError
 from recon_cli.geometry.transforms import invert, transform_points
@@ -34,10 +33,10 @@ from recon_cli.geometry.view import View
 from recon_cli.perception.charuco import cell_board
 from recon_cli.perception.sensor import SensorModel, cell_sensor
 from recon_cli.robot.cell import Cell
+from recon_cli.robot.cell_file import descendant_links
 from recon_cli.robot.collision import DistanceReport
 from recon_cli.robot.ik import IKOptions
 from recon_cli.robot.shapes import CollisionShape
-from recon_cli.robot.urdf import attribute, child
 
 #: polar angles of the checked viewing directions [deg] (0: looking straight down)
 THETAS = (20.0, 40.0, 60.0)
@@ -164,21 +163,8 @@ def check_layout(cell: Cell) -> None:
 
 
 def camera_links(cell: Cell) -> tuple[str, ...]:
-    """The links from the flange (excluded) down to the camera frame: the camera's own parts,
-    and every link fixed under them (bracket, housing)."""
-    root = etree.fromstring(cell.urdf.encode())
-    children: dict[str, list[str]] = {}
-    for j in root.iter("joint"):
-        if j.get("type") == "fixed":
-            children.setdefault(attribute(child(j, "parent"), "link"), []).append(attribute(child(j, "child"), "link"))
-    flange = cell.config.cell_file.flange_link
-    out: list[str] = []
-    todo = list(children.get(flange, []))
-    while todo:
-        link = todo.pop()
-        out.append(link)
-        todo += children.get(link, [])
-    return tuple(out)
+    """The links fixed under the flange: the camera's own parts (bracket, housing, optical frame)."""
+    return descendant_links(cell.urdf, cell.config.cell_file.flange_link, fixed_only=True)
 
 
 def joint_rows(cell: Cell) -> tuple[JointRow, ...]:
@@ -210,7 +196,7 @@ def board_sight(world_T_camera: np.ndarray, points: np.ndarray, sensor: SensorMo
 
 def table_top(cell: Cell) -> tuple[float, float, float, float, float]:
     """(x0, x1, y0, y1, z) of the table top's surface (axis-aligned, without the safety margin)."""
-    top = cell._table_top()
+    top = cell.table_top_shape()
     sd = cell.config.safety_distance
     c, half = top.joint_T_shape[:3, 3], np.asarray(top.dims) / 2.0 - sd
     return (float(c[0] - half[0]), float(c[0] + half[0]), float(c[1] - half[1]), float(c[1] + half[1]),

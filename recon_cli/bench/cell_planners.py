@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from recon_cli.bench.mplib_peer import run_mplib
-from recon_cli.bench.planners import RequestRow, summarize
+from recon_cli.bench.planners import RequestRow, plan_time_boxes, summarize
 from recon_cli.bench.scan_moves import ScanMoves, run_scan_moves
 from recon_cli.bench.vamp_peer import run_vamp, vamp_valid
 from recon_cli.planning.planner import PlanOptions
@@ -93,11 +93,6 @@ def _profile_head(profile: str, lines: int = 12) -> list[str]:
 
 
 def _plot(path: Path, problem: ScanMoves, rows: list[RequestRow], peers: list[dict]) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     labels, data, colors = [], [], []
     for name in dict.fromkeys(r.planner for r in rows):
         t = [r.plan_time * 1e3 for r in rows if r.planner == name and r.solved]
@@ -110,16 +105,6 @@ def _plot(path: Path, problem: ScanMoves, rows: list[RequestRow], peers: list[di
             labels.append(f"RRTConnect\n({peer['name']})")
             data.append([t * 1e3 for t in peer["times"]])
             colors.append("#3a9e4f" if peer["name"] == "mplib" else "#8e44ad")
-    fig, ax = plt.subplots(figsize=(max(5.0, 1.3 * len(labels)), 4.5))
-    box = ax.boxplot(data, patch_artist=True, showfliers=True)
-    for patch, c in zip(box["boxes"], colors, strict=True):
-        patch.set_facecolor(c)
-        patch.set_alpha(0.6)
-    ax.set_xticks(range(1, len(labels) + 1), labels, fontsize=8)
-    ax.set_yscale("log")
-    ax.set_ylabel("plan time (search + simplification) [ms]")
-    ax.set_title(f"{problem.cell} cell: {len(problem.pairs)} scan moves at {problem.distance:g} m camera distance")
-    ax.grid(True, which="both", axis="y", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    plan_time_boxes(path, labels, data, colors, "plan time (search + simplification) [ms]",
+                    f"{problem.cell} cell: {len(problem.pairs)} scan moves at {problem.distance:g} m camera distance",
+                    width=(5.0, 1.3), fontsize=8)

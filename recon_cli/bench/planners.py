@@ -126,11 +126,6 @@ def write_results(folder: Path, rows: list[RequestRow], meta: dict, peer: dict |
 
 
 def _box_plot(path: Path, rows: list[RequestRow], thesis: dict[str, np.ndarray], peer: dict | None) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     labels: list[str] = []
     data: list[list[float] | np.ndarray] = []
     colors: list[str] = []
@@ -148,15 +143,28 @@ def _box_plot(path: Path, rows: list[RequestRow], thesis: dict[str, np.ndarray],
         labels.append(f"{name}\n(thesis, MoveIt)")
         data.append(times)
         colors.append("#c0504d")
-    fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(labels)), 4.5))
+    plan_time_boxes(path, labels, data, colors, "plan time (search + simplification) [s]",
+                    "Table 4.1 problem: plan time per request (cf. thesis Figure 4.2)", width=(6.0, 1.1), fontsize=7)
+
+
+def plan_time_boxes(path: Path, labels: list[str], data: list, colors: list[str], ylabel: str, title: str,
+                    width: tuple[float, float], fontsize: int) -> None:
+    """Box plots of plan times on a log axis, one box per planner (``width``: the figure's
+    least width and its width per box [in])."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(max(width[0], width[1] * len(labels)), 4.5))
     box = ax.boxplot(data, patch_artist=True, showfliers=True)
     for patch, c in zip(box["boxes"], colors, strict=True):
         patch.set_facecolor(c)
         patch.set_alpha(0.6)
-    ax.set_xticks(range(1, len(labels) + 1), labels, fontsize=7)
+    ax.set_xticks(range(1, len(labels) + 1), labels, fontsize=fontsize)
     ax.set_yscale("log")
-    ax.set_ylabel("plan time (search + simplification) [s]")
-    ax.set_title("Table 4.1 problem: plan time per request (cf. thesis Figure 4.2)")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
     ax.grid(True, which="both", axis="y", alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=130)

@@ -25,13 +25,12 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from lxml import etree
 
 from recon_cli.bench.scan_moves import ScanMoves
 from recon_cli.errors import ReconError
 from recon_cli.geometry.transforms import invert
 from recon_cli.robot.cell import Cell
-from recon_cli.robot.urdf import attribute, child
+from recon_cli.robot.cell_file import descendant_links
 
 PEER_SCRIPT = Path(__file__).with_name("peer_vamp.py")
 VENV_VARIABLE = "RECON_VAMP_VENV"
@@ -59,16 +58,8 @@ BASE_HOLE = 0.1
 
 def _robot_links(cell: Cell) -> set[str]:
     """The arm's base link and every link under it (their shapes are VAMP's spheres)."""
-    root = etree.fromstring(cell.urdf.encode())
-    children: dict[str, list[str]] = {}
-    for j in root.iter("joint"):
-        children.setdefault(attribute(child(j, "parent"), "link"), []).append(attribute(child(j, "child"), "link"))
-    out, todo = set(), [cell.config.cell_file.base_link]
-    while todo:
-        link = todo.pop()
-        out.add(link)
-        todo += children.get(link, [])
-    return out
+    base = cell.config.cell_file.base_link
+    return {base, *descendant_links(cell.urdf, base)}
 
 
 def _around_base(center: np.ndarray, half: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -47,7 +47,7 @@ class Cell:
         """``world_T_camera`` of a view given in the world or the marker frame."""
         return world_T_camera(view, self.world_T_marker)
 
-    def _table_top(self) -> CollisionShape:
+    def table_top_shape(self) -> CollisionShape:
         """The table top's collision shape (the cell file's ``table.shape``)."""
         name = self.config.cell_file.table_shape
         return next(s for s in self.collision.env_shapes if s.name == name)
@@ -55,13 +55,13 @@ class Cell:
     @property
     def table_surface_z(self) -> float:
         """[m] world height of the table top surface (from the description, lift included)."""
-        top = self._table_top()
+        top = self.table_top_shape()
         return float(top.joint_T_shape[2, 3] + top.dims[2] / 2.0 - self.config.safety_distance)
 
     def check_camera_position(self, world_T_cam: npt.NDArray[np.float64], what: str = "view") -> None:
         """Refuse a camera pose whose origin lies inside an obstacle (table, frame, object)."""
         p = world_T_cam[:3, 3]
-        top = self._table_top()
+        top = self.table_top_shape()
         centre, half = top.joint_T_shape[:3, 3], np.asarray(top.dims) / 2.0  # axis-aligned
         if np.all(np.abs(p[:2] - centre[:2]) <= half[:2]) and p[2] < centre[2] + half[2]:
             raise InvalidViewError(

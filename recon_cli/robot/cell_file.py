@@ -32,6 +32,7 @@ from recon_cli.inputs.files import version_stamp
 from recon_cli.inputs.schema import check
 from recon_cli.inputs.yamlfile import line_of, read_yaml
 from recon_cli.paths import CELLS_DIR
+from recon_cli.robot.urdf import attribute, child
 
 CELL_FORMAT = 1
 #: the cell used when none is named
@@ -397,6 +398,22 @@ def _ancestors(root: Any, link: str) -> list[str]:
         link = up[link][0]
         out.append(link)
     return out
+
+
+def descendant_links(urdf: str, link: str, fixed_only: bool = False) -> tuple[str, ...]:
+    """The links below ``link`` in the description's tree (``link`` excluded); ``fixed_only``:
+    only those reached through fixed joints (what rides rigidly on it)."""
+    children: dict[str, list[str]] = {}
+    for j in etree.fromstring(urdf.encode()).iter("joint"):
+        if not fixed_only or j.get("type") == "fixed":
+            children.setdefault(attribute(child(j, "parent"), "link"), []).append(attribute(child(j, "child"), "link"))
+    out: list[str] = []
+    todo = list(children.get(link, []))
+    while todo:
+        name = todo.pop()
+        out.append(name)
+        todo += children.get(name, [])
+    return tuple(out)
 
 
 def _tree_order(root: Any, movable: list[str]) -> list[str]:

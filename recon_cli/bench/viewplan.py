@@ -38,10 +38,11 @@ class ViewplanRow:
     error: str = ""
 
 
-def face_on_view(name: str, d_c: float) -> View:
+def face_on_view(name: str, d_c: float, position: tuple[float, float, float] | None = None) -> View:
     """The initial view straight at the largest vertical face (thesis 5.3.3), as low as the
-    cell allows: 80 deg from the vertical (at 90 deg the camera bracket meets the table)."""
-    obj = load_object(name)
+    cell allows: 80 deg from the vertical (at 90 deg the camera bracket meets the table);
+    ``position``: where the cell's objects stand (None: the thesis cell's board centre)."""
+    obj = load_object(name, position=position)
     center, size = obj.crop_box(0.01)
     phi = 90.0 if size[0] >= size[1] else 0.0  # look along the shorter horizontal axis
     return View.from_degrees(center, d_c + 0.1, 80.0, phi)
@@ -61,7 +62,8 @@ def run_viewplan_bench(out: Path, objects=BUILT_IN, methods=METHODS, n: int = 16
         config = DEFAULTS.replace(cell=cell or DEFAULTS.cell, scene=SceneConfig(name), seed=seed,
                                   sensor=SensorConfig(DEFAULTS.sensor.noise, resolution),
                                   viewplan=replace(DEFAULTS.viewplan, n=n, d_c=d_c), realism=realism)
-        opts = AutoscanOptions(folder, config, face_on_view(name, d_c) if initial == "face-on" else None,
+        face_on = face_on_view(name, d_c, config.cell.cell_file.object_position) if initial == "face-on" else None
+        opts = AutoscanOptions(folder, config, face_on,
                                Method(method), pictures=method == "ellipsoid", run={"command": "bench viewplan"},
                                page=False)
         try:

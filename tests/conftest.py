@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,11 @@ import pytest
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.description import CellConfig, CellKind
 from recon_cli.thesis import BENCH_CUBE
+
+# A job started with & by a non-interactive shell inherits SIGINT ignored, and Python then
+# keeps ignoring it: the tests of Ctrl-C need Python's own handler whatever started the run.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = ROOT.parent / "shared" / "data"

@@ -25,6 +25,7 @@ from recon_cli.backends.sim.scene import build_scene, mujoco
 
 if TYPE_CHECKING:
     from recon_cli.backends.hardware.ads_config import AdsConfig
+    from recon_cli.backends.hardware.franka_config import FrankaConfig
     from recon_cli.backends.hardware.genicam import GenICamConfig
     from recon_cli.backends.hardware.realsense import RealSenseConfig
     from recon_cli.backends.hardware.replay import ReplayConfig
@@ -33,7 +34,7 @@ if TYPE_CHECKING:
     from recon_cli.robot.cell import Cell
 
 #: the typed section of a station file's ``robot:`` / ``camera:`` (one class per adapter)
-RobotConfig: TypeAlias = "AdsConfig | SimRobotConfig"
+RobotConfig: TypeAlias = "AdsConfig | FrankaConfig | SimRobotConfig"
 CameraConfig: TypeAlias = "SimCameraConfig | GenICamConfig | RealSenseConfig | ReplayConfig"
 #: the config class of one robot / camera adapter
 RobotConfigT = TypeVar("RobotConfigT", bound=RobotConfig)
@@ -104,6 +105,18 @@ def _open_ads(config: AdsConfig, around: Surroundings) -> RobotPart:
     return AdsRobot(config, around.cell.joint_names, around.cell.kin.limits)
 
 
+def _read_franka(mapping: dict, where: str) -> FrankaConfig:
+    from recon_cli.backends.hardware.franka_config import FrankaConfig
+
+    return FrankaConfig.from_mapping(mapping, where)
+
+
+def _open_franka(config: FrankaConfig, around: Surroundings) -> RobotPart:
+    from recon_cli.backends.hardware.franka import FrankaRobot
+
+    return FrankaRobot(config, around.cell.joint_names, around.cell.kin.limits)
+
+
 def _read_sim_robot(mapping: dict, where: str) -> SimRobotConfig:
 
     return SimRobotConfig.from_mapping(mapping, where)
@@ -143,6 +156,7 @@ def _driver_camera(module: str, config_class: str) -> tuple[Callable, Callable]:
 
 ROBOT_ADAPTERS: dict[str, RobotAdapter[Any]] = {
     "ads": RobotAdapter("ads", simulated=False, physical=True, read=_read_ads, open=_open_ads),
+    "franka": RobotAdapter("franka", simulated=False, physical=True, read=_read_franka, open=_open_franka),
     "sim": RobotAdapter("sim", simulated=True, physical=False, read=_read_sim_robot, open=_open_sim_robot),
 }
 

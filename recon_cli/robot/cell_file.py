@@ -76,6 +76,7 @@ class JointLimit:
     velocity: float | None = None
     acceleration: float | None = None
     effort: float | None = None
+    jerk: float | None = None
 
 
 @dataclass(frozen=True)
@@ -305,7 +306,7 @@ def _limits(doc: Any, lines: _Lines) -> LimitTable:
         lines.rows.setdefault(f"limits.joints.{name}", at)
         rows.append(JointLimit(str(name), entry.get("type"), *(entry.get(k) for k in
                                                                 ("lower", "upper", "velocity", "acceleration",
-                                                                 "effort"))))
+                                                                 "effort", "jerk"))))
     return LimitTable(tuple(rows), section.get("soft_margin_revolute_deg"), section.get("soft_margin_prismatic_m"),
                       where)
 

@@ -3,7 +3,8 @@
 Position, soft position, velocity and effort limits come from the URDF (``<limit>`` and
 ``<safety_controller>``) unless the cell file's limits give them (revolute joints in deg,
 prismatic in m; a soft margin there puts the soft limits that far inside the hard ones);
-acceleration limits, which URDF cannot hold, come from the cell file. Units: m, rad, s.
+acceleration limits and the controller's jerk limits, which URDF cannot hold, come from the
+cell file. Units: m, rad, s.
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ class JointLimits:
     soft_lower, soft_upper: planning limits inside the hard ones (10 deg for revolute joints)
     velocity: [m/s or rad/s]; acceleration: [m/s^2 or rad/s^2]; effort: [N or N m]
     prismatic: True for the linear axes
+    jerk: [m/s^3 or rad/s^3] the controller's jerk limits where the cell file gives them
+        (inf where it does not: the joint's controller has none recon must keep)
     """
 
     names: tuple[str, ...]
@@ -39,6 +42,7 @@ class JointLimits:
     acceleration: npt.NDArray[np.float64]
     effort: npt.NDArray[np.float64]
     prismatic: npt.NDArray[np.bool_]
+    jerk: npt.NDArray[np.float64] | None = None
 
     @property
     def n(self) -> int:
@@ -85,7 +89,8 @@ def limits_from_urdf(urdf: str, joint_names: tuple[str, ...] | list[str], table:
             slo, shi = lo, hi
         velocity = given.velocity * k if given.velocity is not None else float(attribute(limit, "velocity"))
         effort = given.effort if given.effort is not None else float(attribute(limit, "effort"))
-        rows.append((lo, hi, slo, shi, velocity, given.acceleration * k, effort, prismatic))
+        jerk = given.jerk * k if given.jerk is not None else math.inf
+        rows.append((lo, hi, slo, shi, velocity, given.acceleration * k, effort, prismatic, jerk))
     cols = list(zip(*rows, strict=True))
     return JointLimits(
         names=tuple(joint_names),
@@ -97,4 +102,5 @@ def limits_from_urdf(urdf: str, joint_names: tuple[str, ...] | list[str], table:
         acceleration=np.array(cols[5]),
         effort=np.array(cols[6]),
         prismatic=np.array(cols[7], dtype=bool),
+        jerk=np.array(cols[8]),
     )

@@ -103,7 +103,7 @@ class SimScene:
     drives: Drives
 
 
-def _mujoco_urdf(config: CellConfig) -> str:
+def mujoco_urdf(config: CellConfig) -> str:
     """URDF text of the cell (real sizes, the config's robot base and hand-eye transform)
     with MuJoCo's compiler options inside <robot>."""
     urdf = expand_urdf(dataclasses.replace(config, safety_distance=0.0))
@@ -127,7 +127,7 @@ def build_scene(config: CellConfig, scene_object: SceneObject | None = None,
                 timestep: float = 0.001) -> SimScene:
     sensor = sensor or cell_sensor(config.cell_file)
     board = board or cell_board(config.cell_file)
-    urdf = _mujoco_urdf(config)
+    urdf = mujoco_urdf(config)
     spec = mujoco.MjSpec.from_string(urdf)
     spec.option.timestep = timestep
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST

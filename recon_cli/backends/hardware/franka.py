@@ -1,0 +1,311 @@
+"""A Franka robot (FR3, Panda) over libfranka's own protocol, through pylibfranka.
+
+recon streams the checked trajectory as joint positions at the controller's 1 kHz
+(:mod:`recon_cli.backends.hardware.setpoint_stream`: smoothed to the jerk limit, every
+finite difference within the cell's velocity, acceleration and jerk limits, refused before
+anything is sent otherwise), in libfranka's ``readOnce``/``writeOnce`` loop with the joint
+impedance controller, then waits until the robot has settled at the goal and reports the
+measured joints.
+
+Faults stop the robot and raise :class:`~recon_cli.errors.RobotFault`, completed scans stay:
+a control error or reflex of the controller (its error flags as text: the controller has
+stopped the robot itself), connection loss (the controller stops a robot whose commands
+stop: communication constraints), a tracking error over its bound, no completion in time,
+a robot that does not settle, measured joints that are not numbers or outside the limits.
+Ctrl-C and SIGTERM in a motion stop the robot before they propagate. The controller's error
+state is cleared only when the user asks (``recon station recover``): a robot found in
+reflex mode is refused with its errors.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from recon_cli import install_hint
+from recon_cli.backends.base import ExecutionReport
+from recon_cli.backends.hardware.franka_config import REST_SPREAD, SETTLE_STATES, FrankaConfig
+from recon_cli.backends.hardware.setpoint_stream import SetpointStream, setpoint_stream
+from recon_cli.errors import HardwareUnavailable, InputError, RobotFault
+from recon_cli.planning.trajectory import Trajectory
+from recon_cli.robot.limits import JointLimits
+
+#: the FCI's command rate
+PERIOD = 0.001
+#: how long a stop may take to bring the joints to rest before it counts as unconfirmed
+STOP_BOUND = 2.0
+
+
+def _spread(window: list[np.ndarray]) -> float:
+    """Largest range of any joint over consecutive states [rad]."""
+    w = np.asarray(window)
+    return float(np.max(w.max(axis=0) - w.min(axis=0)))
+
+
+def _pylibfranka():
+    try:
+        import pylibfranka
+    except ImportError:
+        raise HardwareUnavailable("the Franka robot adapter needs pylibfranka, which is not installed",
+                                  hint=install_hint("franka")) from None
+    return pylibfranka
+
+
+def error_names(errors) -> list[str]:
+    """The flags set in a libfranka ``Errors`` (e.g. ``joint_motion_generator_velocity_discontinuity``)."""
+    if errors is None:
+        return []
+    return [name for name in dir(errors) if not name.startswith("_") and getattr(errors, name, False) is True]
+
+
+def _library_text(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text.removeprefix("libfranka: ") or type(exc).__name__
+
+
+class FrankaRobot:
+    """RobotBackend of a Franka arm's controller (FCI) over pylibfranka."""
+
+    def __init__(self, config: FrankaConfig, joint_names: tuple[str, ...], limits: JointLimits) -> None:
+        p = _pylibfranka()
+        if len(joint_names) != 7:
+            raise InputError(f"the franka adapter drives the 7 joints of a Franka arm; the cell plans "
+                             f"{len(joint_names)}", hint="name a cell of a Franka arm (cells/fr3.yaml)")
+        self._p = p
+        self.config = config
+        self.joint_names = tuple(joint_names)
+        self.limits = limits
+        self._measured_lo = np.asarray(limits.lower, dtype=float) - config.tracking_bound
+        self._measured_hi = np.asarray(limits.upper, dtype=float) + config.tracking_bound
+        realtime = p.RealtimeConfig.kEnforce if config.realtime == "enforce" else p.RealtimeConfig.kIgnore
+        self.robot: Any = None  # pylibfranka.Robot; None once closed
+        try:
+            self.robot = p.Robot(config.ip, realtime)
+            state = self.robot.read_once()
+        except (p.FrankaException, RuntimeError) as exc:
+            self.robot = None
+            raise RobotFault(f"cannot reach the Franka controller at {config.ip} ({_library_text(exc)})",
+                             kind="connection", stopped=False,
+                             hint="check the address, the network and that FCI is activated in Desk") from None
+        if state.robot_mode == p.RobotMode.Reflex:
+            names = error_names(state.current_errors) or error_names(state.last_motion_errors)
+            self.close()
+            raise RobotFault(f"the Franka at {config.ip} is in reflex mode (errors: {', '.join(names) or 'none'}); "
+                             "nothing was moved", kind="control", stopped=True,
+                             hint="find the cause, then clear it with recon station recover STATION")
+        self._checked(np.asarray(state.q, dtype=float))
+
+    # ------------------------------------------------------------------ state
+    def _state(self):
+        p = self._p
+        if self.robot is None:
+            raise RobotFault("the connection to the Franka is closed", kind="connection", stopped=False)
+        try:
+            return self.robot.read_once()
+        except (p.FrankaException, RuntimeError) as exc:
+            raise self._lost(exc, moving=False) from None
+
+    def _checked(self, q: np.ndarray, at: str = "") -> np.ndarray:
+        if q.shape != (7,):
+            raise RobotFault(f"the controller reports {q.size} joint positions, a Franka has 7{at}",
+                             kind="measurement", stopped=False)
+        bad = ~np.isfinite(q) | (q < self._measured_lo) | (q > self._measured_hi)
+        if np.any(bad):
+            j = int(np.flatnonzero(bad)[0])
+            stopped = self._halt()
+            raise RobotFault(f"the measured position of {self.joint_names[j]} is {q[j]:.4g} rad, outside its limits "
+                             f"[{self.limits.lower[j]:.4f}, {self.limits.upper[j]:.4f}] rad widened by the tracking "
+                             f"bound {self.config.tracking_bound:g} rad{at}; {self._stop_text(stopped)}",
+                             kind="measurement", joint=self.joint_names[j], value=float(q[j]), stopped=stopped,
+                             hint="check that the station's cell is this robot")
+        return q
+
+    def measured_joints(self) -> np.ndarray:
+        """The measured joints [rad] (checked: finite, within the limits widened by the tracking bound)."""
+        return self._checked(np.asarray(self._state().q, dtype=float))
+
+    def errors(self) -> list[str]:
+        """The controller's current error flags (empty when none)."""
+        return error_names(self._state().current_errors)
+
+    # ------------------------------------------------------------------ RobotBackend
+    def stream(self, trajectory: Trajectory, commanded: np.ndarray | None = None) -> SetpointStream:
+        """The trajectory as the checked 1 kHz setpoints, beginning at the controller's
+        ``commanded`` joints (RobotFault before anything is sent)."""
+        return setpoint_stream(trajectory, self.limits, self.joint_names, PERIOD, self.config.jerk_share,
+                               self.config.deviation_bound, start=commanded)
+
+    def execute(self, trajectory: Trajectory) -> ExecutionReport:
+        """Stream a checked trajectory at 1 kHz, then wait until the robot has settled at its
+        goal; every fault, Ctrl-C and SIGTERM stops the robot before the exception leaves."""
+        p = self._p
+        state = self._state()
+        start = self._checked(np.asarray(state.q, dtype=float))
+        commanded = self._checked(np.asarray(state.q_d, dtype=float), " (its commanded joints)")
+        err = np.maximum(np.abs(start - trajectory.start), np.abs(commanded - trajectory.start))
+        if np.any(err > self.config.tracking_bound):
+            j = int(np.argmax(err))
+            raise RobotFault(f"the robot is not at the trajectory's start ({self.joint_names[j]} is {err[j]:.4f} rad "
+                             "away); nothing was sent", kind="start", joint=self.joint_names[j], value=float(err[j]),
+                             bound=self.config.tracking_bound, stopped=False, hint="plan from the measured joints")
+        stream = self.stream(trajectory, commanded)
+        q = stream.q
+        try:
+            max_err = self._follow(stream)
+            final, settle_time = self._settle(q[-1])
+        except RobotFault:
+            raise
+        except (p.FrankaException, RuntimeError) as exc:
+            raise self._control_fault(exc) from None
+        except BaseException:  # Ctrl-C, SIGTERM (recon_cli.interrupts), a bug
+            self._halt()
+            raise
+        return ExecutionReport(duration=stream.duration, settle_time=settle_time, max_tracking_error=max_err,
+                               final_error=final, settled=True)
+
+    def _follow(self, stream: SetpointStream) -> np.ndarray:
+        """The 1 kHz loop: one setpoint per controller cycle (a cycle the controller reports
+        as lost advances the index with it). Returns the largest tracking error per joint."""
+        p, cfg = self._p, self.config
+        q = stream.q
+        last = len(q) - 1
+        control = self.robot.start_joint_position_control(p.ControllerMode.JointImpedance)
+        index = 0
+        sent = q[0]
+        max_err = np.zeros(7)
+        deadline = time.monotonic() + stream.duration + cfg.time_margin
+        while True:
+            state, period = control.readOnce()
+            measured = np.asarray(state.q, dtype=float)
+            err = np.abs(measured - sent)
+            max_err = np.maximum(max_err, err)
+            if np.any(~np.isfinite(measured)) or np.any(err > cfg.tracking_bound):
+                j = int(np.argmax(np.where(np.isfinite(err), err, np.inf)))
+                del control
+                stopped = self._halt()
+                raise RobotFault(f"tracking error of {self.joint_names[j]} is {err[j]:.4f} rad, above the bound "
+                                 f"{cfg.tracking_bound:g} rad, at setpoint {index} of {last + 1}; "
+                                 f"{self._stop_text(stopped)}", kind="tracking", joint=self.joint_names[j],
+                                 value=float(err[j]), bound=cfg.tracking_bound, stopped=stopped,
+                                 hint="check the load and the collision thresholds; completed scans are kept")
+            index = min(index + round(period.to_sec() / PERIOD), last)
+            sent = q[index]
+            command = p.JointPositions(sent.tolist())
+            command.motion_finished = index == last
+            control.writeOnce(command)
+            if index == last:
+                return max_err
+            if time.monotonic() > deadline:
+                del control
+                stopped = self._halt()
+                raise RobotFault(f"the motion did not complete within {stream.duration + cfg.time_margin:.1f} s "
+                                 f"(setpoint {index} of {last + 1}); {self._stop_text(stopped)}", kind="timeout",
+                                 stopped=stopped, hint="the control loop fell behind the controller; completed "
+                                                       "scans are kept")
+
+    def _settle(self, goal: np.ndarray) -> tuple[np.ndarray, float]:
+        """Wait until every joint is within the settle tolerance of the goal on SETTLE_STATES
+        consecutive states (1 ms apart) and has moved less than REST_SPREAD among them; the
+        final error and the time it took. (Positions, not the reported velocities: a robot
+        holding still reports velocity noise of several hundredths of a rad/s.)"""
+        cfg = self.config
+        t0 = time.monotonic()
+        window: list[np.ndarray] = []
+        while True:
+            state = self._state()
+            measured = self._checked(np.asarray(state.q, dtype=float), " after the motion")
+            final = np.abs(measured - goal)
+            window = [*window, measured][-SETTLE_STATES:] if np.all(final <= cfg.settle_tolerance) else []
+            if len(window) == SETTLE_STATES and _spread(window) < REST_SPREAD:
+                return final, time.monotonic() - t0
+            if time.monotonic() - t0 > cfg.settle_timeout:
+                j = int(np.argmax(final))
+                stopped = self._halt()
+                raise RobotFault(f"the robot did not settle at the goal within {cfg.settle_timeout:g} s "
+                                 f"({self.joint_names[j]} is {final[j]:.4g} rad away, tolerance "
+                                 f"{cfg.settle_tolerance:g} rad); no scan was taken; {self._stop_text(stopped)}",
+                                 kind="settle", joint=self.joint_names[j], value=float(final[j]),
+                                 bound=cfg.settle_tolerance, stopped=stopped,
+                                 hint="check the load and robot.franka.settle_tolerance; completed scans are kept")
+
+    # ------------------------------------------------------------------ faults and stopping
+    def _control_fault(self, exc: BaseException) -> RobotFault:
+        """A libfranka exception of a motion: a control error (the controller stopped the
+        robot, its flags as text) or a lost connection."""
+        p = self._p
+        if isinstance(exc, p.NetworkException):
+            return self._lost(exc, moving=True)
+        names: list[str] = []
+        try:
+            state = self.robot.read_once()
+            names = error_names(state.last_motion_errors) or error_names(state.current_errors)
+        except (p.FrankaException, RuntimeError):
+            pass
+        text = _library_text(exc)
+        names = [n for n in names if n not in text]
+        flags = f" (errors: {', '.join(names)})" if names else ""
+        stopped = self._halt()
+        return RobotFault(f"the Franka controller aborted the motion: {text}{flags}; "
+                          f"{self._stop_text(stopped)}", kind="control", stopped=stopped,
+                          hint="find the cause, clear the error with recon station recover STATION; completed scans "
+                               "are kept")
+
+    def _lost(self, exc: BaseException, moving: bool) -> RobotFault:
+        what = "in a motion" if moving else "at rest"
+        return RobotFault(f"lost the connection to the Franka controller at {self.config.ip} {what} "
+                          f"({_library_text(exc)}); the controller stops a robot whose commands stop",
+                          kind="connection", stopped=False,
+                          hint="check the robot and the network before moving it again; completed scans are kept")
+
+    def stop(self) -> bool:
+        """Stop every motion and hold; True when the joints came to rest within STOP_BOUND."""
+        return self._halt()
+
+    def _halt(self) -> bool:
+        p = self._p
+        if self.robot is None:
+            return False
+        try:
+            self.robot.stop()
+        except (p.FrankaException, RuntimeError):
+            pass
+        deadline = time.monotonic() + STOP_BOUND
+        window: list[np.ndarray] = []
+        while time.monotonic() < deadline:
+            try:
+                state = self.robot.read_once()
+            except (p.FrankaException, RuntimeError):
+                return False
+            window = [*window, np.asarray(state.q, dtype=float)][-SETTLE_STATES:]
+            if len(window) == SETTLE_STATES and _spread(window) < REST_SPREAD:
+                return True
+        return False
+
+    @staticmethod
+    def _stop_text(stopped: bool) -> str:
+        return "the robot was stopped" if stopped else \
+            f"the stop could not be confirmed within {STOP_BOUND:g} s: check the robot"
+
+    def recover(self) -> list[str]:
+        """libfranka's automatic error recovery; the errors it cleared."""
+        p = self._p
+        names = self.errors()
+        try:
+            self.robot.automatic_error_recovery()
+        except (p.FrankaException, RuntimeError) as exc:
+            raise RobotFault(f"the Franka controller refused the error recovery ({_library_text(exc)})",
+                             kind="control", stopped=True,
+                             hint="release the external activation device or see Desk") from None
+        return names
+
+    def close(self) -> None:
+        """Release the connection (idempotent); the controller holds the robot."""
+        self.robot = None
+
+    def __enter__(self) -> FrankaRobot:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,198 @@
+"""franka-sim as a stand-in for a Franka robot: libfranka's own network protocol on loopback.
+
+franka-sim (PyPI, Apache-2.0) is a MuJoCo server that speaks libfranka's robot protocol
+(version 10, the FR3's) on TCP port 1337 plus its 1 kHz UDP state and command stream, and
+checks commanded motions against the FCI's limits as the real controller does. recon's
+Franka adapter is tested against it through pylibfranka, the real client library.
+
+franka-sim pins numpy 1.26 and MuJoCo < 3.3, so it runs in its own virtual environment
+(``bash install.sh --franka-sim`` builds ``.venvs/franka-sim`` beside the checkout;
+``RECON_FRANKA_SIM_VENV`` names another). It would download its FR3 model on first use; it
+is given the cell's own description instead (:func:`standin_mjcf`: the expanded URDF
+compiled by MuJoCo with the drives file's armature and friction, no meshes), so the
+stand-in moves the same kinematics and inertias recon plans with.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from recon_cli.backends.sim.scene import drives, mujoco_urdf
+from recon_cli.errors import ReconError
+from recon_cli.lazy import lazy_module
+from recon_cli.paths import ROOT
+from recon_cli.robot.cell import Cell
+from recon_cli.robot.description import CellConfig
+from recon_cli.robot.poses import named_configuration
+
+if TYPE_CHECKING:
+    import mujoco
+else:
+    mujoco = lazy_module("mujoco")
+
+#: libfranka's command port (fixed in libfranka: a robot is reached by its address alone)
+COMMAND_PORT = 1337
+VENV_ENV = "RECON_FRANKA_SIM_VENV"
+DEFAULT_VENV = ROOT / ".venvs" / "franka-sim"
+
+#: run inside franka-sim's environment: the server bound to one address, the gripper off,
+#: motions checked against the FCI's limits and aborted on a violation as the robot does
+_LAUNCHER = """
+import logging, signal, sys
+logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+import franka_sim.mujoco_franka_sim as arm
+from franka_sim import FrankaSimServer
+host, port = sys.argv[1], int(sys.argv[2])
+if len(sys.argv) > 3:  # where the arm stands at start-up (the module's start pose, changed in place)
+    arm.ARM_INITIAL_Q[:] = [float(v) for v in sys.argv[3].split(",")]
+server = FrankaSimServer(host=host, port=port, enable_gripper=False, enforce_motion_limits=True)
+def _quit(*_):
+    raise KeyboardInterrupt
+signal.signal(signal.SIGTERM, _quit)
+try:
+    server.start()
+except KeyboardInterrupt:
+    pass
+finally:
+    server.stop()
+"""
+
+
+def standin_venv() -> Path | None:
+    """franka-sim's virtual environment, None when it is not built."""
+    root = Path(os.environ.get(VENV_ENV) or DEFAULT_VENV).expanduser()
+    python = root / "bin" / "python"
+    return root if python.exists() else None
+
+
+def standin_mjcf(config: CellConfig) -> str:
+    """MJCF text of the cell's robot for franka-sim: the description's bodies, joints,
+    inertias and (real-size) collision primitives, the drives file's armature and friction.
+    franka-sim finds the arm by its ``*joint1`` .. ``*joint7`` and ``*link7`` names."""
+    spec = mujoco.MjSpec.from_string(mujoco_urdf(config))
+    d = drives(config.cell_file)
+    for joint in spec.joints:
+        joint.armature = d.armature_of(joint.name)
+        joint.damping = [d.friction_of(joint.name), 0.0, 0.0]
+    spec.compile()
+    return spec.to_xml()
+
+
+@dataclass
+class FrankaStandin:
+    """A running franka-sim server (``start_standin``); ``stop`` ends it, ``kill`` cuts it off
+    as a pulled network cable or a crashed controller would."""
+
+    host: str
+    port: int
+    process: subprocess.Popen = field(repr=False)
+    log_path: Path
+    workdir: Path
+
+    def log_tail(self, lines: int = 30) -> str:
+        try:
+            return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])
+        except OSError:
+            return ""
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def kill(self) -> None:
+        if self.alive():
+            self.process.kill()
+            self.process.wait(10)
+
+    def stop(self, grace: float = 20.0) -> None:
+        if self.alive():
+            self.process.send_signal(signal.SIGTERM)
+            try:
+                self.process.wait(grace)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(10)
+        shutil.rmtree(self.workdir, ignore_errors=True)
+
+    def __enter__(self) -> FrankaStandin:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def _port_open(host: str, port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.settimeout(0.2)
+        return s.connect_ex((host, port)) == 0
+
+
+def start_standin(config: CellConfig, host: str = "127.0.0.1", port: int = COMMAND_PORT,
+                  start: Sequence[float] | None = None, venv: Path | None = None,
+                  timeout: float = 120.0) -> FrankaStandin:
+    """Start franka-sim on ``host:port`` with the cell's robot standing at ``start`` [rad]
+    (default: the cell's home pose) and wait until it accepts connections. Raises ReconError when its environment is missing, the port is taken or it
+    does not come up (with the tail of its log)."""
+    venv = venv or standin_venv()
+    if venv is None:
+        raise ReconError("franka-sim's environment is not built",
+                         hint=f"bash install.sh --franka-sim (or set {VENV_ENV} to a venv with franka-sim)")
+    if _port_open(host, port):
+        raise ReconError(f"{host}:{port} is taken: a robot or another franka-sim already listens there",
+                         hint="stop it first")
+    workdir = Path(tempfile.mkdtemp(prefix="recon-franka-sim-"))
+    model = workdir / "fr3.xml"
+    model.write_text(standin_mjcf(config))
+    if start is None:
+        start = [float(v) for v in named_configuration(config.kind, "home", Cell(config).joint_names)]
+    log_path = workdir / "server.log"
+    env = dict(os.environ, FR3_MJCF=str(model), MUJOCO_GL="egl", PYTHONUNBUFFERED="1")
+    env.pop("PYTHONPATH", None)
+    with log_path.open("wb") as log:
+        process = subprocess.Popen([str(venv / "bin" / "python"), "-c", _LAUNCHER, host, str(port),
+                                    ",".join(repr(float(v)) for v in start)],
+                                   stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
+                                   cwd=workdir, start_new_session=True)
+    standin = FrankaStandin(host, port, process, log_path, workdir)
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if not standin.alive():
+            tail = standin.log_tail()
+            standin.stop()
+            raise ReconError(f"franka-sim ended at start-up:\n{tail}", hint="see its log above")
+        if _port_open(host, port):
+            return standin
+        time.sleep(0.1)
+    tail = standin.log_tail()
+    standin.stop()
+    raise ReconError(f"franka-sim did not listen on {host}:{port} within {timeout:g} s:\n{tail}")
+
+
+@contextlib.contextmanager
+def running_standin(config: CellConfig, **kwargs):
+    """``start_standin`` as a context manager (stopped on leaving)."""
+    standin = start_standin(config, **kwargs)
+    try:
+        yield standin
+    finally:
+        standin.stop()
+
+
+if __name__ == "__main__":  # pragma: no cover (a manual check: python -m recon_cli.backends.sim.franka_standin)
+    from recon_cli.robot.description import CellName
+
+    with running_standin(CellConfig(kind=CellName.parse(sys.argv[1] if len(sys.argv) > 1 else "fr3"))) as s:
+        print(f"franka-sim on {s.host}:{s.port}, log {s.log_path}; Ctrl-C ends it")
+        with contextlib.suppress(KeyboardInterrupt):
+            s.process.wait()

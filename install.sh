@@ -2,7 +2,16 @@
 # Installs recon and everything it needs on Debian 12 with Python >= 3.11:
 # Debian libraries (Open3D needs libusb-1.0; MuJoCo's offscreen rendering needs EGL/Mesa),
 # then the Python packages from PyPI, with recon itself in editable mode.
+#   --franka-sim   also build franka-sim's own environment (.venvs/franka-sim), the stand-in
+#                  Franka the tests drive through pylibfranka (it pins numpy 1.26 and MuJoCo < 3.3)
 set -euo pipefail
+FRANKA_SIM=0
+for arg in "$@"; do
+  case "$arg" in
+    --franka-sim) FRANKA_SIM=1 ;;
+    *) echo "install.sh: unknown option $arg (known: --franka-sim)" >&2; exit 2 ;;
+  esac
+done
 cd "$(dirname "$0")"
 
 SUDO=""
@@ -21,3 +30,9 @@ if "$PY" -c 'import sys, sysconfig, pathlib; sys.exit(0 if (pathlib.Path(sysconf
 fi
 "$PY" -m pip install -q --disable-pip-version-check -e ".[dev]"
 echo "== recon installed: $(command -v recon || echo "$PY -m recon_cli")"
+
+if [ "$FRANKA_SIM" = 1 ]; then
+  echo "== franka-sim stand-in (.venvs/franka-sim)"
+  "$PY" -m venv .venvs/franka-sim
+  .venvs/franka-sim/bin/python -m pip install -q --disable-pip-version-check "franka-sim==1.1.7"
+fi

@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from recon_cli.backends.station_file import load_station
 from recon_cli.cli.app import app
 from recon_cli.cli.options import (
     MAX_THETA,
@@ -85,13 +86,15 @@ def autoscan(
         resolution=("sensor.resolution", resolution), seed=("seed", seed), n=("viewplan.n", n),
         **({} if dc is None else {"dc": ("viewplan.d_c", dc)}), m=("viewplan.m", m), sigma=("viewplan.sigma", sigma),
         realism=("realism", lambda: realism_profile(realism))))
+    station = base.pick("station", station, base.stored("station"))
+    station = None if station is None else Path(station)
+    if station is not None:  # the station file's cell is the one scanned in
+        config = config.replace(cell=load_station(station).cell)
     if dc is None and base.path is None:  # the camera distance of the cell's sensor
         config = config.with_values({"viewplan.d_c": cell_sensor(config.cell.cell_file).default_distance})
     object_name, scale, dc = config.scene.object_name, config.scene.object_scale, config.viewplan.d_c
     initial = base.pick("initial", initial, base.stored("initial"))
     pictures = base.pick("pictures", pictures, base.stored("pictures", pictures))
-    station = base.pick("station", station, base.stored("station"))
-    station = None if station is None else Path(station)
     view = None
     if initial is not None:
         theta, phi = parse_vector(initial, 2, "--initial", "degrees")

@@ -8,7 +8,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from recon_cli.backends.hardware.station import check_station, refuse_unready
+from recon_cli.backends.hardware.station import check_station, recover_robot, refuse_unready
 from recon_cli.backends.station_file import load_station
 from recon_cli.cli.app import app
 from recon_cli.cli.options import D
@@ -39,3 +39,16 @@ def check(
                   f"fx {result.intrinsics['fx']:.1f} px, fy {result.intrinsics['fy']:.1f} px")
     refuse_unready(sf, result)
     console.print(f"station ok in {result.seconds:.2f} s")
+
+
+@station_app.command("recover")
+def recover(
+    station: Annotated[Path, typer.Argument(help="Station file (YAML; docs/hardware.md).")],
+) -> None:
+    """Clear the robot controller's error state after a reflex or control error (libfranka's
+    automatic error recovery); recon never does it by itself. Find the cause first."""
+
+    sf = load_station(station)
+    cleared = recover_robot(sf)
+    console.print(f"station {sf.name!r}: the {sf.robot_adapter} robot's errors cleared"
+                  + (f" ({', '.join(cleared)})" if cleared else " (none were set)"))

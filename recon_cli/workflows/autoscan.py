@@ -227,6 +227,10 @@ class Autoscan:
             self.trajectory_s += move.execution.duration
             self._scan(T0)
             views.append(ViewRecord(T0, Status.COMPLETED, 0, move.plan.total_time, move.execution.duration))
+            if len(self._partial_points()) < 4:
+                raise ReconError("the initial view saw no point of the object inside its box",
+                                 hint="check that the object stands where the cell's objects stand, or give "
+                                      "--initial and --dc within the camera's range")
             self.progress("scans", 1, vp.n)
             it, stuck = 0, 0
             while len(self.store) < vp.n and stuck < 3:

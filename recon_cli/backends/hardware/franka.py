@@ -68,7 +68,8 @@ def _library_text(exc: BaseException) -> str:
 class FrankaRobot:
     """RobotBackend of a Franka arm's controller (FCI) over pylibfranka."""
 
-    def __init__(self, config: FrankaConfig, joint_names: tuple[str, ...], limits: JointLimits) -> None:
+    def __init__(self, config: FrankaConfig, joint_names: tuple[str, ...], limits: JointLimits,
+                 refuse_reflex: bool = True) -> None:
         p = _pylibfranka()
         if len(joint_names) != 7:
             raise InputError(f"the franka adapter drives the 7 joints of a Franka arm; the cell plans "
@@ -89,7 +90,7 @@ class FrankaRobot:
             raise RobotFault(f"cannot reach the Franka controller at {config.ip} ({_library_text(exc)})",
                              kind="connection", stopped=False,
                              hint="check the address, the network and that FCI is activated in Desk") from None
-        if state.robot_mode == p.RobotMode.Reflex:
+        if refuse_reflex and state.robot_mode == p.RobotMode.Reflex:
             names = error_names(state.current_errors) or error_names(state.last_motion_errors)
             self.close()
             raise RobotFault(f"the Franka at {config.ip} is in reflex mode (errors: {', '.join(names) or 'none'}); "

@@ -141,6 +141,32 @@ def check_station(station: StationFile, seed: int) -> StationCheck:
         (float(depth[valid].min()), float(depth[valid].max())) if valid.any() else None, time.perf_counter() - t0)
 
 
+def recover_robot(station: StationFile) -> list[str]:
+    """Clear the error state of the station's robot (libfranka's automatic error recovery),
+    only when the user asks for it; the errors it cleared. A robot adapter without an error
+    recovery over its protocol is one line."""
+    cell = Cell(station.cell)
+    start = named_configuration(station.cell.kind, "home", cell.joint_names)
+    around = Surroundings(cell, None, start, np.random.default_rng(0))
+    adapter = ROBOT_ADAPTERS[station.robot_adapter]
+    if station.robot_adapter != "franka":
+        raise ReconError(f"the {adapter.name} robot adapter has no error recovery over its protocol",
+                         hint="clear the fault where the controller shows it (the PLC, the simulation)")
+    try:
+        robot = adapter.open(station.robot, around)
+    except RobotFault as exc:
+        if exc.kind != "control":
+            raise
+        # in reflex mode: open the connection without the refusal to recover from it
+        from recon_cli.backends.hardware.franka import FrankaRobot
+
+        robot = FrankaRobot(station.robot, cell.joint_names, cell.kin.limits, refuse_reflex=False)  # type: ignore[arg-type]
+    try:
+        return robot.recover()  # type: ignore[attr-defined]
+    finally:
+        robot.close()
+
+
 def refuse_unready(station: StationFile, result: StationCheck) -> None:
     """One line when a run must not start on the station (``StationCheck.problem``)."""
     problem = result.problem()

@@ -17,9 +17,12 @@ does; ``ideal`` (the default) makes them equal, as every simulation before the p
 
 Profiles are YAML files (robot/realism/NAME.yaml for the built-in ones, or any file),
 angles in degrees and lengths in millimetres at the edge (the key names say which), SI
-units inside. Every number a profile draws (offsets, error directions, pixel effects) comes
-from generators spawned from the session's generator, so a seed gives the same cell and the
-same images. A profile error is one line naming ``FILE: key``.
+units inside. ``extends: NAME`` starts a profile from a built-in one: each key the profile
+gives in a section replaces that key of the built-in profile as a whole, the rest is
+inherited (``lab`` is ``thesis`` with the cell's own camera). Every number a profile draws
+(offsets, error directions, pixel effects) comes from generators spawned from the session's
+generator, so a seed gives the same cell and the same images. A profile error is one line
+naming ``FILE: key``.
 
 This module is light (numpy, yaml on demand): the configuration imports it.
 """
@@ -39,8 +42,10 @@ from recon_cli.paths import ROBOT_DIR
 from recon_cli.perception.camera_model import Intrinsics
 
 REALISM_DIR = ROBOT_DIR / "realism"
-BUILT_IN = ("ideal", "thesis")
+BUILT_IN = ("ideal", "thesis", "lab")
 PROFILE_FORMAT = 1
+#: the sections of a profile, which ``extends`` merges key by key
+SECTIONS = ("kinematics", "camera", "depth", "image")
 
 
 @dataclass(frozen=True)
@@ -184,10 +189,8 @@ def load_profile(name_or_path: str | Path) -> RealismProfile:
 def parse_profile(text: str, where: str = "<profile>") -> RealismProfile:
     """Parse a profile's YAML text; ``where`` names it in errors."""
 
-    data = parse_yaml(text, where)
-    check(data, "realism", where)
     r = _Reader(where)
-    d = r.mapping(data if data is not None else {}, "", ("format", "name", "kinematics", "camera", "depth", "image"))
+    d = r.mapping(_profile_data(text, where, ()), "", ("format", "name", *SECTIONS))
     fmt = d.get("format", PROFILE_FORMAT)
     if fmt != PROFILE_FORMAT:
         r.fail("format", f"is {fmt!r}, not {PROFILE_FORMAT}", "this recon reads profiles of format 1")
@@ -195,6 +198,30 @@ def parse_profile(text: str, where: str = "<profile>") -> RealismProfile:
     return RealismProfile(name=name, source=where, kinematics=_kinematics(r, d.get("kinematics")),
                           camera=_camera(r, d.get("camera")), depth=_depth(r, d.get("depth")),
                           image=_image(r, d.get("image")))
+
+
+def _profile_data(text: str, where: str, chain: tuple[str, ...]) -> dict:
+    """A profile's mapping, checked against the schema, with the built-in profile it
+    ``extends`` filled in (``chain``: the built-in profiles already on the way)."""
+
+    data = parse_yaml(text, where)
+    check(data, "realism", where)
+    own = dict(data) if isinstance(data, dict) else {}
+    parent = own.pop("extends", None)
+    if parent is None:
+        return own
+    if parent in chain:  # the built-in profiles are few: this bounds the chain
+        _Reader(where).fail("extends", f"= {parent} comes back to itself ({' -> '.join((*chain, parent))})",
+                            "extend a built-in profile that does not extend this one")
+    path = REALISM_DIR / f"{parent}.yaml"
+    inherited = _profile_data(read_text(path, "realism profile"), str(path), (*chain, str(parent)))
+    inherited.pop("name", None)  # the profile's own name, or its file's
+    for key, value in own.items():
+        if key in SECTIONS and isinstance(inherited.get(key), dict):
+            inherited[key] = {**inherited[key], **(value or {})}  # an empty section changes nothing
+        else:
+            inherited[key] = value
+    return inherited
 
 
 class _Reader:

@@ -130,7 +130,7 @@ def write_calibrated_profile(profile: str | Path, camera: CameraCalibration, pat
 
 
     source = REALISM_DIR / f"{profile}.yaml" if str(profile) in BUILT_IN else Path(profile)
-    data = plain(read_yaml(source, "realism profile", hint="give ideal, thesis or a profile YAML file")) or {}
+    data = plain(read_yaml(source, "realism profile", hint=f"give {', '.join(BUILT_IN)} or a profile YAML file")) or {}
     if not isinstance(data, dict):
         raise InputError(f"{source}: the profile is not a mapping", hint="see docs/simulation.md")
     camera_section = data.get("camera")

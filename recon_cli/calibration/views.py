@@ -7,16 +7,23 @@ image border, where distortion shows). One generated set serves both: views in t
 frame whose polar angle theta, azimuth phi, roll alpha, distance r and focus offset run
 through low-discrepancy sequences (golden-ratio steps), so any prefix of the set is spread
 as well as a set of its size can be. Deterministic: no random numbers.
+
+The distances are those of the thesis' camera (the MotionCam-3D M, whose image the thesis'
+board just fills at 0.42 m). Another camera sees the board from distances scaled so that
+the board covers the same share of its image (:meth:`BoardViewOptions.for_camera`): the
+FR3's RealSense D405, 87 deg wide, from 0.23-0.28 m, inside its depth range, instead of
+0.42-0.52 m at the end of it, where the board's squares would be 45 % smaller in the image.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from recon_cli.errors import InputError
 from recon_cli.geometry.view import Frame, View
 from recon_cli.perception.charuco import BoardSpec
+from recon_cli.perception.sensor import SensorModel, motioncam_3d_m
 
 _GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0  # 0.618...
 
@@ -26,7 +33,8 @@ class BoardViewOptions:
     """The generated set (lengths [m], angles [rad]).
 
     n: number of views
-    radius: camera distance from the focus point, from ... to
+    radius: camera distance from the focus point, from ... to (for the thesis' camera;
+        :meth:`for_camera` scales it for another)
     theta: tilt of the viewing direction from the board normal, from ... to
     alpha: largest roll about the viewing direction (both signs)
     offset: largest shift of the focus point from the board centre, along x and y of the
@@ -50,6 +58,19 @@ class BoardViewOptions:
         if not 0.0 <= lo <= hi < math.radians(80.0):
             raise InputError(f"view tilt {math.degrees(lo):g} ... {math.degrees(hi):g} deg is not an increasing "
                              "range within 0 ... 80 deg", hint="e.g. 12 ... 48 deg")
+
+    def for_camera(self, board: BoardSpec, sensor: SensorModel) -> BoardViewOptions:
+        """The same views for ``sensor``: the distances scaled by how much nearer (or farther)
+        than the thesis' camera it sees the board fill its image (1 for the thesis' camera)."""
+        scale = fill_distance(board, sensor) / fill_distance(board, motioncam_3d_m())
+        return replace(self, radius=(self.radius[0] * scale, self.radius[1] * scale))
+
+
+def fill_distance(board: BoardSpec, sensor: SensorModel) -> float:
+    """The distance [m] at which the board, seen face-on, fills the sensor's image: spans its
+    width or its height, whichever it reaches first."""
+    K = sensor.intrinsics()
+    return max(board.size[0] * K.fx / K.width, board.size[1] * K.fy / K.height)
 
 
 def _frac(x: float) -> float:

@@ -306,7 +306,7 @@ def intrinsics(
     board: BoardOpt = None,
     min_corners: Annotated[int, typer.Option(min=4, max=10_000, help="Board corners an image needs to take "
                                                                       "part.")] = 8,
-    profile: Annotated[str | None, realism_option("Realism profile (ideal, thesis or FILE.yaml) to copy into "
+    profile: Annotated[str | None, realism_option("Realism profile (ideal, thesis, lab or FILE.yaml) to copy into "
                                                   "<out>/realism.yaml with the calibration as its assumed camera "
                                                   "(simulated sessions then use it: --realism that file).")] = None,
     force: ForceOpt = False,

@@ -212,8 +212,8 @@ PlanningTimeOpt = Annotated[float, typer.Option("--planning-time", min=PLANNING_
 DcOpt = Annotated[float | None, typer.Option("--dc", min=VIEWPLAN_DC[0], max=VIEWPLAN_DC[1],
                                              help="Camera distance to the ellipsoid [m] (default: the scan distance "
                                                   "of the cell's camera, 0.55 m on the thesis' cells).")]
-REALISM_HELP = ("How real the simulated cell is: 'ideal' (the model itself), 'thesis' (errors of the thesis' cell) "
-                "or a profile FILE.yaml (docs/simulation.md).")
+REALISM_HELP = ("How real the simulated cell is: 'ideal' (the model itself), 'thesis' (errors of the thesis' cell), "
+                "'lab' (the thesis' errors with the cell's own camera) or a profile FILE.yaml (docs/simulation.md).")
 
 
 def realism_option(help_text: str = REALISM_HELP):

@@ -62,6 +62,7 @@ from recon_cli.inputs.images import read_color
 from recon_cli.inputs.jsonfile import load_json
 from recon_cli.outputs import atomic_write, atomic_write_text
 from recon_cli.perception.charuco import BoardSpec, cell_board, recorded_board
+from recon_cli.perception.sensor import cell_sensor
 from recon_cli.reconstruction.metadata import read_session
 from recon_cli.robot.description import CellName, expand_urdf
 from recon_cli.robot.kinematics import Kinematics
@@ -88,14 +89,16 @@ def record_board_views(out: Path, config: Config = DEFAULTS, views: BoardViewOpt
     write one scan per reachable view into the scan store ``out``."""
 
     t0 = time.perf_counter()
-    view_list = board_views(board or cell_board(config.cell.cell_file), views)
-    n = len(view_list)
+    n = views.n
     failures, scans = [], 0
     spec = SessionSpec(Path(out), config, Mode.CALIBRATION, station=station, board_only=True,
                        run={"command": "calibrate", "views": n})
     with open_session(spec) as session:
         cell, acq = session.cell, session.acquisition
         assert acq is not None  # open_session opens the acquisition
+        cell_file = cell.config.cell_file  # the station file's cell, when there is one
+        board = board or cell_board(cell_file)
+        view_list = board_views(board, views.for_camera(board, cell_sensor(cell_file)))
         poses = [cell.view_pose(v) for v in view_list]
         goals = board_view_goals(cell, poses, session.rng)  # keeping the arm's posture
         for k, (view, T, goal) in enumerate(zip(view_list, poses, goals, strict=True), start=1):

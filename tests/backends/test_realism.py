@@ -181,6 +181,7 @@ def test_depth_artefacts(gantry, view_q, thesis):
     ("image: {exposure: -1}", "image.exposure = -1"),
     ("format: 2", "format = 2 is not 1"),
     ("depth: [1, 2", "broken.yaml:2: not valid YAML"),
+    ("extends: perfect", "extends = 'perfect' is not one of ideal, thesis, lab"),
 ])
 def test_profile_errors_are_one_line(text, where):
     with pytest.raises(InputError) as exc:
@@ -202,3 +203,19 @@ def test_profile_file_errors(tmp_path, gantry):
     p = parse_profile("image: {blur_sigma_px: 1}", "x.yaml")
     assert p.image.blur_sigma == 1.0 and p.camera == CameraErrors()
     assert dataclasses.replace(p, image=IDEAL.image) == dataclasses.replace(IDEAL, name="x", source="x.yaml")
+
+
+def test_a_profile_extends_a_built_in_one():
+    """``extends``: the built-in profile's sections, each key the profile gives replacing
+    that key as a whole; ``lab`` is ``thesis`` with the cell's own camera."""
+    from recon_cli.inputs.schema import load_schema
+    from recon_cli.realism import BUILT_IN, PoseError
+
+    thesis = load_profile("thesis")
+    assert load_profile("lab") == dataclasses.replace(thesis, name="lab", source="robot/realism/lab.yaml",
+                                                      camera=CameraErrors())
+    p = parse_profile("extends: thesis\nkinematics:\n  base_error: {translation_mm: 5}\n", "more.yaml")
+    assert p.name == "more" and p.camera == thesis.camera and p.depth == thesis.depth and p.image == thesis.image
+    assert p.kinematics == dataclasses.replace(thesis.kinematics, base=PoseError(0.005, 0.0))
+    assert parse_profile("extends: thesis\nkinematics:\n", "x.yaml").kinematics == thesis.kinematics
+    assert tuple(load_schema("realism")["properties"]["extends"]["enum"]) == BUILT_IN

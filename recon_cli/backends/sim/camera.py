@@ -102,7 +102,8 @@ def _check_camera_fits(realism: RealismProfile, role: str, spec: CameraSpec | No
             f"realism profile {realism.name}: camera.{role} ({spec.width} x {spec.height} px, "
             f"{math.degrees(fov):.1f} deg wide) is not the cell's sensor {sensor.name} ({sensor.width} x "
             f"{sensor.height} px, {math.degrees(sensor.hfov):.1f} deg wide)",
-            hint="write a profile for this cell's camera (docs/simulation.md), or use --realism ideal")
+            hint="use --realism lab (the thesis' errors with the cell's own camera) or ideal, or write a profile "
+                 "for this cell's camera (docs/simulation.md)")
 
 
 class SimCamera:

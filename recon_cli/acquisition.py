@@ -40,6 +40,7 @@ class MoveReport:
             "trajectory_duration_s": self.execution.duration,
             "settle_time_s": self.execution.settle_time,
             "settled": self.execution.settled,
+            "lost_cycles": self.execution.lost_cycles,
             "max_tracking_error": self.execution.max_tracking_error,
             "final_joint_error": self.execution.final_error,
             "camera_position_error_m": self.camera_position_error,

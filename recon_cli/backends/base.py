@@ -29,6 +29,7 @@ class ExecutionReport:
     max_tracking_error: largest |q - q_d| over the motion, per joint (n,) [rad or m]
     final_error: |q - q_goal| per joint when settled (n,)
     settled: the settling criterion was met before the time-out
+    lost_cycles: controller cycles a streamed motion missed (the controller extrapolated them)
     """
 
     duration: float
@@ -36,6 +37,7 @@ class ExecutionReport:
     max_tracking_error: np.ndarray
     final_error: np.ndarray
     settled: bool
+    lost_cycles: int = 0
 
 
 @dataclass(frozen=True)

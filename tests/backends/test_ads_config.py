@@ -134,12 +134,23 @@ def test_every_numeric_value_has_a_range_and_the_defaults_are_inside():
 
 def test_docs_table_equals_the_code():
     """docs/hardware.md's ranges table is the code's, row for row."""
-    text = DOCS.read_text(encoding="utf-8")
+    text = DOCS.read_text(encoding="utf-8").split("## 3. Safety values")[1].split("## 4.")[0]
     rows = range_rows()
     for row in rows:
         assert row in text, f"docs/hardware.md lacks the row\n{row}"
     documented = re.findall(r"^\| `(\w+)` \| [\[(]", text, flags=re.M)
     assert documented == list(RANGES), "the docs table has other rows or another order than RANGES"
+
+
+def test_docs_franka_table_equals_the_code():
+    """docs/hardware.md's Franka safety values are the code's, row for row."""
+    from recon_cli.backends.hardware import franka_config
+
+    text = DOCS.read_text(encoding="utf-8").split("## 7. Franka")[1].split("## 8.")[0]
+    for row in franka_config.range_rows():
+        assert row in text, f"docs/hardware.md lacks the row\n{row}"
+    documented = re.findall(r"^\| `(\w+)` \| [\[(]", text, flags=re.M)
+    assert documented == list(franka_config.RANGES)
 
 
 def test_the_documented_example_is_valid():

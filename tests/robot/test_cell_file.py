@@ -217,8 +217,12 @@ def test_a_board_off_the_table_or_a_camera_inside_a_link_is_one_line(tmp_path, f
 ])
 def test_a_description_that_is_no_urdf_is_one_line(tmp_path, text, message):
     """A cell file naming a URDF that is not one (binary, not XML) is refused in one line."""
-    path = _cell(tmp_path, lambda t: t.replace("file: ../robot/cell.urdf.xacro", "file: ../robot/broken.urdf").replace(
-        "  arguments: {cell: gantry}\n", "").split("  # the xacro arguments")[0] + "joints:" + t.split("\njoints:", 1)[1])
+    def broken(t: str) -> str:
+        head = t.replace("file: ../robot/cell.urdf.xacro", "file: ../robot/broken.urdf").replace(
+            "  arguments: {cell: gantry}\n", "").split("  # the xacro arguments")[0]
+        return head + "joints:" + t.split("\njoints:", 1)[1]
+
+    path = _cell(tmp_path, broken)
     target = tmp_path / "robot" / "broken.urdf"
     target.write_bytes(text if isinstance(text, bytes) else text.encode())
     with pytest.raises(InputError) as info:

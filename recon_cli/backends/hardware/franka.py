@@ -19,7 +19,10 @@ reflex mode is refused with its errors.
 
 from __future__ import annotations
 
+import contextlib
+import os
 import time
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -27,7 +30,7 @@ import numpy as np
 from recon_cli import install_hint
 from recon_cli.backends.base import ExecutionReport
 from recon_cli.backends.hardware.franka_config import REST_SPREAD, SETTLE_STATES, FrankaConfig
-from recon_cli.backends.hardware.setpoint_stream import SetpointStream, setpoint_stream
+from recon_cli.backends.hardware.setpoint_stream import SetpointStream, jerk_share_for, setpoint_stream
 from recon_cli.errors import HardwareUnavailable, InputError, RobotFault
 from recon_cli.planning.trajectory import Trajectory
 from recon_cli.robot.limits import JointLimits
@@ -36,6 +39,27 @@ from recon_cli.robot.limits import JointLimits
 PERIOD = 0.001
 #: how long a stop may take to bring the joints to rest before it counts as unconfirmed
 STOP_BOUND = 2.0
+
+
+@contextlib.contextmanager
+def realtime_priority() -> Iterator[bool]:
+    """Run the calling thread under the real-time FIFO scheduler meanwhile, as libfranka does
+    for its own control loop on a real-time kernel (yields False where the system does not
+    permit it: then the loop runs at normal priority and missed cycles are more likely)."""
+    if not hasattr(os, "sched_setscheduler"):
+        yield False
+        return
+    try:
+        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(min(80, os.sched_get_priority_max(os.SCHED_FIFO))))
+    except OSError:
+        yield False
+        return
+    try:
+        yield True
+    finally:
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, policy, param)
 
 
 def _spread(window: list[np.ndarray]) -> float:
@@ -78,6 +102,7 @@ class FrankaRobot:
         self.config = config
         self.joint_names = tuple(joint_names)
         self.limits = limits
+        self.lost_cycles = 0  # controller cycles the 1 kHz loop missed, over all motions
         self._measured_lo = np.asarray(limits.lower, dtype=float) - config.tracking_bound
         self._measured_hi = np.asarray(limits.upper, dtype=float) + config.tracking_bound
         realtime = p.RealtimeConfig.kEnforce if config.realtime == "enforce" else p.RealtimeConfig.kIgnore
@@ -135,8 +160,8 @@ class FrankaRobot:
     def stream(self, trajectory: Trajectory, commanded: np.ndarray | None = None) -> SetpointStream:
         """The trajectory as the checked 1 kHz setpoints, beginning at the controller's
         ``commanded`` joints (RobotFault before anything is sent)."""
-        return setpoint_stream(trajectory, self.limits, self.joint_names, PERIOD, self.config.jerk_share,
-                               self.config.deviation_bound, start=commanded)
+        return setpoint_stream(trajectory, self.limits, self.joint_names, PERIOD,
+                               jerk_share_for(self.config.lost_cycles), self.config.deviation_bound, start=commanded)
 
     def execute(self, trajectory: Trajectory) -> ExecutionReport:
         """Stream a checked trajectory at 1 kHz, then wait until the robot has settled at its
@@ -153,6 +178,7 @@ class FrankaRobot:
                              bound=self.config.tracking_bound, stopped=False, hint="plan from the measured joints")
         stream = self.stream(trajectory, commanded)
         q = stream.q
+        lost = self.lost_cycles
         try:
             max_err = self._follow(stream)
             final, settle_time = self._settle(q[-1])
@@ -164,11 +190,15 @@ class FrankaRobot:
             self._halt()
             raise
         return ExecutionReport(duration=stream.duration, settle_time=settle_time, max_tracking_error=max_err,
-                               final_error=final, settled=True)
+                               final_error=final, settled=True, lost_cycles=self.lost_cycles - lost)
 
     def _follow(self, stream: SetpointStream) -> np.ndarray:
         """The 1 kHz loop: one setpoint per controller cycle (a cycle the controller reports
         as lost advances the index with it). Returns the largest tracking error per joint."""
+        with realtime_priority():
+            return self._loop(stream)
+
+    def _loop(self, stream: SetpointStream) -> np.ndarray:
         p, cfg = self._p, self.config
         q = stream.q
         last = len(q) - 1
@@ -191,7 +221,9 @@ class FrankaRobot:
                                  f"{self._stop_text(stopped)}", kind="tracking", joint=self.joint_names[j],
                                  value=float(err[j]), bound=cfg.tracking_bound, stopped=stopped,
                                  hint="check the load and the collision thresholds; completed scans are kept")
-            index = min(index + round(period.to_sec() / PERIOD), last)
+            step = round(period.to_sec() / PERIOD)
+            self.lost_cycles += max(step - 1, 0)
+            index = min(index + step, last)
             sent = q[index]
             command = p.JointPositions(sent.tolist())
             command.motion_finished = index == last

@@ -11,6 +11,11 @@ filtered stream is the trajectory delayed by ``(m - 1) dt / 2``, off the checked
 where the acceleration changes, by about ``a dt^2 m^2 / 24``; that deviation is measured and
 bounded too.
 
+A cycle the client misses is extrapolated by the controller at constant acceleration; when
+the client resumes after ``n`` missed cycles, the controller's third difference jumps by the
+stream's jerk times ``(n + 1)^3 / 6``. :func:`jerk_share_for` gives the share of the jerk
+limit that keeps such a resumption within the limit (3 missed cycles: 9.4 %).
+
 :func:`setpoint_stream` returns the stream with its measured peaks, or raises
 :class:`~recon_cli.errors.RobotFault` (kind ``limit``) naming the joint, the quantity and
 both numbers before anything is sent; no value of a station file switches a check off.
@@ -51,6 +56,12 @@ class SetpointStream:
     @property
     def duration(self) -> float:
         return (len(self.q) - 1) * self.dt
+
+
+def jerk_share_for(lost_cycles: int) -> float:
+    """The share of the jerk limit to smooth a stream to, so that resuming after
+    ``lost_cycles`` consecutive cycles the controller extrapolated stays within the limit."""
+    return min(0.9, 6.0 / (lost_cycles + 1) ** 3)
 
 
 def smoothing_window(peak_acceleration: npt.NDArray[np.float64], jerk: npt.NDArray[np.float64], dt: float,
@@ -96,10 +107,31 @@ def setpoint_stream(trajectory: Trajectory, limits: JointLimits, joint_names: tu
         j = int(np.flatnonzero(~np.all(np.isfinite(raw), axis=0))[0])
         raise RobotFault(f"a setpoint of {joint_names[j]} is not a finite number; nothing was sent", kind="limit",
                          joint=joint_names[j], stopped=False, hint="plan the motion again")
+    units = ["m" if p else "rad" for p in limits.prismatic]
+    if len(raw) > 1:  # a trajectory over the velocity limits is named as such (smoothing would not help)
+        speed = np.max(np.abs(np.diff(raw, axis=0)), axis=0) / dt
+        over = np.flatnonzero(speed > limits.velocity * (1.0 + ROUNDING))
+        if over.size:
+            j = int(over[np.argmax(speed[over] / limits.velocity[over])])
+            raise RobotFault(f"setpoints of {joint_names[j]} reach velocity {speed[j]:.4g} {units[j]}/s, beyond its "
+                             f"limit {limits.velocity[j]:.4g} {units[j]}/s; nothing was sent", kind="limit",
+                             joint=joint_names[j], value=float(speed[j]), bound=float(limits.velocity[j]),
+                             stopped=False, hint="time the trajectory with the cell's velocity limits")
     jerk = limits.jerk if limits.jerk is not None else np.full(limits.n, np.inf)
-    peak_acc = np.max(np.abs(qdd), axis=0) if np.all(np.isfinite(qdd)) else np.asarray(limits.acceleration)
-    window = smoothing_window(np.maximum(peak_acc, 1e-12), jerk, dt, jerk_share)
-    q = _moving_average(raw, window)
+    # the samples' own accelerations: above toppra's between its grid points where the path bends
+    peak_acc = np.max(np.abs(np.diff(raw, 2, axis=0)), axis=0) / dt**2 if len(raw) > 2 else np.zeros(limits.n)
+    if np.all(np.isfinite(qdd)):
+        peak_acc = np.maximum(peak_acc, np.max(np.abs(qdd), axis=0))
+    # the window from the peak accelerations, widened while a sample's bend (a one-sample
+    # spike the formula over-weights or a step it under-weights) keeps the jerk above the share
+    window = smoothing_window(np.maximum(np.max(np.abs(qdd), axis=0) if np.all(np.isfinite(qdd)) else peak_acc,
+                                         1e-12), jerk, dt, jerk_share)
+    for _ in range(12):
+        q = _moving_average(raw, window)
+        peak = np.max(np.abs(np.diff(q, 3, axis=0)), axis=0) / dt**3 if len(q) > 3 else np.zeros(limits.n)
+        if np.all(peak <= jerk_share * jerk * (1.0 + ROUNDING)):
+            break
+        window = int(math.ceil(window * 1.5))
     # the filtered stream follows the path delayed by half the window
     delayed = trajectory.sample(np.clip(np.arange(len(q)) * dt - (window - 1) * dt / 2, 0.0, duration))[0]
     deviation = np.max(np.abs(q - delayed), axis=0)
@@ -113,7 +145,6 @@ def setpoint_stream(trajectory: Trajectory, limits: JointLimits, joint_names: tu
                           f"{bound:.4g} {unit}; nothing was sent", kind="limit", joint=joint_names[j],
                           value=float(value), bound=float(bound), stopped=False, hint=hint)
 
-    units = ["m" if p else "rad" for p in limits.prismatic]
     lo, hi = q.min(axis=0), q.max(axis=0)
     for j in range(limits.n):
         if lo[j] < limits.lower[j] - 1e-9:

@@ -34,6 +34,7 @@ from recon_cli.errors import ReconError
 from recon_cli.lazy import lazy_module
 from recon_cli.paths import ROOT
 from recon_cli.robot.cell import Cell
+from recon_cli.robot.cell_file import descendant_links
 from recon_cli.robot.description import CellConfig
 from recon_cli.robot.poses import named_configuration
 
@@ -50,7 +51,7 @@ DEFAULT_VENV = ROOT / ".venvs" / "franka-sim"
 #: run inside franka-sim's environment: the server bound to one address, the gripper off,
 #: motions checked against the FCI's limits and aborted on a violation as the robot does
 _LAUNCHER = """
-import logging, signal, sys
+import logging, os, signal, sys, threading, time
 logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
 import franka_sim.mujoco_franka_sim as arm
 from franka_sim import FrankaSimServer
@@ -61,6 +62,11 @@ server = FrankaSimServer(host=host, port=port, enable_gripper=False, enforce_mot
 def _quit(*_):
     raise KeyboardInterrupt
 signal.signal(signal.SIGTERM, _quit)
+def _orphaned(parent=os.getppid()):  # the process that started the stand-in has ended: end too
+    while os.getppid() == parent:
+        time.sleep(0.5)
+    os.kill(os.getpid(), signal.SIGTERM)
+threading.Thread(target=_orphaned, daemon=True).start()
 try:
     server.start()
 except KeyboardInterrupt:
@@ -80,12 +86,23 @@ def standin_venv() -> Path | None:
 def standin_mjcf(config: CellConfig) -> str:
     """MJCF text of the cell's robot for franka-sim: the description's bodies, joints,
     inertias and (real-size) collision primitives, the drives file's armature and friction.
-    franka-sim finds the arm by its ``*joint1`` .. ``*joint7`` and ``*link7`` names."""
-    spec = mujoco.MjSpec.from_string(mujoco_urdf(config))
+    The robot's links make contact with the table and the board, not with each other: their
+    collision primitives enclose the real links loosely (a real gap of 3 cm between the
+    camera bracket and link 6 is an overlap of theirs), and the FR3 keeps its links apart by
+    its controller, not by contact. franka-sim finds the arm by its ``*joint1`` ..
+    ``*joint7`` and ``*link7`` names."""
+    urdf = mujoco_urdf(config)
+    spec = mujoco.MjSpec.from_string(urdf)
     d = drives(config.cell_file)
     for joint in spec.joints:
         joint.armature = d.armature_of(joint.name)
         joint.damping = [d.friction_of(joint.name), 0.0, 0.0]
+    base = config.cell_file.base_link
+    robot = [name for name in (base, *descendant_links(urdf, base)) if spec.body(name) is not None]
+    for i, a in enumerate(robot):
+        for b in robot[i + 1:]:
+            exclude = spec.add_exclude()
+            exclude.bodyname1, exclude.bodyname2 = a, b
     spec.compile()
     return spec.to_xml()
 
@@ -142,8 +159,9 @@ def start_standin(config: CellConfig, host: str = "127.0.0.1", port: int = COMMA
                   start: Sequence[float] | None = None, venv: Path | None = None,
                   timeout: float = 120.0) -> FrankaStandin:
     """Start franka-sim on ``host:port`` with the cell's robot standing at ``start`` [rad]
-    (default: the cell's home pose) and wait until it accepts connections. Raises ReconError when its environment is missing, the port is taken or it
-    does not come up (with the tail of its log)."""
+    (default: the cell's home pose) and wait until it accepts connections. Raises ReconError
+    when its environment is missing, the port is taken or it does not come up (with the tail
+    of its log)."""
     venv = venv or standin_venv()
     if venv is None:
         raise ReconError("franka-sim's environment is not built",

@@ -1,0 +1,320 @@
+"""The Franka adapter end to end through pylibfranka (the real client library) against
+franka-sim on 127.0.0.1 (a MuJoCo server speaking libfranka's robot protocol, checking the
+FCI's motion limits), fed the FR3 cell's own description: a planned trajectory executes and
+the measured joints match the plan; a trajectory over a limit is refused with nothing sent;
+a control error, connection loss (the stand-in killed mid-motion) and Ctrl-C stop the motion;
+`recon station check`, `recon run --station` and `recon autoscan --station` with scans,
+registration and mesh; faults mid-run keep the completed scans."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pylibfranka", reason="the Franka adapter needs pylibfranka (pip install 'recon-scan[franka]')")
+
+from recon_cli.backends.hardware.franka import FrankaRobot  # noqa: E402
+from recon_cli.backends.hardware.franka_config import FrankaConfig  # noqa: E402
+from recon_cli.backends.sim.franka_standin import FrankaStandin, standin_venv, start_standin  # noqa: E402
+from recon_cli.cli import main  # noqa: E402
+from recon_cli.errors import InputError, RobotFault  # noqa: E402
+from recon_cli.paths import CELLS_DIR, ROBOT_DIR  # noqa: E402
+from recon_cli.planning.trajectory import Trajectory, parameterize  # noqa: E402
+from recon_cli.robot.cell import Cell  # noqa: E402
+from recon_cli.robot.description import CellConfig, CellName  # noqa: E402
+
+if standin_venv() is None:
+    pytest.skip("franka-sim's environment is not built (bash install.sh --franka-sim)", allow_module_level=True)
+
+CONFIG = FrankaConfig(ip="127.0.0.1", realtime="ignore")
+HOME = np.radians([0.0, -10.0, 0.0, -130.0, 0.0, 110.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def fr3() -> Cell:
+    return Cell(CellConfig(kind=CellName.parse("fr3")))
+
+
+@pytest.fixture()
+def standin(fr3):
+    s = start_standin(fr3.config)
+    yield s
+    s.stop()
+
+
+def moves(s: FrankaStandin) -> int:
+    """Motions the stand-in has started (its log's lines)."""
+    return s.log_path.read_text(errors="replace").count("Motion started with ID")
+
+
+def _plan(cell: Cell, start: np.ndarray, goal: np.ndarray, scale: float = 0.3) -> Trajectory:
+    lim = cell.kin.limits
+    return parameterize(np.array([start, goal]), lim.velocity, lim.acceleration, scale, scale)
+
+
+def _when(condition, action, timeout: float = 120.0) -> threading.Thread:
+    def watch():
+        deadline = time.monotonic() + timeout
+        while not condition():
+            if time.monotonic() > deadline:
+                return
+            time.sleep(0.005)
+        action()
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    return thread
+
+
+# --------------------------------------------------------------------- the adapter
+def test_planned_trajectory_executes_and_measured_joints_match(fr3, standin):
+    robot = FrankaRobot(CONFIG, fr3.joint_names, fr3.kin.limits)
+    start = robot.measured_joints()
+    assert np.allclose(start, HOME, atol=3e-3)  # the stand-in starts at the cell's home
+    goal = HOME + np.radians([25.0, 8.0, -15.0, 12.0, 30.0, -15.0, 45.0])
+    traj = _plan(fr3, start, goal)
+    report = robot.execute(traj)
+    q = robot.measured_joints()
+    assert report.settled and np.all(report.final_error <= CONFIG.settle_tolerance)
+    assert np.abs(q - goal).max() <= CONFIG.settle_tolerance
+    assert np.all(report.max_tracking_error < 0.02)
+    assert report.duration == pytest.approx(traj.duration, abs=0.02)
+    assert moves(standin) == 1 and robot.errors() == []
+    robot.close()
+
+
+def test_over_velocity_limit_is_refused_with_nothing_sent(fr3, standin):
+    robot = FrankaRobot(CONFIG, fr3.joint_names, fr3.kin.limits)
+    start = robot.measured_joints()
+    traj = _plan(fr3, start, start + np.radians([90.0, 0, 0, 0, 0, 0, 0]), 1.0)
+    fast = Trajectory(traj.times / 1.5, traj.q, traj.qd * 1.5, traj.qdd * 2.25)  # 1.5 x the velocity limit
+    with pytest.raises(RobotFault) as info:
+        robot.execute(fast)
+    assert info.value.kind == "limit" and info.value.joint == "fr3_joint1" and not info.value.stopped
+    assert "beyond its limit 2.62 rad/s; nothing was sent" in info.value.message
+    time.sleep(0.2)
+    assert moves(standin) == 0 and np.allclose(robot.measured_joints(), start, atol=1e-3)
+    robot.close()
+
+
+def test_control_error_stops_with_its_flags_and_recovery_only_when_asked(fr3, standin):
+    """A careless cell file (acceleration and jerk limits far above the FR3's) lets a
+    trajectory through recon's check; the controller aborts it with its reflex, recon reports
+    the error flags, and the error stays until recover() is asked for."""
+    careless = dataclasses.replace(fr3.kin.limits, acceleration=fr3.kin.limits.acceleration * 30,
+                                   jerk=fr3.kin.limits.jerk * 30)
+    robot = FrankaRobot(CONFIG, fr3.joint_names, careless)
+    start = robot.measured_joints()
+    # 30 rad/s^2: three times the FR3's acceleration limit, a tenth of the careless one
+    traj = parameterize(np.array([start, start + np.radians([30.0, 0, 0, 0, 0, 0, 0])]), careless.velocity,
+                        careless.acceleration, 1.0, 0.1)
+    with pytest.raises(RobotFault) as info:
+        robot.execute(traj)
+    e = info.value
+    assert e.kind == "control" and e.stopped
+    assert e.message.startswith("the Franka controller aborted the motion: Move command aborted")
+    assert "recon station recover" in (e.hint or "")
+    flags = robot.errors()  # not cleared by itself
+    assert len(flags) == 1 and flags[0] in e.message
+    assert flags[0] in ("joint_motion_generator_velocity_discontinuity",  # acceleration over the limit
+                        "joint_motion_generator_acceleration_discontinuity")  # jerk over the limit
+    assert robot.recover() == flags and robot.errors() == []
+    robot.close()
+
+
+def test_connection_loss_mid_motion_is_a_fault_within_two_seconds(fr3, standin):
+    robot = FrankaRobot(CONFIG, fr3.joint_names, fr3.kin.limits)
+    start = robot.measured_joints()
+    traj = _plan(fr3, start, HOME + np.radians([40.0, 0, 0, 0, 0, 0, 0]), 0.15)
+    _when(lambda: moves(standin) == 1, lambda: (time.sleep(0.3), standin.kill()))
+    t0 = time.monotonic()
+    with pytest.raises(RobotFault) as info:
+        robot.execute(traj)
+    assert time.monotonic() - t0 < traj.duration
+    e = info.value
+    assert e.kind == "connection" and not e.stopped
+    assert e.message.startswith("lost the connection to the Franka controller at 127.0.0.1 in a motion")
+    robot.close()
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_signal_mid_motion_stops_the_robot_first(fr3, standin, signum):
+    from recon_cli.interrupts import stop_signals
+
+    robot = FrankaRobot(CONFIG, fr3.joint_names, fr3.kin.limits)
+    start = robot.measured_joints()
+    goal = HOME + np.radians([40.0, 0, 0, 0, 0, 0, 0])
+    traj = _plan(fr3, start, goal, 0.15)
+    _when(lambda: moves(standin) == 1, lambda: (time.sleep(0.5), os.kill(os.getpid(), signum)))
+    with stop_signals(), pytest.raises(KeyboardInterrupt):
+        robot.execute(traj)
+    assert "Handling StopMove command" in standin.log_path.read_text()
+    a = robot.measured_joints()
+    time.sleep(0.3)
+    b = robot.measured_joints()
+    assert np.abs(a - b).max() < 2e-3  # at rest ...
+    assert np.abs(b - goal).max() > 0.1  # ... short of the goal
+    robot.close()
+
+
+def test_unreachable_controller_and_config_mistakes_are_one_line(fr3):
+    with pytest.raises(RobotFault) as info:
+        FrankaRobot(FrankaConfig(ip="127.0.0.9", realtime="ignore"), fr3.joint_names, fr3.kin.limits)
+    assert info.value.kind == "connection" and not info.value.stopped
+    assert info.value.message.startswith("cannot reach the Franka controller at 127.0.0.9")
+    with pytest.raises(InputError, match="robot.franka.tracking_bound"):
+        FrankaConfig.from_mapping({"ip": "127.0.0.1", "tracking_bound": 5.0})
+    with pytest.raises(InputError, match="robot.franka has no ip"):
+        FrankaConfig.from_mapping({})
+    with pytest.raises(InputError, match="robot.franka.realtime"):
+        FrankaConfig.from_mapping({"ip": "127.0.0.1", "realtime": "off"})
+    with pytest.raises(InputError, match="robot.franka.lost_cycles"):
+        FrankaConfig.from_mapping({"ip": "127.0.0.1", "lost_cycles": 9})  # the check stays at the limit
+
+
+# --------------------------------------------------------------------- station files and runs
+STATION = """\
+format: 1
+name: FR3 stand-in
+cell: {{kind: {cell}}}
+robot:
+  adapter: franka
+  franka: {{ip: 127.0.0.1, realtime: ignore}}
+camera:
+  adapter: sim
+  sim: {{noise: true, resolution: 0.5}}
+"""
+
+SCRIPT = """\
+<?xml version="1.0"?>
+<recon name="FR3 stand-in: three views" on_failure="skip">
+  <cell kind="fr3" backend="hardware"/>
+  <object name="bottle"/>
+  <planner name="RRTConnect" time="5" velocity_scale="{speed1}" acceleration_scale="{accel1}"/>
+  <move focus="0.1925 0.1225 0.08" radius="0.22" theta="50" phi="170" frame="marker"/>
+  <scan name="a"/>
+  <planner name="RRTConnect" time="5" velocity_scale="0.3" acceleration_scale="{accel2}"/>
+  <move focus="0.1925 0.1225 0.08" radius="0.22" theta="50" phi="230" frame="marker"/>
+  <scan name="b"/>
+  <move focus="0.1925 0.1225 0.08" radius="0.22" theta="35" phi="300" frame="marker"/>
+  <scan name="c"/>
+  <register/>
+  <reconstruct voxel="0.002" depth="7"/>
+  <export mesh="mesh.ply"/>
+</recon>
+"""
+
+
+def _files(tmp_path: Path, cell: str = "fr3", speed1: float = 0.3, accel1: float = 0.3,
+           accel2: float = 0.3) -> tuple[Path, Path]:
+    (tmp_path / "station.yaml").write_text(STATION.format(cell=cell))
+    (tmp_path / "scan.xml").write_text(SCRIPT.format(speed1=speed1, accel1=accel1, accel2=accel2))
+    return tmp_path / "station.yaml", tmp_path / "scan.xml"
+
+
+def _careless_cell(tmp_path: Path) -> str:
+    """The FR3 cell with a limits file whose accelerations and jerks are 30 times
+    the FR3's: recon's own check passes what the controller refuses."""
+    text = (CELLS_DIR / "fr3.yaml").read_text().replace("../robot/", f"{ROBOT_DIR}/")
+    limits = (ROBOT_DIR / "fr3" / "limits.yaml").read_text()
+    limits = limits.replace("acceleration: 572.9578", "acceleration: 17188.734").replace(
+        "jerk: 286478.8976", "jerk: 8594366.93")
+    (tmp_path / "careless_limits.yaml").write_text(limits)
+    text = text.replace(f"{ROBOT_DIR}/fr3/limits.yaml", "careless_limits.yaml")
+    (tmp_path / "careless_fr3.yaml").write_text(text)
+    return "careless_fr3.yaml"
+
+
+def _scans(out: Path) -> list[str]:
+    return [json.loads(s.read_text())["name"] for s in sorted((out / "scans").glob("scan_*/scan.json"))]
+
+
+def test_station_check_reads_the_joints_and_a_frame(standin, tmp_path, capsys):
+    station, _ = _files(tmp_path)
+    assert main(["station", "check", str(station)]) == 0
+    out = capsys.readouterr().out
+    assert "robot franka, camera sim, cell fr3, backend hardware" in out
+    assert "fr3_joint4 -130.0" in out and "station ok" in out
+
+
+def test_station_check_of_an_unreachable_franka_is_one_line(tmp_path, capsys):
+    station, _ = _files(tmp_path)
+    station.write_text(station.read_text().replace("127.0.0.1", "127.0.0.9"))
+    assert main(["station", "check", str(station)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("error: cannot reach the Franka controller at 127.0.0.9")
+
+
+def test_run_with_station_three_moves_scans_registration_mesh(standin, tmp_path, capsys):
+    station, script = _files(tmp_path)
+    out = tmp_path / "run"
+    code = main(["run", str(script), "--out", str(out), "--station", str(station)])
+    text = capsys.readouterr()
+    assert code == 0, text.out + text.err + standin.log_tail()
+    assert moves(standin) == 3
+    assert _scans(out) == ["a", "b", "c"]
+    session = json.loads((out / "scans" / "session.json").read_text())
+    assert session["backend"] == "hardware" and not (out / "scans" / "ground_truth").exists()
+    registration = json.loads((out / "reconstruction" / "report.json").read_text())
+    assert registration["scans_registered"] == 3 and registration["scans_skipped"] == 0
+    assert (out / "mesh.ply").stat().st_size > 10_000
+    report = json.loads((out / "run_report.json").read_text())
+    assert report["status"] == "done" and report["backend"] == "hardware"
+    # each scan records the joints the controller measured when it was taken
+    last = np.array(list(json.loads(sorted((out / "scans").glob("scan_*/scan.json"))[-1].read_text())["joints"]
+                         .values()))
+    robot = FrankaRobot(CONFIG, Cell(CellConfig(kind=CellName.parse("fr3"))).joint_names,
+                        Cell(CellConfig(kind=CellName.parse("fr3"))).kin.limits)
+    assert np.abs(robot.measured_joints() - last).max() < 2e-3
+    robot.close()
+
+
+def test_control_error_mid_run_stops_and_keeps_the_scans(standin, tmp_path, capsys):
+    cell = _careless_cell(tmp_path)
+    # the first move slow and gentle (within what the FR3 takes), the second at 30 % of the careless accelerations
+    station, script = _files(tmp_path, cell=cell, speed1=0.05, accel1=0.01, accel2=0.3)
+    out = tmp_path / "run"
+    code = main(["run", str(script), "--out", str(out), "--station", str(station)])
+    err = capsys.readouterr().err
+    assert code == 4 and err.count("\n") == 1 and "Traceback" not in err, err
+    assert "the Franka controller aborted the motion" in err and "joint_motion_generator_" in err
+    assert _scans(out) == ["a"]
+    report = json.loads((out / "run_report.json").read_text())
+    assert report["status"] == "aborted" and "aborted the motion" in report["aborted"]
+    # recovery when asked (franka-sim forgets a motion's errors when its client reconnects; the
+    # adapter test above shows they stay over one connection until recover())
+    assert main(["station", "recover", str(station)]) == 0
+    assert "the franka robot's errors cleared" in capsys.readouterr().out
+
+
+def test_standin_killed_mid_run_stops_and_keeps_the_scans(standin, tmp_path, capsys):
+    station, script = _files(tmp_path)
+    out = tmp_path / "run"
+    _when(lambda: moves(standin) == 2, lambda: (time.sleep(0.3), standin.kill()))
+    code = main(["run", str(script), "--out", str(out), "--station", str(station)])
+    err = capsys.readouterr().err
+    assert code == 4 and err.count("\n") == 1 and "Traceback" not in err, err
+    assert "lost the connection to the Franka controller at 127.0.0.1 in a motion" in err
+    assert _scans(out) == ["a"]
+    assert json.loads((out / "run_report.json").read_text())["status"] == "aborted"
+
+
+def test_autoscan_with_station(standin, tmp_path, capsys):
+    station, _ = _files(tmp_path)
+    out = tmp_path / "auto"
+    code = main(["autoscan", "--station", str(station), "--object", "bottle", "--n", "3", "--no-pictures",
+                 "--out", str(out)])
+    text = capsys.readouterr()
+    assert code == 0, text.out + text.err + standin.log_tail()
+    assert moves(standin) == 3 and len(list(out.glob("scan_*/scan.json"))) == 3
+    assert (out / "reconstruction" / "mesh.ply").stat().st_size > 10_000
+    report = json.loads((out / "autoscan_report.json").read_text())
+    assert report["scans"] == 3 and report["error"] is None and report["cell"] == "fr3"

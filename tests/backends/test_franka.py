@@ -275,6 +275,13 @@ def test_run_with_station_three_moves_scans_registration_mesh(standin, tmp_path,
                         Cell(CellConfig(kind=CellName.parse("fr3"))).kin.limits)
     assert np.abs(robot.measured_joints() - last).max() < 2e-3
     robot.close()
+    # the same robot with the replay camera playing the run's scans back
+    replay = tmp_path / "replay.yaml"
+    replay.write_text(STATION.format(cell="fr3").split("camera:")[0]
+                      + f"camera:\n  adapter: replay\n  replay: {{source: {out / 'scans'}}}\n")
+    assert main(["station", "check", str(replay)]) == 0
+    text = capsys.readouterr().out
+    assert "robot franka, camera replay" in text and "frame: 640 x 360 px" in text and "station ok" in text
 
 
 def test_control_error_mid_run_stops_and_keeps_the_scans(standin, tmp_path, capsys):

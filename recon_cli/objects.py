@@ -117,8 +117,9 @@ class SceneObject:
     def surface_points(self, n: int, rng: np.random.Generator,
                        exclude_base: float = 0.001) -> np.ndarray:
         """About n points (world frame) sampled uniformly on the visible ground-truth surface,
-        without the face resting on the board (object z < exclude_base) and without faces
-        hidden inside a union of primitives."""
+        without the face resting on the board (points less than ``exclude_base`` above the
+        object's lowest point, whichever way up it lies; -inf: the whole surface) and without
+        faces hidden inside a union of primitives."""
         tri = self.vertices[self.triangles]  # (M, 3, 3)
         area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
         k = rng.choice(len(tri), size=n, p=area / area.sum())
@@ -127,14 +128,15 @@ class SceneObject:
         a[flip], b[flip] = 1.0 - a[flip], 1.0 - b[flip]
         t = tri[k]
         p = t[:, 0] + a[:, None] * (t[:, 1] - t[:, 0]) + b[:, None] * (t[:, 2] - t[:, 0])
-        keep = p[:, 2] >= exclude_base
+        world = transform_points(self.world_T_object, p)
+        keep = world[:, 2] >= float(self.world_vertices()[:, 2].min()) + exclude_base
         if len(self.primitives) > 1:
             # a point of one primitive's surface inside (or on) another one is hidden
             owner = np.concatenate([np.full(len(p.mesh().triangles), i)
                                     for i, p in enumerate(self.primitives)])[k]
             for i, prim in enumerate(self.primitives):
                 keep &= ~(prim.contains(p, eps=1e-5) & (owner != i))
-        return transform_points(self.world_T_object, p[keep])
+        return world[keep]
 
 
 def _from_primitives(name: str, description: str, prims: list[Primitive],

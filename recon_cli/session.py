@@ -35,7 +35,7 @@ from recon_cli.cell_check import check_layout
 from recon_cli.config import DEFAULTS, Config, write_config
 from recon_cli.console import write_json
 from recon_cli.errors import FileError, HardwareUnavailable, InputError
-from recon_cli.objects import available_objects, load_object
+from recon_cli.objects import SceneObject, available_objects, load_object
 from recon_cli.outputs import atomic_write
 from recon_cli.perception.charuco import cell_board
 from recon_cli.perception.sensor import cell_sensor
@@ -89,6 +89,7 @@ class SessionSpec:
     board_only: bool = False  # nothing on the table but the ChArUco board (calibration views)
     recorder: Recorder | None = None  # the cell, every motion and every scan go into it
     station_checked: bool = False  # the station file passed its check already (recon run checks it first)
+    scene_object: SceneObject | None = None  # the object as it lies (turned over); default: the config's, standing
 
 
 class Session:
@@ -102,7 +103,7 @@ class Session:
         self.spec = spec
         self.rng = rng
         self.station_file = station_file
-        self.scene_object = None if spec.board_only else load_object(
+        self.scene_object = None if spec.board_only else spec.scene_object or load_object(
             resolve_object_name(cfg.scene.object_name), cfg.scene.object_scale, cfg.cell.cell_file.object_position)
         self.object_box = None if spec.board_only else self._object_box()
         self.cell = Cell(cfg.cell, object_box=self.object_box)

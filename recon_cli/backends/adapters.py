@@ -18,6 +18,8 @@ import numpy as np
 from recon_cli.backends.base import CameraBackend, Capabilities, RobotBackend
 from recon_cli.backends.hardware.ads import AdsRobot
 from recon_cli.backends.hardware.ads_config import AdsConfig
+from recon_cli.backends.hardware.franka import FrankaRobot
+from recon_cli.backends.hardware.franka_config import FrankaConfig
 from recon_cli.backends.sim.config import SimCameraConfig, SimRobotConfig
 from recon_cli.backends.sim.rendered import RenderedCamera
 from recon_cli.backends.sim.robot import SimRobot
@@ -106,14 +108,10 @@ def _open_ads(config: AdsConfig, around: Surroundings) -> RobotPart:
 
 
 def _read_franka(mapping: dict, where: str) -> FrankaConfig:
-    from recon_cli.backends.hardware.franka_config import FrankaConfig
-
     return FrankaConfig.from_mapping(mapping, where)
 
 
 def _open_franka(config: FrankaConfig, around: Surroundings) -> RobotPart:
-    from recon_cli.backends.hardware.franka import FrankaRobot
-
     return FrankaRobot(config, around.cell.joint_names, around.cell.kin.limits)
 
 

@@ -27,6 +27,7 @@ from recon_cli.config import DEFAULTS, Config
 from recon_cli.errors import ReconError, UnknownNameError
 from recon_cli.geometry.view import View
 from recon_cli.inputs.meshes import read_cloud
+from recon_cli.objects import SceneObject
 from recon_cli.perception.charuco import cell_board
 from recon_cli.planning.lower_bound import duration_lower_bound
 from recon_cli.planning.planner import MotionPlanner
@@ -64,6 +65,8 @@ class AutoscanOptions:
     station: Path | None = None  # a station file (robot and camera adapters)
     record: bool = False  # write a 3D recording of the run (recording.rrd in ``out``)
     page: bool = True  # write the report page (report.html) at the end
+    scene_object: SceneObject | None = None  # the object as it lies (a turned-over side); default: the config's
+    box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None  # crop box (centre, size)
 
 
 @dataclass
@@ -118,13 +121,13 @@ class Autoscan:
 
             self.recorder = open_recorder(opt.out, f"recon autoscan ({self.method.value})")
         spec = SessionSpec(opt.out, cfg, Mode.AUTOSCAN, opt.backend, run={"method": self.method.value, **opt.run},
-                           station=opt.station, recorder=self.recorder)
+                           station=opt.station, recorder=self.recorder, scene_object=opt.scene_object, box=opt.box)
         self.session = open_session(spec, self.rng)
         obj, store, station, acq = (self.session.scene_object, self.session.store, self.session.station,
                                     self.session.acquisition)
         assert obj is not None and store is not None and station is not None and acq is not None  # an open session
         self.obj, self.cell, self.store, self.station, self.acq = obj, self.session.cell, store, station, acq
-        center, size = self.obj.crop_box(cfg.scene.box_margin)
+        center, size = self.obj.crop_box(cfg.scene.box_margin) if opt.box is None else opt.box
         T = np.eye(4)
         T[:3, 3] = center
         self.feasible = Feasibility(self.cell, self.rng, self.vp.min_height)

@@ -84,7 +84,7 @@ def test_station_capabilities_are_composed_from_the_registry(robot, camera, expe
 
 
 def test_registry_names_are_the_station_file_choices(tmp_path):
-    assert tuple(ROBOT_ADAPTERS) == ("ads", "sim")
+    assert tuple(ROBOT_ADAPTERS) == ("ads", "franka", "sim")
     assert tuple(CAMERA_ADAPTERS) == ("sim", "genicam", "realsense", "replay")
     path = tmp_path / "s.yaml"
     path.write_text("format: 1\nrobot: {adapter: sim}\ncamera: {adapter: sim}\n")

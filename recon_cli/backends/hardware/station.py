@@ -21,6 +21,7 @@ import numpy as np
 
 from recon_cli.backends.adapters import CAMERA_ADAPTERS, ROBOT_ADAPTERS, CameraPart, RobotPart, Surroundings
 from recon_cli.backends.base import Backend, Capabilities, Station
+from recon_cli.backends.hardware.franka import FrankaRobot
 from recon_cli.backends.sim.rendered import RenderedCamera
 from recon_cli.backends.sim.robot import SimRobot
 from recon_cli.backends.sim.station import simulation_truth
@@ -158,8 +159,6 @@ def recover_robot(station: StationFile) -> list[str]:
         if exc.kind != "control":
             raise
         # in reflex mode: open the connection without the refusal to recover from it
-        from recon_cli.backends.hardware.franka import FrankaRobot
-
         robot = FrankaRobot(station.robot, cell.joint_names, cell.kin.limits, refuse_reflex=False)  # type: ignore[arg-type]
     try:
         return robot.recover()  # type: ignore[attr-defined]

@@ -40,6 +40,7 @@ from recon_cli.objects import load_object
 from recon_cli.perception.sensor import cell_sensor
 from recon_cli.session import resolve_object_name
 from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions
+from recon_cli.workflows.two_sided import TwoSided
 
 _V = D.viewplan
 
@@ -72,6 +73,9 @@ def autoscan(
                                                       "(docs/hardware.md); default: the simulation.")] = None,
     realism: RealismOpt = D.realism.name,
     record: RecordOpt = False,
+    sides: Annotated[int, typer.Option(min=1, max=2, help="2: scan, turn the object over (by physics in "
+                                                          "simulation, by the operator on a real cell), scan again "
+                                                          "and merge both sides by shape (docs/two_sided.md).")] = 1,
     force: ForceOpt = False,
     config_file: ConfigOpt = None,
 ) -> None:
@@ -110,6 +114,9 @@ def autoscan(
     opts = AutoscanOptions(folder, config, view, pictures=pictures,
                            run={"command": "autoscan", "initial": initial, "pictures": pictures}, station=station,
                            record=record)
+    if sides == 2:
+        _two_sided(opts, object_name)
+        return
     with progress_bar() as update:
         result = Autoscan(opts, update).run()
     if result.interrupted:
@@ -131,3 +138,23 @@ def autoscan(
         console.print(f"recording: {folder / 'recording.rrd'} (recon view {folder})")
     if result.page is not None:
         console.print(f"page: {result.page}")
+
+
+def _two_sided(opts: AutoscanOptions, object_name: str) -> None:
+    with progress_bar() as update:
+        result = TwoSided(opts, update).run()
+    if result.interrupted:
+        done = ", ".join(f"side {i + 1} ({s.scans} scans, {s.folder})" for i, s in enumerate(result.sides))
+        console.print(f"interrupted; kept: {done}")
+        raise typer.Exit(130)
+    for i, side in enumerate(result.sides):
+        console.print(f"side {i + 1}: {side.scans} scans in {side.seconds:.1f} s ({side.folder})")
+    reg = result.registration
+    if reg is not None:
+        truth = ""
+        console.print(f"sides registered by shape: fitness {reg.fitness:.3f}, rmse {reg.rmse * 1e3:.3f} mm, overlap "
+                      f"{reg.overlap:.2f}" + (", ambiguous (symmetric shape)" if reg.ambiguous else "") + truth)
+    if result.coverage is not None:
+        console.print(f"ground truth: coverage {result.coverage * 100:.2f} % of the whole surface (1 mm)")
+    console.print(f"mesh: {result.mesh}\ncloud: {result.cloud}\nreport: {result.report}\n"
+                  f"{object_name} on two sides in {result.seconds:.1f} s")

@@ -25,6 +25,7 @@ import numpy as np
 from recon_cli.acquisition import view_record
 from recon_cli.config import DEFAULTS, Config
 from recon_cli.errors import ReconError, UnknownNameError
+from recon_cli.geometry.transforms import transform_points
 from recon_cli.geometry.view import View
 from recon_cli.inputs.meshes import read_cloud
 from recon_cli.objects import SceneObject
@@ -36,6 +37,7 @@ from recon_cli.reconstruction.evaluation import histogram_png, signed_distances,
 from recon_cli.reconstruction.global_registration import global_pose
 from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
 from recon_cli.reconstruction.pipeline import run_register, scan_cloud
+from recon_cli.reconstruction.sides import register_sides
 from recon_cli.recording import open_recorder
 from recon_cli.recording.results import record_registration
 from recon_cli.report import write_page_after_run
@@ -67,6 +69,22 @@ class AutoscanOptions:
     page: bool = True  # write the report page (report.html) at the end
     scene_object: SceneObject | None = None  # the object as it lies (a turned-over side); default: the config's
     box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None  # crop box (centre, size)
+    park: bool = False  # end at the cell's home posture (clear of the table: someone reaches in next)
+    prior: SidePrior | None = None  # what an earlier side of the object saw (a second side)
+
+
+@dataclass(frozen=True)
+class SidePrior:
+    """What the first side of a turned-over object saw: its partial model and its camera
+    positions, in that side's world frame. Once the second side's own partial model shows
+    enough of the shape, the first side is registered onto it (by shape) and its points join
+    the partial model (the ellipsoid covers the whole object) and its cameras repel the
+    potential field (the views aim at what is still unseen)."""
+
+    points: np.ndarray  # (N, 3) [m], down-sampled
+    cameras: np.ndarray  # (K, 3) [m] camera positions of its completed views
+    voxel: float = 0.003  # [m] of the registration
+    attempts: tuple[int, ...] = (2, 4, 6)  # after so many scans of this side (at most once each)
 
 
 @dataclass
@@ -95,6 +113,7 @@ class AutoscanResult:
     pictures: list[Path]
     interrupted: bool = False
     page: Path | None = None  # report.html (None: not written)
+    prior: dict | None = None  # an earlier side registered onto this one: after how many scans, how well
 
 
 class Autoscan:
@@ -140,6 +159,8 @@ class Autoscan:
                                                        plan.velocity_scale, plan.acceleration_scale)
         self.center = np.asarray(center, float)
         self.partial: list[np.ndarray] = []
+        self.prior_cameras = np.zeros((0, 3))  # the first side's cameras, once registered onto this side
+        self.prior_placed: dict | None = None  # how the prior was registered (fitness, rmse, scans)
         self.requests = 0
         self.trajectory_s = 0.0
 
@@ -160,6 +181,27 @@ class Autoscan:
         pts = np.asarray(cloud.voxel_down_sample(self.vp.partial_voxel).points)
         if len(pts):
             self.partial.append(pts)
+        self._place_prior()
+
+    def _place_prior(self) -> None:
+        """Register the earlier side onto this side's partial model (see SidePrior)."""
+        import open3d as o3d
+
+        prior = self.opt.prior
+        if prior is None or self.prior_placed is not None or len(self.store) not in prior.attempts:
+            return
+        mine = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.vstack(self.partial)))
+        theirs = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(prior.points))
+        try:
+            reg = register_sides(mine, theirs, prior.voxel, seed=self.opt.config.seed)
+        except ReconError:
+            return
+        if reg.reason is not None or reg.shape_ambiguous:
+            return
+        T = reg.side1_T_side2
+        self.partial.append(transform_points(T, prior.points))
+        self.prior_cameras = transform_points(T, prior.cameras)
+        self.prior_placed = {"after_scans": len(self.store), "fitness": reg.fitness, "rmse_m": reg.rmse}
 
     def _partial_points(self) -> np.ndarray:
         return np.vstack(self.partial) if self.partial else self.center[None, :]
@@ -182,6 +224,7 @@ class Autoscan:
 
         A = [ell.nearest_point(ell.to_local(v.world_T_camera[:3, 3])) for v in views
              if v.status in (Status.COMPLETED, Status.INFEASIBLE)]
+        A += [ell.nearest_point(ell.to_local(c)) for c in self.prior_cameras]
         planned: list[tuple[np.ndarray, np.ndarray]] = []
         tries = 0
         while len(planned) < needed and tries < 20 * needed + 50:
@@ -271,6 +314,8 @@ class Autoscan:
                 self._scan(T)
                 views.append(ViewRecord(T, Status.COMPLETED, it, planning, sel.trajectory.duration))
                 self.progress("scans", len(self.store), vp.n)
+            if opt.park:
+                self.acq.move_to_joints(self.session.start, what="home posture")
         except KeyboardInterrupt:
             interrupted = True
         except ReconError as exc:  # a fault, no reachable view: reported below, then raised
@@ -345,7 +390,8 @@ class Autoscan:
                                                   None if mesh is None else str(mesh),
                                                   tuple(str(p) for p in pictures))))
         return AutoscanResult(opt.out, len(self.store), views, infeasible, self.requests, self.trajectory_s,
-                              seconds_total, coverage, accuracy, cloud, mesh, report, pictures, interrupted), error
+                              seconds_total, coverage, accuracy, cloud, mesh, report, pictures, interrupted,
+                              prior=self.prior_placed), error
 
     def _picture(self, it: int, ell, views: list[ViewRecord], planned: list[np.ndarray], active: np.ndarray) -> Path:
 

@@ -325,3 +325,31 @@ def test_autoscan_with_station(standin, tmp_path, capsys):
     assert (out / "reconstruction" / "mesh.ply").stat().st_size > 10_000
     report = json.loads((out / "autoscan_report.json").read_text())
     assert report["scans"] == 3 and report["error"] is None and report["cell"] == "fr3"
+
+
+def test_two_sided_autoscan_on_a_real_cell_asks_the_operator_and_ctrl_c_keeps_side_1(standin, tmp_path, capsys,
+                                                                                    monkeypatch):
+    """On a real cell the robot parks at its home posture and the operator is asked to turn
+    the object over; Ctrl-C at that prompt ends the run with exit 130 and keeps side 1."""
+    station, _ = _files(tmp_path)
+    asked = []
+
+    def operator(prompt: str = "") -> str:
+        asked.append(prompt)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("builtins.input", operator)
+    out = tmp_path / "two"
+    code = main(["autoscan", "--sides", "2", "--station", str(station), "--object", "bottle", "--n", "3",
+                 "--no-pictures", "--out", str(out)])
+    text = capsys.readouterr()
+    assert code == 130, text.out + text.err
+    assert len(asked) == 1 and "turn the object over" in text.out and "press Enter" in text.out
+    assert "interrupted; kept: side 1 (3 scans" in text.out
+    assert len(list((out / "side_1").glob("scan_*/scan.json"))) == 3 and not (out / "side_2").exists()
+    assert (out / "side_1" / "reconstruction" / "mesh.ply").exists()
+    # the robot waited at the cell's home posture
+    robot = FrankaRobot(CONFIG, Cell(CellConfig(kind=CellName.parse("fr3"))).joint_names,
+                        Cell(CellConfig(kind=CellName.parse("fr3"))).kin.limits)
+    assert np.abs(robot.measured_joints() - HOME).max() < 0.01
+    robot.close()

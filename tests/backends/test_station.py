@@ -153,7 +153,8 @@ def test_station_file_names_a_cell_file_beside_it(tmp_path, capsys):
 
 @pytest.mark.parametrize("text, message", [
     ("format: 1\nrobot: {adapter: ads}\n", "no camera section"),
-    ("format: 1\nrobot: {adapter: kuka}\ncamera: {adapter: sim}\n", "robot.adapter = 'kuka' is not one of ads, franka, sim"),
+    ("format: 1\nrobot: {adapter: kuka}\ncamera: {adapter: sim}\n",
+     "robot.adapter = 'kuka' is not one of ads, franka, sim"),
     ("format: 1\nrobot: {adapter: sim}\ncamera: {adapter: sim}\nspeed: 3\n", "speed is not a known key"),
     ("format: 1\nrobot: {adapter: ads, ads: {poll: -1}}\ncamera: {adapter: sim}\n", "robot.ads.poll = -1 s is outside"),
     ("format: 1\nrobot: [adapter\n", r"station.yaml:3: not valid YAML \(did not find expected ',' or ']'"),

@@ -1,12 +1,13 @@
 """Turning an object over between the two sides of a two-sided scan, by physics.
 
 An operator turns the object over and puts it back on its spot; in simulation MuJoCo does
-the turning: the object is rotated by about 180 deg about a random horizontal axis through
-its bounding-box centre, given a random yaw, dropped from a few mm onto a plane at the
-surface it stands on, and simulated until it lies still. Where it comes to rest is a
-stable pose that physics chose, not one picked by hand: the wood block and the closed mug
-end on their tops, the toy on its side, the drill and the mustard bottle on their sides,
-the bottle on its side or, now and then, balanced on its cap. It is then moved in x, y so
+the turning: the object is tipped by about 90 deg about a random horizontal axis through
+its bounding-box centre (onto a flank: its old resting face then faces sideways and is
+seen, and the two sides share its top and a flank, whose shape fixes their registration;
+turned upside down instead, a box's sides would share only flat flanks, along which they
+can slide), given a random yaw, dropped from a few mm onto a plane at the surface it stands
+on, and simulated until it lies still. Where it comes to rest is a stable pose that
+physics chose, not one picked by hand. It is then moved in x, y so
 that its world bounding-box centre is where it was (the operator puts it back on the spot),
 keeping the settled height and orientation.
 
@@ -56,7 +57,7 @@ TIMESTEP_S = 0.001
 NOSLIP_ITERATIONS = 10
 """MuJoCo's noslip solver makes friction hard: without it, a soft rolling-friction constraint
 lets a bottle on its side creep on for many seconds."""
-FLIP_DEG = (150.0, 210.0)
+FLIP_DEG = (75.0, 105.0)
 """Range of the turning angle about the horizontal axis [deg]."""
 DROP_M = (0.002, 0.005)
 """Range of the drop height of the lowest point above the surface [m]."""
@@ -98,7 +99,7 @@ def turn_over(obj: SceneObject, rng: np.random.Generator, surface_z: float | Non
     """Turn ``obj`` over onto another face and let it settle on the plane ``surface_z`` [m]
     (default: the lowest world z of its vertices, the surface it rests on now).
 
-    Each draw turns it by 150-210 deg about a random horizontal axis through its bounding-box
+    Each draw tips it by 75-105 deg about a random horizontal axis through its bounding-box
     centre, with a random yaw, and drops it from 2-5 mm. An object can fall back onto the face
     it stood on (a tilt of the up axis below :data:`MIN_TILT_DEG`); then the next draw of
     ``rng`` is tried, :data:`MAX_ATTEMPTS` at most, after which a ReconError is raised. A

@@ -61,15 +61,19 @@ class TwoSidedResult:
     interrupted: bool = False  # Ctrl-C in a side or at the turn: what was scanned is kept
 
 
-def _coverage(obj: SceneObject, points: np.ndarray, rng: np.random.Generator, samples: int = 100_000) -> float:
-    """Share of the object's whole surface (the resting faces included) with a point within
-    the coverage tolerance."""
+def _coverages(obj: SceneObject, clouds: dict[str, np.ndarray], rng: np.random.Generator,
+               samples: int = 100_000) -> dict[str, float]:
+    """Share of the object's whole surface (the resting faces included) with a point of each
+    cloud within the coverage tolerance (one sample of the surface for all)."""
     import open3d as o3d
 
     truth = obj.surface_points(samples, rng, exclude_base=-np.inf)
     ref = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(truth))
-    rec = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, float)))
-    return float(np.mean(np.asarray(ref.compute_point_cloud_distance(rec)) <= COVERAGE_TOLERANCE))
+    out = {}
+    for name, points in clouds.items():
+        rec = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, float)))
+        out[name] = float(np.mean(np.asarray(ref.compute_point_cloud_distance(rec)) <= COVERAGE_TOLERANCE))
+    return out
 
 
 def _angle_deg(R: np.ndarray) -> float:
@@ -116,7 +120,9 @@ class TwoSided:
         opt = self.opt
         t0 = time.perf_counter()
         first = self._object()
-        side_opt = replace(opt, page=False, scene_object=first)
+        # each side a complete autoscan folder with its registered cloud; the mesh and the page
+        # are the merged model's
+        side_opt = replace(opt, scene_object=first, mesh=False, page=False)
         # on a real cell the robot waits at its home posture while the operator turns the object
         side1 = Autoscan(replace(side_opt, out=opt.out / "side_1", park=not self._simulated()), self.progress).run()
         if side1.interrupted:
@@ -189,11 +195,12 @@ class TwoSided:
                 m, _ = poisson_mesh(merged, cfg.registration.surface)
                 mesh = write_mesh(out / "mesh.ply", m)
             if second is not None:
-                rng = np.random.default_rng(cfg.seed)
                 pts = np.asarray(merged.points)
-                coverage = _coverage(first, pts, rng)
-                contributions = {"side_1": _coverage(first, np.asarray(clouds[0].points), rng),
-                                 "side_2": _coverage(first, np.asarray(second_cloud.points), rng)}
+                shares = _coverages(first, {"merged": pts, "side_1": np.asarray(clouds[0].points),
+                                            "side_2": np.asarray(second_cloud.points)},
+                                    np.random.default_rng(cfg.seed))
+                coverage = shares.pop("merged")
+                contributions = shares
                 d = signed_distances(pts, first.mesh_world())
                 accuracy = {"mean_mm": float(d.mean() * 1e3), "std_mm": float(d.std() * 1e3),
                             "within": within_shares(d)}

@@ -347,7 +347,7 @@ def test_two_sided_autoscan_on_a_real_cell_asks_the_operator_and_ctrl_c_keeps_si
     assert len(asked) == 1 and "turn the object over" in text.out and "press Enter" in text.out
     assert "interrupted; kept: side 1 (3 scans" in text.out
     assert len(list((out / "side_1").glob("scan_*/scan.json"))) == 3 and not (out / "side_2").exists()
-    assert (out / "side_1" / "reconstruction" / "mesh.ply").exists()
+    assert (out / "side_1" / "reconstruction" / "cloud.ply").exists()  # side 1 registered
     # the robot waited at the cell's home posture
     robot = FrankaRobot(CONFIG, Cell(CellConfig(kind=CellName.parse("fr3"))).joint_names,
                         Cell(CellConfig(kind=CellName.parse("fr3"))).kin.limits)

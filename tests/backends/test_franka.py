@@ -343,7 +343,7 @@ def test_two_sided_autoscan_on_a_real_cell_asks_the_operator_and_ctrl_c_keeps_si
     code = main(["autoscan", "--sides", "2", "--station", str(station), "--object", "bottle", "--n", "3",
                  "--no-pictures", "--out", str(out)])
     text = capsys.readouterr()
-    assert code == 130, text.out + text.err
+    assert code == 130, text.out + text.err + standin.log_tail(60)
     assert len(asked) == 1 and "turn the object over" in text.out and "press Enter" in text.out
     assert "interrupted; kept: side 1 (3 scans" in text.out
     assert len(list((out / "side_1").glob("scan_*/scan.json"))) == 3 and not (out / "side_2").exists()

@@ -20,6 +20,7 @@ reflex mode is refused with its errors.
 from __future__ import annotations
 
 import contextlib
+import gc
 import os
 import time
 from collections.abc import Iterator
@@ -194,9 +195,19 @@ class FrankaRobot:
 
     def _follow(self, stream: SetpointStream) -> np.ndarray:
         """The 1 kHz loop: one setpoint per controller cycle (a cycle the controller reports
-        as lost advances the index with it). Returns the largest tracking error per joint."""
-        with realtime_priority():
-            return self._loop(stream)
+        as lost advances the index with it). Returns the largest tracking error per joint.
+        Python's cyclic garbage collector is collected before and paused during the loop: a
+        full collection in a process holding many objects takes longer than several
+        controller cycles (the loop's own objects are freed by reference counting)."""
+        gc.collect()
+        paused = gc.isenabled()
+        gc.disable()
+        try:
+            with realtime_priority():
+                return self._loop(stream)
+        finally:
+            if paused:
+                gc.enable()
 
     def _loop(self, stream: SetpointStream) -> np.ndarray:
         p, cfg = self._p, self.config

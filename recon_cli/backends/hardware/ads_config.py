@@ -89,7 +89,7 @@ _SYMBOL = re.compile(r"[^\s]{1,255}")
 _WHERE = re.compile(r"(.*?)(?::\d+)?: (.*)")
 
 
-def _at(d: object, key: str, where: str) -> str:
+def key_where(d: object, key: str, where: str) -> str:
     """``where.key``, as ``file:line: where.key`` when the mapping knows the key's line."""
     lines = getattr(d, "lines", None)
     line = lines.get(key) if isinstance(lines, dict) else None
@@ -227,7 +227,7 @@ class AdsConfig:
         for key in d:
             if key not in known:
                 raise InputError(f"{where}.{key} is not a known key", hint=f"known keys: {', '.join(sorted(known))}")
-        kw = {key: _field(key, value, _at(d, key, where)) for key, value in d.items()}
+        kw = {key: _field(key, value, key_where(d, key, where)) for key, value in d.items()}
         values = {f.name: f.default_factory() if callable(f.default_factory) else f.default for f in fields(cls)}
-        _together({**values, **kw}, lambda key: _at(d, key, where))
+        _together({**values, **kw}, lambda key: key_where(d, key, where))
         return cls(**kw)

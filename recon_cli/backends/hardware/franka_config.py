@@ -8,7 +8,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, fields
 
-from recon_cli.backends.hardware.ads_config import Range
+from recon_cli.backends.hardware.ads_config import Range, key_where
 from recon_cli.errors import InputError
 
 #: at rest: every joint moved less than REST_SPREAD over this many consecutive states (1 ms
@@ -31,21 +31,11 @@ RANGES: dict[str, tuple[Range, str]] = {
 }
 REALTIME = ("enforce", "ignore")
 _HOST = re.compile(r"[A-Za-z0-9.\-]{1,253}")
-_WHERE = re.compile(r"(.*?)(?::\d+)?: (.*)")
 
 
 def range_rows() -> list[str]:
     """The rows of the ranges table of docs/hardware.md."""
     return [f"| `{key}` | {r.text()} | {meaning} |" for key, (r, meaning) in RANGES.items()]
-
-
-def _at(d: object, key: str, where: str) -> str:
-    lines = getattr(d, "lines", None)
-    line = lines.get(key) if isinstance(lines, dict) else None
-    m = _WHERE.fullmatch(where)
-    if line and m:
-        return f"{m.group(1)}:{line}: {m.group(2)}.{key}"
-    return f"{where}.{key}"
 
 
 def _field(key: str, value: object, where: str):
@@ -92,8 +82,8 @@ class FrankaConfig:
                 raise InputError(f"{where}.{key} is not a known key", hint=f"known keys: {', '.join(sorted(known))}")
         if "ip" not in d:
             raise InputError(f"{where} has no ip", hint="ip: the controller's address, e.g. 172.16.0.2")
-        kw = {key: _field(key, value, _at(d, key, where)) for key, value in d.items()}
+        kw = {key: _field(key, value, key_where(d, key, where)) for key, value in d.items()}
         if kw.get("settle_tolerance", cls.settle_tolerance) > kw.get("tracking_bound", cls.tracking_bound):
-            raise InputError(f"{_at(d, 'settle_tolerance', where)} is more than tracking_bound",
+            raise InputError(f"{key_where(d, 'settle_tolerance', where)} is more than tracking_bound",
                              hint="settling is the tighter bound; lower settle_tolerance")
         return cls(**kw)

@@ -4,8 +4,8 @@ recon streams the checked trajectory as joint positions at the controller's 1 kH
 (:mod:`recon_cli.backends.hardware.setpoint_stream`: smoothed to the jerk limit, every
 finite difference within the cell's velocity, acceleration and jerk limits, refused before
 anything is sent otherwise), in libfranka's ``readOnce``/``writeOnce`` loop with the joint
-impedance controller, then waits until the robot has settled at the goal and reports the
-measured joints.
+impedance controller, keeps commanding the goal until the robot has settled there, only then
+finishes the motion, and reports the measured joints.
 
 Faults stop the robot and raise :class:`~recon_cli.errors.RobotFault`, completed scans stay:
 a control error or reflex of the controller (its error flags as text: the controller has
@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import gc
 import os
+import sys
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -38,6 +39,8 @@ from recon_cli.robot.limits import JointLimits
 
 #: the FCI's command rate
 PERIOD = 0.001
+#: longest hold of the interpreter lock by another thread during the 1 kHz loop [s]
+SWITCH_INTERVAL = 0.0002
 #: how long a stop may take to bring the joints to rest before it counts as unconfirmed
 STOP_BOUND = 2.0
 
@@ -178,11 +181,9 @@ class FrankaRobot:
                              "away); nothing was sent", kind="start", joint=self.joint_names[j], value=float(err[j]),
                              bound=self.config.tracking_bound, stopped=False, hint="plan from the measured joints")
         stream = self.stream(trajectory, commanded)
-        q = stream.q
         lost = self.lost_cycles
         try:
-            max_err = self._follow(stream)
-            final, settle_time = self._settle(q[-1])
+            max_err, final, settle_time = self._follow(stream)
         except RobotFault:
             raise
         except (p.FrankaException, RuntimeError) as exc:
@@ -193,88 +194,113 @@ class FrankaRobot:
         return ExecutionReport(duration=stream.duration, settle_time=settle_time, max_tracking_error=max_err,
                                final_error=final, settled=True, lost_cycles=self.lost_cycles - lost)
 
-    def _follow(self, stream: SetpointStream) -> np.ndarray:
+    def _follow(self, stream: SetpointStream) -> tuple[np.ndarray, np.ndarray, float]:
         """The 1 kHz loop: one setpoint per controller cycle (a cycle the controller reports
-        as lost advances the index with it). Returns the largest tracking error per joint.
-        Python's cyclic garbage collector is collected before and paused during the loop: a
+        as lost advances the index with it), then the hold at the goal until settled (see
+        :meth:`_loop`). Python's cyclic garbage collector is collected before and paused during the loop: a
         full collection in a process holding many objects takes longer than several
-        controller cycles (the loop's own objects are freed by reference counting)."""
+        controller cycles (the loop's own objects are freed by reference counting); and another
+        Python thread holding the interpreter lock is made to hand it over within
+        SWITCH_INTERVAL instead of Python's 5 ms."""
         gc.collect()
         paused = gc.isenabled()
         gc.disable()
+        switch = sys.getswitchinterval()
+        sys.setswitchinterval(SWITCH_INTERVAL)
         try:
             with realtime_priority():
                 return self._loop(stream)
         finally:
+            sys.setswitchinterval(switch)
             if paused:
                 gc.enable()
 
-    def _loop(self, stream: SetpointStream) -> np.ndarray:
+    def _loop(self, stream: SetpointStream) -> tuple[np.ndarray, np.ndarray, float]:
+        """Stream the setpoints, then keep commanding the goal until the robot has settled
+        there (every joint within the settle tolerance on SETTLE_STATES consecutive states and
+        moving less than REST_SPREAD among them: positions, not the reported velocities, which
+        are noise at rest) and only then finish the motion: a controller takes over the pose
+        the robot *has* when the motion finishes, so finishing while the arm still lags its
+        command would leave it short of the goal. The largest tracking error per joint, the
+        final error and the settle time."""
         p, cfg = self._p, self.config
         q = stream.q
         last = len(q) - 1
+        goal = q[last]
         control = self.robot.start_joint_position_control(p.ControllerMode.JointImpedance)
         index = 0
         sent = q[0]
         max_err = np.zeros(7)
         deadline = time.monotonic() + stream.duration + cfg.time_margin
-        while True:
-            state, period = control.readOnce()
-            measured = np.asarray(state.q, dtype=float)
-            err = np.abs(measured - sent)
-            max_err = np.maximum(max_err, err)
-            if np.any(~np.isfinite(measured)) or np.any(err > cfg.tracking_bound):
-                j = int(np.argmax(np.where(np.isfinite(err), err, np.inf)))
-                del control
-                stopped = self._halt()
-                raise RobotFault(f"tracking error of {self.joint_names[j]} is {err[j]:.4f} rad, above the bound "
-                                 f"{cfg.tracking_bound:g} rad, at setpoint {index} of {last + 1}; "
-                                 f"{self._stop_text(stopped)}", kind="tracking", joint=self.joint_names[j],
-                                 value=float(err[j]), bound=cfg.tracking_bound, stopped=stopped,
-                                 hint="check the load and the collision thresholds; completed scans are kept")
-            step = round(period.to_sec() / PERIOD)
-            self.lost_cycles += max(step - 1, 0)
-            index = min(index + step, last)
-            sent = q[index]
-            command = p.JointPositions(sent.tolist())
-            command.motion_finished = index == last
-            control.writeOnce(command)
-            if index == last:
-                return max_err
-            if time.monotonic() > deadline:
-                del control
-                stopped = self._halt()
-                raise RobotFault(f"the motion did not complete within {stream.duration + cfg.time_margin:.1f} s "
-                                 f"(setpoint {index} of {last + 1}); {self._stop_text(stopped)}", kind="timeout",
-                                 stopped=stopped, hint="the control loop fell behind the controller; completed "
-                                                       "scans are kept")
-
-    def _settle(self, goal: np.ndarray) -> tuple[np.ndarray, float]:
-        """Wait until every joint is within the settle tolerance of the goal on SETTLE_STATES
-        consecutive states (1 ms apart) and has moved less than REST_SPREAD among them; the
-        final error and the time it took. (Positions, not the reported velocities: a robot
-        holding still reports velocity noise of several hundredths of a rad/s.)"""
-        cfg = self.config
-        t0 = time.monotonic()
+        arrived = time.monotonic()  # when the last setpoint was first sent
         window: list[np.ndarray] = []
-        while True:
-            state = self._state()
-            measured = self._checked(np.asarray(state.q, dtype=float), " after the motion")
-            final = np.abs(measured - goal)
-            window = [*window, measured][-SETTLE_STATES:] if np.all(final <= cfg.settle_tolerance) else []
-            if len(window) == SETTLE_STATES and _spread(window) < REST_SPREAD:
-                return final, time.monotonic() - t0
-            if time.monotonic() - t0 > cfg.settle_timeout:
-                j = int(np.argmax(final))
-                stopped = self._halt()
-                raise RobotFault(f"the robot did not settle at the goal within {cfg.settle_timeout:g} s "
-                                 f"({self.joint_names[j]} is {final[j]:.4g} rad away, tolerance "
-                                 f"{cfg.settle_tolerance:g} rad); no scan was taken; {self._stop_text(stopped)}",
-                                 kind="settle", joint=self.joint_names[j], value=float(final[j]),
-                                 bound=cfg.settle_tolerance, stopped=stopped,
-                                 hint="check the load and robot.franka.settle_tolerance; completed scans are kept")
+        try:
+            while True:
+                state, period = control.readOnce()
+                measured = np.asarray(state.q, dtype=float)
+                err = np.abs(measured - sent)
+                max_err = np.maximum(max_err, err)
+                if np.any(~np.isfinite(measured)) or np.any(err > cfg.tracking_bound):
+                    control = None
+                    raise self._tracking_fault(err, f"at setpoint {index} of {last + 1}")
+                now = time.monotonic()
+                finished = False
+                if index == last:
+                    final = np.abs(measured - goal)
+                    window = [*window, measured][-SETTLE_STATES:] if np.all(final <= cfg.settle_tolerance) else []
+                    finished = len(window) == SETTLE_STATES and _spread(window) < REST_SPREAD
+                    if not finished and now - arrived > cfg.settle_timeout:
+                        control = None
+                        raise self._settle_fault(final)
+                else:
+                    step = round(period.to_sec() / PERIOD)
+                    self.lost_cycles += max(step - 1, 0)
+                    index = min(index + step, last)
+                    sent = q[index]
+                    if index == last:
+                        arrived = now
+                    elif now > deadline:
+                        control = None
+                        raise self._timeout_fault(stream.duration + cfg.time_margin, f"setpoint {index} of {last + 1}")
+                command = p.JointPositions(sent.tolist())
+                command.motion_finished = finished
+                control.writeOnce(command)
+                if finished:
+                    return max_err, final, now - arrived
+        except BaseException:
+            # the ActiveControl goes now, while the connection is as the error left it (its
+            # destructor cancels an unfinished motion over that connection), not whenever the
+            # collector reaches the traceback that holds this frame
+            control = None
+            raise
 
     # ------------------------------------------------------------------ faults and stopping
+    def _tracking_fault(self, err: np.ndarray, where: str) -> RobotFault:
+        j = int(np.argmax(np.where(np.isfinite(err), err, np.inf)))
+        cfg = self.config
+        stopped = self._halt()
+        return RobotFault(f"tracking error of {self.joint_names[j]} is {err[j]:.4f} rad, above the bound "
+                          f"{cfg.tracking_bound:g} rad, {where}; {self._stop_text(stopped)}", kind="tracking",
+                          joint=self.joint_names[j], value=float(err[j]), bound=cfg.tracking_bound, stopped=stopped,
+                          hint="check the load and the collision thresholds; completed scans are kept")
+
+    def _settle_fault(self, final: np.ndarray) -> RobotFault:
+        j = int(np.argmax(final))
+        cfg = self.config
+        stopped = self._halt()
+        return RobotFault(f"the robot did not settle at the goal within {cfg.settle_timeout:g} s "
+                          f"({self.joint_names[j]} is {final[j]:.4g} rad away, tolerance {cfg.settle_tolerance:g} "
+                          f"rad); no scan was taken; {self._stop_text(stopped)}", kind="settle",
+                          joint=self.joint_names[j], value=float(final[j]), bound=cfg.settle_tolerance,
+                          stopped=stopped,
+                          hint="check the load and robot.franka.settle_tolerance; completed scans are kept")
+
+    def _timeout_fault(self, allowed: float, where: str) -> RobotFault:
+        stopped = self._halt()
+        return RobotFault(f"the motion did not complete within {allowed:.1f} s ({where}); "
+                          f"{self._stop_text(stopped)}", kind="timeout", stopped=stopped,
+                          hint="the control loop fell behind the controller; completed scans are kept")
+
     def _control_fault(self, exc: BaseException) -> RobotFault:
         """A libfranka exception of a motion: a control error (the controller stopped the
         robot, its flags as text) or a lost connection."""

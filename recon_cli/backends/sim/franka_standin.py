@@ -53,6 +53,18 @@ DEFAULT_VENV = ROOT / ".venvs" / "franka-sim"
 _LAUNCHER = """
 import logging, os, signal, sys, threading, time
 logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+# A controller runs on its own real-time computer; on a shared machine the stand-in's threads
+# get real-time round-robin priority where the system permits it (inherited by the server's
+# threads, below the client's 1 kHz loop), else a higher nice level, and hand the interpreter
+# lock over within 0.2 ms instead of Python's 5 ms
+try:
+    os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(40))
+except (AttributeError, OSError):
+    try:
+        os.nice(-10)
+    except OSError:
+        pass
+sys.setswitchinterval(0.0002)
 import franka_sim.mujoco_franka_sim as arm
 from franka_sim import FrankaSimServer
 host, port = sys.argv[1], int(sys.argv[2])

@@ -19,6 +19,7 @@ from recon_cli.bench.planners import DEFAULT_PLANNERS, run_planner_bench, thesis
 from recon_cli.bench.registration import run_registration_bench
 from recon_cli.bench.sequence import CASES, ecdf_png, run_sequence_bench, summarize
 from recon_cli.bench.sim import run_sim_bench
+from recon_cli.bench.tour import QUICK_VIEW_STEP, run_tour_bench, summarize_tours, tour_png
 from recon_cli.bench.viewplan import coverage_png, run_viewplan_bench
 from recon_cli.cli.app import bench_app
 from recon_cli.cli.options import (
@@ -164,6 +165,32 @@ def bench_sequence(
         console.print(item)
     console.print(f"results: {folder / 'bench_sequence.json'}, plot: {folder / 't_p_ecdf.png'}")
 
+
+@bench_app.command("tour")
+def bench_tour(
+    seeds: Annotated[int, typer.Option("--seeds", min=1, max=1000, help="Seeds (runs 0 ... N-1 of bench sequence "
+                                                                        "--seed).")] = 5,
+    quick: Annotated[bool, typer.Option("--quick", help="CI mode: 1 seed, every second view (12).")] = False,
+    seed: SeedOpt = D.seed,
+    out: OutOpt = None,
+    force: ForceOpt = False,
+) -> None:
+    """Sequence optimization: case D's tour against the optimal tour on the same planned durations."""
+
+    folder = output_folder(out, "bench tour", force=force).path
+    n, step = (1, QUICK_VIEW_STEP) if quick else (seeds, 1)
+    plan = D.planner
+    with progress_bar() as update:
+        rows = run_tour_bench(n, seed, step, update, plan)
+    summary = summarize_tours(rows)
+    write_json(folder / "bench_tour.json", {"seeds": n, "seed": seed, "views_step": step, "planner": plan,
+                                            "velocity_scale": plan.velocity_scale,
+                                            "acceleration_scale": plan.acceleration_scale, "summary": summary,
+                                            "runs": [asdict(r) for r in rows]})
+    tour_png(folder / "tour_gap.png", rows)
+    for item in render.tour_report(summary, rows, plan.velocity_scale, plan.acceleration_scale):
+        console.print(item)
+    console.print(f"results: {folder / 'bench_tour.json'}, plot: {folder / 'tour_gap.png'}")
 
 @bench_app.command("viewplan")
 def bench_viewplan(

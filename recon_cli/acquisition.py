@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -19,7 +19,7 @@ from recon_cli.errors import PlanningError, RobotFault
 from recon_cli.geometry.transforms import pose_error
 from recon_cli.geometry.view import View
 from recon_cli.planning.planner import MotionPlanner, PlanOptions, PlanResult
-from recon_cli.reconstruction.scan_store import Scan, ScanStore
+from recon_cli.reconstruction.scan_store import Scan, ScanStore, stored_depth
 from recon_cli.robot.cell import Cell
 
 
@@ -110,7 +110,7 @@ class Acquisition:
 
     def scan(self, planned: dict, move: MoveReport | None = None, name: str | None = None) -> Scan:
         """Capture a frame at the settled robot and write it as the next scan (``name``, when
-        given, is stored in scan.json)."""
+        given, is stored in scan.json); the scan returned holds the depth as stored."""
         t0 = time.time()
         frame = self.camera.capture()
         t1 = time.time()
@@ -132,7 +132,9 @@ class Acquisition:
             ground_truth=self.ground_truth() if self.ground_truth else None,
             distortion=frame.distortion,
         )
-        self.store.write(scan, self.depth_scale)
+        folder = self.store.write(scan, self.depth_scale)
+        # from here on the scan is what its readers get: the depth as stored
+        scan = replace(scan, depth=stored_depth(scan.depth, self.depth_scale), path=folder)
         if self.on_scan is not None:
             self.on_scan(scan)
         return scan

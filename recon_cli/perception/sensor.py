@@ -95,23 +95,57 @@ def _incidence_ok(depth: np.ndarray, K: Intrinsics, max_incidence: float) -> np.
 
 def _incidence_cos(depth: np.ndarray, K: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
     """|cos| of the angle between each pixel's ray and its surface normal (from the depth
-    image), and the pixels where no normal can be made (neighbours missing or degenerate)."""
+    image), and the pixels where no normal can be made (neighbours missing or degenerate).
+    The normal is the cross product of the central differences of the back-projected points
+    (X, Y, Z) = depth (u, v, 1) along the image's columns and rows (zero on the border),
+    computed per component with few temporaries."""
     h, w = depth.shape
+    d = np.asarray(depth, dtype=np.float64)
     u = (np.arange(w) - K.cx) / K.fx
     v = (np.arange(h) - K.cy) / K.fy
-    X = depth * u[None, :]
-    Y = depth * v[:, None]
-    P = np.stack([X, Y, depth], axis=-1)
-    du = np.zeros_like(P)
-    dv = np.zeros_like(P)
-    du[:, 1:-1] = P[:, 2:] - P[:, :-2]
-    dv[1:-1, :] = P[2:, :] - P[:-2, :]
-    n = np.cross(du, dv)
-    norm = np.linalg.norm(n, axis=-1)
-    ray = np.stack([np.broadcast_to(u[None, :], (h, w)), np.broadcast_to(v[:, None], (h, w)),
-                    np.ones((h, w))], axis=-1)
-    cos = np.abs(np.sum(n * ray, axis=-1)) / (norm * np.linalg.norm(ray, axis=-1) + 1e-300)
-    edge = (norm == 0) | ~np.isfinite(cos)
+    right, left = d[1:-1, 2:], d[1:-1, :-2]  # neighbours along u (interior rows)
+    down, up = d[2:, 1:-1], d[:-2, 1:-1]  # neighbours along v (interior columns)
+    uc, vc = u[None, 1:-1], v[1:-1, None]
+    zu = right - left
+    zv = down - up
+    xu = right * u[None, 2:]
+    xu -= left * u[None, :-2]
+    xv = down * uc
+    xv -= up * uc
+    yu = right * vc
+    yu -= left * vc
+    yv = down * v[2:, None]
+    yv -= up * v[:-2, None]
+    nx = np.zeros((h, w))
+    ny = np.zeros((h, w))
+    nz = np.zeros((h, w))
+    inner = (slice(1, -1), slice(1, -1))
+    np.multiply(yu, zv, out=nx[inner])
+    nx[inner] -= zu * yv
+    np.multiply(zu, xv, out=ny[inner])
+    ny[inner] -= xu * zv
+    np.multiply(xu, yv, out=nz[inner])
+    nz[inner] -= yu * xv
+    del zu, zv, xu, xv, yu, yv
+    norm = nx * nx
+    norm += ny * ny
+    norm += nz * nz
+    np.sqrt(norm, out=norm)
+    ray = u[None, :] * u[None, :] + v[:, None] * v[:, None]
+    ray += 1.0
+    np.sqrt(ray, out=ray)
+    cos = nx
+    cos *= u[None, :]
+    ny *= v[:, None]
+    cos += ny
+    cos += nz
+    np.abs(cos, out=cos)
+    ray *= norm
+    ray += 1e-300
+    with np.errstate(invalid="ignore", over="ignore"):
+        cos /= ray
+    edge = norm == 0
+    edge |= ~np.isfinite(cos)
     return cos, edge
 
 

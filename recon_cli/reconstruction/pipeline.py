@@ -33,7 +33,7 @@ from recon_cli.reconstruction.global_registration import (
     kinematic_correction,
 )
 from recon_cli.reconstruction.metadata import SessionInfo
-from recon_cli.reconstruction.options import RegisterOptions  # noqa: F401 (re-exported)
+from recon_cli.reconstruction.options import RegisterOptions
 from recon_cli.reconstruction.pose_graph import MultiwayResult, register_multiway
 from recon_cli.reconstruction.scan_store import ScanStore, read_scan
 from recon_cli.reconstruction.surface import (
@@ -171,6 +171,62 @@ def _crop_box(options: RegisterOptions, session: SessionInfo, world_T_marker: np
     return box.moved(invert(world_T_marker))
 
 
+class CloudMemo:
+    """What a run has made of its scans already, kept for :func:`run_register`: each scan's
+    global pose (reused when asked for with the same board, marker pose and options) and its
+    cloud (cropped, normals toward the camera; reused when made with the very same pose, crop
+    box and surface options). Anything else is made anew. The scans must hold the depth as
+    stored (what :func:`read_scan` gives)."""
+
+    def __init__(self) -> None:
+        self._clouds: dict[str, tuple[np.ndarray, CropBox | None, SurfaceOptions, Any]] = {}
+        self._poses: dict[str, tuple[tuple, GlobalPose | None]] = {}
+        self.hits = 0  # poses and clouds reused
+
+    def pose(self, folder: str, scan, board, world_T_marker: np.ndarray | None,
+             options: RegisterOptions) -> GlobalPose | None:
+        """The scan's global pose (:func:`global_pose` with the options' board settings)."""
+        key = _pose_key(board, world_T_marker, options)
+        known = self._poses.get(folder)
+        if known is not None and known[0] == key:
+            self.hits += 1
+            return known[1]
+        pose = global_pose(scan, board, world_T_marker, options.min_corners, options.use_board,
+                           options.max_reprojection_px, options.board_plane, options.max_board_sigma)
+        self._poses[folder] = (key, pose)
+        return pose
+
+    def put(self, folder: str, marker_T_camera: np.ndarray, box: CropBox | None, surface: SurfaceOptions,
+            cloud) -> None:
+        import open3d as o3d
+
+        self._clouds[folder] = (np.array(marker_T_camera, dtype=float), box, surface, o3d.geometry.PointCloud(cloud))
+
+    def get(self, folder: str, marker_T_camera: np.ndarray, box: CropBox | None, surface: SurfaceOptions):
+        """A copy of the scan's cloud made with these inputs, or None."""
+        import open3d as o3d
+
+        known = self._clouds.get(folder)
+        if known is None or known[2] != surface or not np.array_equal(known[0], marker_T_camera) \
+                or not _same_box(known[1], box):
+            return None
+        self.hits += 1
+        return o3d.geometry.PointCloud(known[3])
+
+
+def _pose_key(board, world_T_marker: np.ndarray | None, options: RegisterOptions) -> tuple:
+    return (board, None if world_T_marker is None else np.asarray(world_T_marker, float).tobytes(),
+            options.min_corners, options.use_board, options.max_reprojection_px, options.board_plane,
+            options.max_board_sigma)
+
+
+def _same_box(a: CropBox | None, b: CropBox | None) -> bool:
+    if a is None or b is None:
+        return a is b
+    return np.array_equal(a.frame_T_box, b.frame_T_box) and tuple(a.size) == tuple(b.size) \
+        and a.support_margin == b.support_margin
+
+
 def scan_cloud(scan, pose: GlobalPose, box: CropBox | None, surface: SurfaceOptions):
     """A scan's points in the marker frame (placed by its global pose), cropped to the box
     (when given), with normals turned toward its camera."""
@@ -203,11 +259,13 @@ def crop_box_marker(options: RegisterOptions, session: SessionInfo) -> CropBox:
 
 
 def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOptions = RegisterOptions(),  # noqa: B008
-                 progress: Progress | None = None, *, seed: int = DEFAULT_SEED) -> RegisterResult:
+                 progress: Progress | None = None, *, seed: int = DEFAULT_SEED,
+                 memo: CloudMemo | None = None) -> RegisterResult:
     """Register the scan store ``folder`` into ``out`` (a folder, or one a command claimed:
     it is made, and what ``--force`` removes is removed, only when there is something to
     write). Scans that cannot be read, or that are links out of the store, are skipped with
-    their reason. ``seed``: the run's seed (Config.seed), of the ``perturb`` directions."""
+    their reason. ``seed``: the run's seed (Config.seed), of the ``perturb`` directions.
+    ``memo``: clouds the caller made of these scans already (see :class:`CloudMemo`)."""
 
     t0 = time.perf_counter()
     step = progress or (lambda *a: None)
@@ -231,7 +289,8 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
     cloud_of: dict[int, Any] = {}  # record position -> its cropped, oriented cloud
 
     def add_cloud(pos: int, rec: ScanRecord, scan) -> None:
-        cloud = scan_cloud(scan, rec.placed_pose, box, options.surface)
+        known = None if memo is None else memo.get(rec.folder, rec.placed_pose.marker_T_camera, box, options.surface)
+        cloud = known if known is not None else scan_cloud(scan, rec.placed_pose, box, options.surface)
         rec.points = len(cloud.points)
         if rec.points < 100:
             rec.skipped = f"{rec.points} points inside the crop box"
@@ -252,7 +311,8 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
             step("global registration", k + 1, len(scan_folders))
             continue
         pose = global_pose(scan, board, world_T_marker, options.min_corners, options.use_board,
-                           options.max_reprojection_px, options.board_plane, options.max_board_sigma)
+                           options.max_reprojection_px, options.board_plane, options.max_board_sigma) \
+            if memo is None else memo.pose(scan_folder.name, scan, board, world_T_marker, options)
         if pose is not None and options.perturb is not None:
             pose = replace(pose, marker_T_camera=perturbed(pose.marker_T_camera, *options.perturb, rng))
         rec = ScanRecord(index, pose, folder=scan_folder.name)

@@ -117,6 +117,26 @@ def _write_json(path: Path, data) -> None:
         os.fsync(f.fileno())
 
 
+def encoded_depth(depth: np.ndarray, depth_scale: float) -> np.ndarray:
+    """Depth [m] as the stored uint16 image in ``depth_scale`` units per metre (FileError
+    beyond its range)."""
+    units = np.round(depth * depth_scale)
+    if np.any(units > np.iinfo(np.uint16).max):
+        raise FileError(f"depth beyond {np.iinfo(np.uint16).max / depth_scale:.2f} m "
+                        f"cannot be stored at scale {depth_scale}")
+    return units.astype(np.uint16)
+
+
+def decoded_depth(units: np.ndarray, depth_scale: float) -> np.ndarray:
+    """The stored depth image as depth [m] (what every reader of a scan gets)."""
+    return units.astype(np.float64) / float(depth_scale)
+
+
+def stored_depth(depth: np.ndarray, depth_scale: float) -> np.ndarray:
+    """Depth [m] exactly as it reads back once stored."""
+    return decoded_depth(encoded_depth(depth, depth_scale), depth_scale)
+
+
 def _write_png(path: Path, image: np.ndarray) -> None:
     ok, buf = cv2.imencode(".png", image)
     if not ok:
@@ -158,11 +178,7 @@ class ScanStore:
             tmp.mkdir()
             if scan.color is not None:
                 _write_png(tmp / "color.png", cv2.cvtColor(scan.color, cv2.COLOR_RGB2BGR))
-            units = np.round(scan.depth * depth_scale)
-            if np.any(units > np.iinfo(np.uint16).max):
-                raise FileError(f"depth beyond {np.iinfo(np.uint16).max / depth_scale:.2f} m "
-                                f"cannot be stored at scale {depth_scale}")
-            _write_png(tmp / "depth.png", units.astype(np.uint16))
+            _write_png(tmp / "depth.png", encoded_depth(scan.depth, depth_scale))
             record = {
                 "format": FORMAT_VERSION,
                 "index": scan.index,
@@ -299,7 +315,7 @@ def read_scan(folder: Path) -> Scan:
     if depth_raw.shape != size:
         raise MetadataError(f"{folder / 'depth.png'}: depth image is {depth_raw.shape[1]} x {depth_raw.shape[0]}, "
                             f"the intrinsics in scan.json say {size[1]} x {size[0]}", path=str(folder / "depth.png"))
-    depth = depth_raw.astype(np.float64) / float(meta["depth_scale"])
+    depth = decoded_depth(depth_raw, meta["depth_scale"])
     color = None
     if (folder / "color.png").exists():
         bgr = _read_image(folder / "color.png", cv2.IMREAD_COLOR, "colour image")

@@ -4,11 +4,81 @@ green, planned blue, active yellow)."""
 
 from __future__ import annotations
 
+import multiprocessing
+import signal
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 COLORS = {"infeasible": "#d62728", "completed": "#2ca02c", "planned": "#1f77b4", "active": "#ffbf00"}
+
+
+#: points of the partial object drawn at most (a seeded subset)
+DRAWN_POINTS = 4000
+
+
+@dataclass(frozen=True)
+class DrawnView:
+    """A view as the picture draws it."""
+
+    world_T_camera: np.ndarray
+    status: str  # infeasible, completed
+
+
+def drawn_points(points: np.ndarray, seed: int) -> np.ndarray:
+    """The points a picture draws: all, or a subset of DRAWN_POINTS seeded by ``seed``."""
+    pts = np.asarray(points)
+    if len(pts) > DRAWN_POINTS:
+        pts = pts[np.random.default_rng(seed).choice(len(pts), DRAWN_POINTS, replace=False)]
+    return pts
+
+
+class PictureWorker:
+    """Draws the iteration pictures in one worker process, so that drawing never holds up
+    the scanning: :meth:`draw` hands a picture over and returns its path at once,
+    :meth:`close` waits for every picture (and raises the first drawing error)."""
+
+    def __init__(self) -> None:
+        self._pool: ProcessPoolExecutor | None = None
+        self._pending: list[tuple[Future, tuple]] = []
+
+    def draw(self, path: Path, iteration: int, points: np.ndarray, ellipsoid, views, planned: list[np.ndarray],
+             active: np.ndarray, seed: int) -> Path:
+        drawn = [DrawnView(np.asarray(v.world_T_camera, float), str(getattr(v.status, "value", v.status)))
+                 for v in views]
+        args = (path, iteration, drawn_points(points, seed), ellipsoid, drawn, [np.asarray(T, float) for T in planned],
+                np.asarray(active, float), seed)
+        if self._pool is None:  # a fresh interpreter: nothing of this process (threads, GL contexts) is copied
+            self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=_leave_interrupts_to_the_run)
+        try:
+            self._pending.append((self._pool.submit(iteration_png, *args), args))
+        except (BrokenProcessPool, RuntimeError):  # the worker could not start or has died: draw here
+            iteration_png(*args)
+        return path
+
+    def close(self) -> None:
+        """Wait for the pictures handed over (drawn here instead when the worker could not
+        start or has died); the worker ends."""
+        pending, self._pending = self._pending, []
+        try:
+            for future, args in pending:
+                try:
+                    future.result()
+                except (BrokenProcessPool, OSError):
+                    iteration_png(*args)
+        finally:
+            if self._pool is not None:
+                self._pool.shutdown(wait=True, cancel_futures=True)
+                self._pool = None
+
+
+def _leave_interrupts_to_the_run() -> None:
+    """In the worker: Ctrl-C reaches the whole process group; the run decides what ends."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def iteration_png(path: Path, iteration: int, points: np.ndarray, ellipsoid, views, planned: list[np.ndarray],
@@ -22,9 +92,7 @@ def iteration_png(path: Path, iteration: int, points: np.ndarray, ellipsoid, vie
     path.parent.mkdir(parents=True, exist_ok=True)
     fig = plt.figure(figsize=(6.5, 6))
     ax = fig.add_subplot(projection="3d")
-    pts = np.asarray(points)
-    if len(pts) > 4000:
-        pts = pts[np.random.default_rng(seed).choice(len(pts), 4000, replace=False)]
+    pts = drawn_points(points, seed)
     ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], s=0.5, c="0.35", alpha=0.6)
     # ellipsoid wireframe and its box (the box = ellipsoid axes / sqrt(3) * 2 / 2)
     u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 30), np.linspace(0, np.pi, 15))

@@ -34,9 +34,8 @@ from recon_cli.planning.lower_bound import duration_lower_bound
 from recon_cli.planning.planner import MotionPlanner
 from recon_cli.reconstruction.crop import CropBox
 from recon_cli.reconstruction.evaluation import histogram_png, signed_distances, within_shares
-from recon_cli.reconstruction.global_registration import global_pose
 from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
-from recon_cli.reconstruction.pipeline import run_register, scan_cloud
+from recon_cli.reconstruction.pipeline import CloudMemo, run_register, scan_cloud
 from recon_cli.reconstruction.sides import register_sides
 from recon_cli.recording import open_recorder
 from recon_cli.recording.results import record_registration
@@ -47,7 +46,7 @@ from recon_cli.runs.codec import matrix
 from recon_cli.sequence.view_selection import select_view
 from recon_cli.session import Backend, Mode, SessionSpec, open_session
 from recon_cli.viewplan.ellipsoid import Ellipsoid
-from recon_cli.viewplan.picture import iteration_png
+from recon_cli.viewplan.picture import PictureWorker
 from recon_cli.viewplan.policy import Feasibility, Method, Status, baseline_views, lifted
 from recon_cli.viewplan.views import camera_pose, next_sample
 
@@ -131,6 +130,8 @@ class Autoscan:
         self.progress = progress or (lambda *a: None)
         self.rng = np.random.default_rng(opt.config.seed)
         self.recorder = None
+        self.drawing = PictureWorker()  # the iteration pictures, off the critical path
+        self.memo = CloudMemo()  # each scan's cloud, made once for the planner and the registration
 
     # ------------------------------------------------------------------ set-up
     def _setup(self) -> None:
@@ -174,9 +175,13 @@ class Autoscan:
         """Scan where the robot is; add the registered, cropped points to the partial object."""
 
         scan = self.acq.scan(view_record(None, view_T))
-        pose = global_pose(scan, self.board, self.cell.world_T_marker)
+        registration = self.opt.config.registration
+        pose = self.memo.pose(scan.path.name, scan, registration.board or self.board, self.cell.world_T_marker,
+                              registration)
         assert pose is not None  # the kinematics place every scan (world_T_marker is known)
-        cloud = scan_cloud(scan, pose, self.crop_marker, self.opt.config.registration.surface)
+        surface = registration.surface
+        cloud = scan_cloud(scan, pose, self.crop_marker, surface)
+        self.memo.put(scan.path.name, pose.marker_T_camera, self.crop_marker, surface, cloud)
         cloud.transform(self.cell.world_T_marker)
         pts = np.asarray(cloud.voxel_down_sample(self.vp.partial_voxel).points)
         if len(pts):
@@ -321,6 +326,7 @@ class Autoscan:
         except ReconError as exc:  # a fault, no reachable view: reported below, then raised
             error = exc
         except BaseException:
+            self.drawing.close()
             self._close_recorder()
             raise
         finally:
@@ -328,6 +334,7 @@ class Autoscan:
         try:
             result, error = self._finish(views, pictures, t0, interrupted, error)
         finally:
+            self.drawing.close()
             self._close_recorder()
         if opt.page:  # with the recording complete
 
@@ -355,7 +362,7 @@ class Autoscan:
 
             try:
                 reg = run_register(opt.out, opt.out / "reconstruction", replace(cfg.registration, mesh=opt.mesh),
-                                   seed=cfg.seed)
+                                   seed=cfg.seed, memo=self.memo)
             except ReconError as exc:
                 error = exc
             else:
@@ -396,8 +403,7 @@ class Autoscan:
     def _picture(self, it: int, ell, views: list[ViewRecord], planned: list[np.ndarray], active: np.ndarray) -> Path:
 
         path = self.opt.out / "iterations" / f"iteration_{it:02d}.png"
-        iteration_png(path, it, self._partial_points(), ell, views, planned, active, self.opt.config.seed)
-        return path
+        return self.drawing.draw(path, it, self._partial_points(), ell, views, planned, active, self.opt.config.seed)
 
 
 def surface_coverage(obj, points: np.ndarray, tolerance: float, rng: np.random.Generator,

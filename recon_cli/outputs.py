@@ -72,7 +72,8 @@ WRITTEN: dict[str, tuple[str, ...]] = {
     "recon batch": ("batch.json", "jobs", "junit.xml", "summary.json", "summary.md", "index.html", ".lock"),
     "recon bench": ("bench_*.json", "requests.csv", "plan_times.png", "peer", "eq_4_1_views.png", "scans",
                     "case_[0-9]*", "distances.png", "t_p_ecdf.png", "tour_gap.png", "coverage.png",
-                    "*_ellipsoid", "*_ellipsoid_face_on", "*_sphere", "*_random"),
+                    "*_ellipsoid", "*_ellipsoid_face_on", "*_sphere", "*_random", "stage_profile.png",
+                    "profiled_autoscan", "profiled_autoscan.pstats"),
     "every command": (".write-test*",),
 }
 _PATTERNS = tuple(dict.fromkeys(p for names in WRITTEN.values() for p in names))

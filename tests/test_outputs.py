@@ -102,6 +102,7 @@ def tripwire(monkeypatch):
                    "recon_cli.bench.ik.run_ik_bench", "recon_cli.bench.sim.run_sim_bench",
                    "recon_cli.bench.registration.run_registration_bench",
                    "recon_cli.bench.sequence.run_sequence_bench", "recon_cli.bench.tour.run_tour_bench",
+                   "recon_cli.bench.profile.run_profile",
                    "recon_cli.bench.viewplan.run_viewplan_bench",
                    "recon_cli.bench.planners.run_planner_bench"):
         module_name, name = target.rsplit(".", 1)
@@ -139,6 +140,7 @@ COMMANDS = {
     "bench registration": (lambda t: ["bench", "registration"], None, "--force"),
     "bench sequence": (lambda t: ["bench", "sequence", "--quick"], None, "--force"),
     "bench tour": (lambda t: ["bench", "tour", "--quick"], None, "--force"),
+    "bench profile": (lambda t: ["bench", "profile", "--quick"], None, "--force"),
     "bench viewplan": (lambda t: ["bench", "viewplan"], None, "--force"),
     "bench planners": (lambda t: ["bench", "planners", "--quick"], None, "--force"),
 }

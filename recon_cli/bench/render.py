@@ -110,6 +110,25 @@ def tour_report(summary: dict, rows, velocity_scale: float, acceleration_scale: 
            f"{summary['requests_ours_mean']:.1f} ({summary['plan_seconds_mean']:.0f} s more planning here)")
 
 
+def profile_report(result) -> Iterator:
+    """``recon bench profile``: the wall clock of the main job by stage; the rows add up to the total."""
+    s = result.settings
+    table = _table(f"{s['command']}, {s['object']}, seed {s['seed']}, image scale {s['resolution']:g}: wall clock "
+                   "by stage (innermost stage on the call stack)", ("stage", "wall clock", "share", "calls"))
+    table.columns[0].justify = "left"
+    for r in result.rows:
+        calls = " + ".join(str(f.calls) for f in r.functions)  # per function of the stage
+        table.add_row(r.stage, f"{r.seconds:.2f} s", f"{r.share * 100:.1f} %", calls)
+    table.add_row("total", f"{result.total_s:.2f} s", "100.0 %", "")
+    yield table
+    missing = [f"{f.module}.{f.function}" for r in result.rows for f in r.functions if not f.found]
+    if missing:
+        yield f"not found (their time is in the stage around them, or in 'other'): {', '.join(missing)}"
+    ended = " (interrupted)" if result.interrupted else ""
+    yield (f"{result.scans} scans{ended}; the workflow ran {result.workflow_s:.1f} s of the {result.total_s:.1f} s, "
+           "times with the profiler's overhead")
+
+
 def viewplan_report(rows, n: int, dc: float, cell: str) -> Iterator:
     table = _table(f"N = {n}, d_c = {dc} m, {cell} cell",
                    ("object", "method", "initial", "scans", "coverage", "mean", "std", "infeasible", "requests",

@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from recon_cli.backends.station_file import load_station
+from recon_cli.both_sides import confidence_line
 from recon_cli.cli.app import app
 from recon_cli.cli.options import (
     MAX_THETA,
@@ -149,11 +150,8 @@ def _two_sided(opts: AutoscanOptions, object_name: str) -> None:
         raise typer.Exit(130)
     for i, side in enumerate(result.sides):
         console.print(f"side {i + 1}: {side.scans} scans in {side.seconds:.1f} s ({side.folder})")
-    reg = result.registration
-    if reg is not None:
-        truth = ""
-        console.print(f"sides registered by shape: fitness {reg.fitness:.3f}, rmse {reg.rmse * 1e3:.3f} mm, overlap "
-                      f"{reg.overlap:.2f}" + (", ambiguous (symmetric shape)" if reg.ambiguous else "") + truth)
+    if result.registration is not None:
+        console.print(confidence_line(result.registration))
     if result.coverage is not None:
         console.print(f"ground truth: coverage {result.coverage * 100:.2f} % of the whole surface (1 mm)")
     console.print(f"mesh: {result.mesh}\ncloud: {result.cloud}\nreport: {result.report}\n"

@@ -16,6 +16,7 @@ from recon_cli.bench.cell_planners import PEERS, run_cell_planners
 from recon_cli.bench.ik import IKBenchConfig, run_ik_bench
 from recon_cli.bench.mplib_peer import run_mplib
 from recon_cli.bench.planners import DEFAULT_PLANNERS, run_planner_bench, thesis_times, write_results
+from recon_cli.bench.profile import MAIN_N, PSTATS_FILE, QUICK_N, QUICK_RESOLUTION, run_profile, stage_png
 from recon_cli.bench.registration import run_registration_bench
 from recon_cli.bench.sequence import CASES, ecdf_png, run_sequence_bench, summarize
 from recon_cli.bench.sim import run_sim_bench
@@ -191,6 +192,33 @@ def bench_tour(
     for item in render.tour_report(summary, rows, plan.velocity_scale, plan.acceleration_scale):
         console.print(item)
     console.print(f"results: {folder / 'bench_tour.json'}, plot: {folder / 'tour_gap.png'}")
+
+
+@bench_app.command("profile")
+def bench_profile(
+    object_name: Annotated[str, typer.Option("--object", metavar=object_metavar(True), callback=object_option(True),
+                                             help="Object scanned ('auto': the drill if the YCB data is here, "
+                                                  "else the bottle).")] = "bottle",
+    n: ScansOpt = MAIN_N,
+    quick: Annotated[bool, typer.Option("--quick", help=f"CI mode: {QUICK_N} scans at image scale "
+                                                        f"{QUICK_RESOLUTION:g}.")] = False,
+    seed: SeedOpt = D.seed,
+    out: OutOpt = None,
+    force: ForceOpt = False,
+) -> None:
+    """Wall clock of the main job (recon autoscan --dc 0.55 --n 16) by stage, under cProfile."""
+
+    folder = output_folder(out, "bench profile", force=force, inputs=(Path(object_name),)).path
+    n, resolution = (QUICK_N, QUICK_RESOLUTION) if quick else (n, D.sensor.resolution)
+    with progress_bar() as update:
+        result = run_profile(folder, object_name, n, seed, resolution, update)
+    write_json(folder / "bench_profile.json", {"quick": quick, **result.to_dict()})
+    stage_png(folder / "stage_profile.png", result)
+    for item in render.profile_report(result):
+        console.print(item)
+    console.print(f"results: {folder / 'bench_profile.json'}, plot: {folder / 'stage_profile.png'}, "
+                  f"profile: {folder / PSTATS_FILE}, autoscan: {result.folder}")
+
 
 @bench_app.command("viewplan")
 def bench_viewplan(

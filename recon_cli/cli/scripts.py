@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from recon_cli.both_sides import confidence_line
 from recon_cli.cli.app import app
 from recon_cli.cli.options import (
     REALISM_HELP,
@@ -116,7 +117,7 @@ def run_script(
     stored_realism = base.stored("realism_override")
     check_record(record)
     s = load_script(script)
-    check_script(s, object_override=object_name, cell_override=cell)  # before the output folder is made
+    check_script(s, object_override=object_name, cell_override=cell, append=append)  # before the output folder
     check_backend(s, backend, station, dry_run)
     if realism is not None:
         profile = realism_profile(realism)
@@ -146,6 +147,10 @@ def run_script(
         console.print(f"sequence of {seq.moves} moves ({seq.method.value}): planned trajectory time "
                       f"{seq.planned_duration_s:.1f} s with {seq.planning_requests} planning requests "
                       f"({seq.seconds:.1f} s)")
+    if result.sides is not None:
+        console.print(confidence_line(result.sides.registration))
+        if result.sides.coverage is not None:
+            console.print(f"ground truth: coverage {result.sides.coverage * 100:.2f} % of the whole surface (1 mm)")
     for k, v in result.outputs.items():
         console.print(f"{k}: {v}")
     console.print(f"report: {folder / 'run_report.json'}")

@@ -1,7 +1,8 @@
-"""``sides_report.json`` of ``recon autoscan --sides 2`` (schemas/sides_report.schema.json):
-how the object was turned over, each side's scans and time, the registration of the sides
-by shape with its confidence (and, in simulation, its error against the truth), and the
-merged model's coverage of the whole surface with each side's share."""
+"""``sides_report.json`` of ``recon autoscan --sides 2`` and of scripts with ``<turn_over/>``
+(schemas/sides_report.schema.json): how the object was turned over, each side's scans and
+time, the registration of the sides by shape with its confidence (and, in simulation, its
+error against the truth), and the merged model's coverage of the whole surface with each
+side's share."""
 
 from __future__ import annotations
 

@@ -180,6 +180,8 @@ def build_recon(el, src: C.Source) -> list[C.Command]:
         return [C.Scan(src, a.get("name"))]
     if tag == "wait":
         return [C.Wait(src, float(a["seconds"]))]
+    if tag == "turn_over":
+        return [C.TurnOver(src, None if a.get("seed") is None else int(a["seed"]))]
     if tag == "register":
         return [C.Register(src, as_bool(a.get("local"), D.registration.local),
                            as_bool(a.get("board"), D.registration.use_board),

@@ -5,7 +5,8 @@ Shared by ``recon validate`` and ``recon run`` (which checks before it opens the
 * the cell and the object are chosen before the first move or scan;
 * joint goals have one value per joint of the chosen cell and lie within its soft limits;
 * scan and fragment names are unique; registration, reconstruction, exports and
-  evaluation come after a scan (and exports/evaluation after what they need);
+  evaluation come after a scan of their side (and exports/evaluation after what they need);
+* at most one ``<turn_over/>``, with scans before and after it (not with ``--append``);
 * fragments are defined (scanned, loaded or added) before they are used;
 * files a script reads (realism profiles, object meshes, reference meshes, loaded images
   and clouds) lie inside the script's folder or scripts_xml/ and exist (the rule of
@@ -150,11 +151,13 @@ def _check_object(script: C.Script, cmd: C.SetObject) -> None:
                       hint="choose one of: " + ", ".join([*available_objects(), "auto", "<mesh file>"]))
 
 
-def check_script(script: C.Script, *, object_override: str | None = None, cell_override: str | None = None) -> None:
+def check_script(script: C.Script, *, object_override: str | None = None, cell_override: str | None = None,
+                 append: bool = False) -> None:
     """Raise a ScriptError (file:line: what; what to do) for the first problem found."""
     started: C.Command | None = None
     kind = cell_override or DEFAULT_CELL
     scans = 0
+    turn: C.TurnOver | None = None
     registered = reconstructed = False
     names: dict[str, C.Source] = {}
     fragments: set[str] = set()
@@ -171,6 +174,19 @@ def check_script(script: C.Script, *, object_override: str | None = None, cell_o
             _check_object(script, cmd)
         elif isinstance(cmd, C.MoveJoints):
             _check_joints(cmd, kind)
+        elif isinstance(cmd, C.TurnOver):
+            if turn is not None:
+                raise ScriptError(f"{cmd.source}: a second <turn_over/> (the first is at {turn.source})",
+                                  hint="a script scans two sides: one <turn_over/> between them",
+                                  source=str(cmd.source))
+            if scans == 0:
+                raise ScriptError(f"{cmd.source}: <turn_over/> before any scan", source=str(cmd.source),
+                                  hint="scan the first side before turning the object over")
+            if append:
+                raise ScriptError(f"{cmd.source}: --append cannot add to the scans of a script that turns the object "
+                                  "over", hint="run it into a new output folder", source=str(cmd.source))
+            turn, scans = cmd, 0
+            registered = reconstructed = False  # what follows works on side 2
         elif isinstance(cmd, C.Scan):
             scans += 1
             registered = reconstructed = False
@@ -229,6 +245,9 @@ def check_script(script: C.Script, *, object_override: str | None = None, cell_o
                 fragments.add(cmd.target)
             elif isinstance(cmd, C.DeleteFragment):
                 fragments.discard(cmd.fragment)
+    if turn is not None and scans == 0:
+        raise ScriptError(f"{turn.source}: no scan after <turn_over/>: the second side is never scanned",
+                          hint="move and scan the turned object after <turn_over/>", source=str(turn.source))
 
 
 

@@ -154,6 +154,29 @@ class Wait(Command):
         return f"wait {self.seconds:g} s"
 
 
+# --------------------------------------------------------------------- two sides
+@dataclass(frozen=True)
+class TurnOver(Command):
+    """The object turned over: the scans before it are side 1, those after it side 2. The
+    robot parks at its home posture; in simulation physics turns the object (drawn from
+    ``seed``, None: the run's seed), on a real cell the operator."""
+
+    seed: int | None = None
+
+    def describe(self) -> str:
+        seed = "" if self.seed is None else f", seed {self.seed}"
+        return f"turn the object over (robot parked at home; by physics in simulation{seed}, else by the operator)"
+
+
+@dataclass(frozen=True)
+class MergeSides(Command):
+    """The end of a run that turned the object over (not written in a script: the runner adds
+    it, with the source of the ``<turn_over/>``): the sides registered by shape and merged."""
+
+    def describe(self) -> str:
+        return "register the two sides by shape and merge them"
+
+
 # --------------------------------------------------------------------- reconstruction (all scans)
 @dataclass(frozen=True)
 class Register(Command):

@@ -2,9 +2,10 @@
 their order by the view graph (IK per view, graph optimization, tour).
 
 A run of at least two camera moves, each followed only by its scans, may be reordered
-(scans are independent); anything else (set-up, joint moves, waits, registration) keeps
-its place and splits the runs. The tour's planned trajectories are returned with it, so
-the run executes exactly what was planned (no edge is planned twice).
+(scans are independent); anything else (set-up, joint moves, waits, registration, the
+``<turn_over/>``) keeps its place and splits the runs: no move crosses the turn, and each
+side's moves are ordered on their own. The tour's planned trajectories are returned with
+it, so the run executes exactly what was planned (no edge is planned twice).
 """
 
 from __future__ import annotations

@@ -10,6 +10,10 @@ goes into ``RunState.out``::
     <out>/config.yaml            the effective configuration
     <out>/run_report.json        every command: where it was written, status, time, message
     <out>/report.html            the run's page (recon_cli.report), pictures in report_files/
+
+A script that turns the object over (``<turn_over/>``) keeps each side's scans and results
+apart, ``<out>/side_1/`` and ``<out>/side_2/`` (each with ``scans/`` and ``reconstruction/``),
+and writes the merged model into ``<out>/reconstruction/`` with ``<out>/sides_report.json``.
 """
 
 from __future__ import annotations
@@ -24,9 +28,11 @@ import numpy as np
 from recon_cli.backends.base import Capabilities
 from recon_cli.backends.hardware.station import preflight
 from recon_cli.backends.station_file import load_station
+from recon_cli.both_sides import Ask, MergedSides, SideModel, Turn
 from recon_cli.config import DEFAULTS, Config
 from recon_cli.errors import FileError
 from recon_cli.geometry.view import Frame
+from recon_cli.objects import SceneObject
 from recon_cli.outputs import inside
 from recon_cli.realism import RealismProfile
 from recon_cli.robot.cell import Cell
@@ -80,6 +86,7 @@ class RunOptions:
     record: bool = False  # write a 3D recording of the run (recording.rrd in ``out``)
     page: bool = True  # write the run's report page (report.html) at its end
     run: dict = field(default_factory=dict)  # what config.yaml's run: section records to repeat the run
+    ask: Ask | None = None  # asks the operator to turn the object over on a real cell (None: in the terminal)
 
 
 @dataclass
@@ -115,6 +122,18 @@ class SequenceReport:
                 "script_order_lower_bound_s": self.script_order_lower_bound_s, "seconds": self.seconds}
 
 
+@dataclass(frozen=True)
+class Turned:
+    """A run after its ``<turn_over/>``: side 1's model, how the object was turned, side 2's set-up."""
+
+    command: C.TurnOver
+    side_1: SideModel
+    first: SceneObject  # the object as side 1 saw it
+    turn: Turn  # its scene_object: where the object lies now (simulation; None: turned by the operator)
+    box: tuple[tuple[float, float, float], tuple[float, float, float]] | None  # side 2's box on a real cell
+    started: float  # time.perf_counter() when side 2 began [s]
+
+
 @dataclass
 class RunState:
     """What a run knows at the current command."""
@@ -138,10 +157,28 @@ class RunState:
     sequences: list[SequenceReport] = field(default_factory=list)
     recorder: Any = None  # recording.recorder.Recorder of a recorded run
     station_checked: bool = False  # the station file passed the check of `recon station check`
+    started: float = 0.0  # time.perf_counter() when the run began [s]
+    turned: Turned | None = None  # after the <turn_over/>: side 2 is being scanned
+    merged: MergedSides | None = None  # the sides merged at the end of the run
+    two_sided: bool = field(init=False)  # the script turns the object over
+
+    def __post_init__(self) -> None:
+        self.two_sided = any(isinstance(c, C.TurnOver) for c in self.script.commands)
 
     @property
     def out(self) -> Path:
         return Path(self.options.out)
+
+    @property
+    def side(self) -> int:
+        """The side being scanned (2 after the ``<turn_over/>``)."""
+        return 1 if self.turned is None else 2
+
+    @property
+    def side_out(self) -> Path:
+        """Where the scans and results of the side being scanned go: the run folder, or its
+        ``side_1/`` or ``side_2/`` when the script turns the object over."""
+        return self.out / f"side_{self.side}" if self.two_sided else self.out
 
     @property
     def dry_run(self) -> bool:
@@ -169,7 +206,19 @@ class RunState:
         return None if self.session is None else self.session.capabilities
 
     def scan_count(self) -> int:
-        return 0 if self.store is None else len(self.store)
+        """Completed scans of the run (of both sides)."""
+        earlier = 0 if self.turned is None else self.turned.side_1.scans
+        return earlier + (0 if self.store is None else len(self.store))
+
+    def begin_side_2(self, turned: Turned) -> None:
+        """After the turn: the next command that needs the robot opens side 2's session (the
+        turned object, its own scan store); side 1's results are not side 2's."""
+        self.turned = turned
+        self.session = None
+        self.registered = None
+        self.reconstruction = {}
+        self.last_view = None
+        self.move_failed = False
 
     # ------------------------------------------------------------------ session
     def ensure_session(self) -> Session:
@@ -177,11 +226,14 @@ class RunState:
         run opens the cell only); the open session."""
         if self.session is not None:
             return self.session
-        spec = SessionSpec(self.out / "scans", self.config, Mode.SCRIPT, self.backend, box=self._explicit_box(),
+        turned = self.turned
+        spec = SessionSpec(self.side_out / "scans", self.config, Mode.SCRIPT, self.backend,
+                           box=self._explicit_box() or (None if turned is None else turned.box),
                            script=self.script.path, append=self.options.append, run_folder=self.out,
                            run={"command": "run", "dialect": self.script.dialect, **self.options.run},
                            station=self.options.station, recorder=None if self.dry_run else self.recorder,
-                           station_checked=self.station_checked)
+                           station_checked=self.station_checked,
+                           scene_object=None if turned is None else turned.turn.scene_object)
         self.session = open_session(spec, self.rng, plan_only=self.dry_run)
         self.backend = self.session.spec.backend  # a station file's adapters decide
         self.cell = self.session.cell

@@ -7,7 +7,9 @@ A move that fails (unreachable view, no path) is reported and either skips the s
 belong to it (``on_failure="skip"``) or stops the run (``"abort"``); scans already written
 stay. Ctrl-C or SIGTERM stops the robot, keeps every completed scan, and the report says
 which command was interrupted. A dry run plans every move from the previous planned
-configuration but moves nothing and scans nothing.
+configuration but moves nothing and scans nothing. A script that turns the object over
+(``<turn_over/>``) ends with the two sides registered by shape and merged (the command
+:class:`~recon_cli.scripts.commands.MergeSides`, reported at the turn's line).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from recon_cli.both_sides import MergedSides
 from recon_cli.errors import ReconError, RobotFault, RunInterrupted, ScriptAborted
 from recon_cli.interrupts import exit_code, signal_name
 from recon_cli.outputs import atomic_write_text, keep_earlier, refuse_links
@@ -64,6 +67,7 @@ class RunResult:
     aborted: str = ""
     sequences: list[SequenceReport] = field(default_factory=list)
     page: Path | None = None  # report.html (None: not written)
+    sides: MergedSides | None = None  # the two sides merged (a script that turned the object over)
 
     @property
     def failed(self) -> list[CommandReport]:
@@ -77,7 +81,7 @@ class RunResult:
 
 class ScriptRunner:
     def __init__(self, script: C.Script, options: RunOptions, progress: Progress | None = None) -> None:
-        check_script(script, object_override=options.object_name, cell_override=options.cell)
+        check_script(script, object_override=options.object_name, cell_override=options.cell, append=options.append)
         self.script = script
         self.options = options
         self.progress = progress or (lambda *a: None)
@@ -100,7 +104,7 @@ class ScriptRunner:
     # ------------------------------------------------------------------ run
     def run(self) -> RunResult:
 
-        t0 = time.perf_counter()
+        t0 = self.state.started = time.perf_counter()
         self.state.check_station()  # before anything moves or is written
         self.out.mkdir(parents=True, exist_ok=True)
         if self.options.append:
@@ -124,6 +128,8 @@ class ScriptRunner:
                     self._run_command(commands[k])
                     k += 1
                 self.progress("script", k, n)
+            if self.state.turned is not None:  # the two sides merged into one model
+                self._run_command(C.MergeSides(self.state.turned.command.source))
         except ScriptAborted as exc:
             aborted = str(exc)
             raise
@@ -135,12 +141,13 @@ class ScriptRunner:
             self._write_report(time.perf_counter() - t0, aborted, interrupted)
             self._write_page()
         if interrupted is not None:
-            scans = self.out / "scans"
-            raise RunInterrupted(f"{interrupted.reason}; {interrupted.scans_kept} completed scan(s) kept in {scans}",
+            scans = self.state.side_out / "scans"
+            where = f"{self.out / 'side_1' / 'scans'} and {scans}" if self.state.turned is not None else str(scans)
+            raise RunInterrupted(f"{interrupted.reason}; {interrupted.scans_kept} completed scan(s) kept in {where}",
                                  signal=interrupted.signal, scans_kept=interrupted.scans_kept,
                                  hint=f"run_report.json records it; recon register {scans} works on the kept scans")
         return RunResult(self.out, self.script, self.reports, self.state.scan_count(), time.perf_counter() - t0,
-                         dict(self.state.outputs), aborted, list(self.state.sequences), self.page)
+                         dict(self.state.outputs), aborted, list(self.state.sequences), self.page, self.state.merged)
 
     def _keep_earlier(self, *names: str) -> None:
         """--append: an earlier run's report, script and configuration stay, as NAME-1, NAME-2, ..."""
@@ -173,11 +180,12 @@ class ScriptRunner:
             report.status, report.message = CommandStatus.FAILED, exc.one_line()
             if isinstance(cmd, ACTIONS) and not isinstance(cmd, C.Scan):
                 self.state.move_failed = True
-            if self.on_failure is OnFailure.ABORT or isinstance(exc, RobotFault):
+            if self.on_failure is OnFailure.ABORT or isinstance(exc, RobotFault) or isinstance(cmd, C.TurnOver):
                 report.seconds = time.perf_counter() - t
                 self.reports.append(report)
                 why = ("a robot fault ends the run" if isinstance(exc, RobotFault)
-                       else "the script says on_failure=\"abort\"")
+                       else "a failed turn ends the run (what follows would not scan side 2)"
+                       if isinstance(cmd, C.TurnOver) else "the script says on_failure=\"abort\"")
                 raise ScriptAborted(f"{cmd.source}: {exc.one_line()}", source=str(cmd.source),
                                     hint=f"{why}; earlier scans are kept") from None
         report.seconds = time.perf_counter() - t

@@ -16,6 +16,8 @@ make the model complete:
    simulation the coverage of the whole surface (the resting faces included), each side's
    share, the accuracy, and the side-to-side registration against the truth
    (``sides_report.json``).
+
+The turn and the merge are those of a script's ``<turn_over/>`` too (recon_cli/both_sides.py).
 """
 
 from __future__ import annotations
@@ -27,24 +29,23 @@ from pathlib import Path
 
 import numpy as np
 
-from recon_cli.backends.sim.turnover import turn_over, turned
 from recon_cli.backends.station_file import load_station
-from recon_cli.console import console
+from recon_cli.both_sides import (
+    SIDES_VOXEL,
+    Ask,
+    SideModel,
+    any_way_up_box,
+    merge_sides,
+    turn_object,
+    turn_rng,
+)
 from recon_cli.errors import ReconError
-from recon_cli.geometry.transforms import invert
 from recon_cli.inputs.meshes import read_cloud
 from recon_cli.objects import SceneObject, load_object
-from recon_cli.reconstruction.evaluation import signed_distances, within_shares
-from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
-from recon_cli.reconstruction.sides import SideRegistration, register_sides
-from recon_cli.reconstruction.surface import poisson_mesh, write_cloud, write_mesh
-from recon_cli.runs import sides as sides_file
+from recon_cli.reconstruction.sides import SideRegistration
 from recon_cli.session import resolve_object_name
 from recon_cli.viewplan.policy import Status
 from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions, AutoscanResult, SidePrior
-
-#: [m] the side registration's voxel
-SIDES_VOXEL = 0.003
 
 
 @dataclass
@@ -61,34 +62,15 @@ class TwoSidedResult:
     interrupted: bool = False  # Ctrl-C in a side or at the turn: what was scanned is kept
 
 
-def _coverages(obj: SceneObject, clouds: dict[str, np.ndarray], rng: np.random.Generator,
-               samples: int = 100_000) -> dict[str, float]:
-    """Share of the object's whole surface (the resting faces included) with a point of each
-    cloud within the coverage tolerance (one sample of the surface for all)."""
-    import open3d as o3d
-
-    truth = obj.surface_points(samples, rng, exclude_base=-np.inf)
-    ref = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(truth))
-    out = {}
-    for name, points in clouds.items():
-        rec = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, float)))
-        out[name] = float(np.mean(np.asarray(ref.compute_point_cloud_distance(rec)) <= COVERAGE_TOLERANCE))
-    return out
-
-
-def _angle_deg(R: np.ndarray) -> float:
-    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
-
-
 class TwoSided:
     """Both sides of an object (see the module docstring)."""
 
     def __init__(self, opt: AutoscanOptions, progress: Callable[[str, int, int], None] | None = None,
-                 ask: Callable[[str], None] | None = None) -> None:
+                 ask: Ask | None = None) -> None:
         self.opt = opt
         self.progress = progress or (lambda *a: None)
-        self.ask = ask  # the operator prompt of a real cell (None: input())
-        self.rng = np.random.default_rng(opt.config.seed + 7919)
+        self.ask = ask  # the operator prompt of a real cell (None: a prompt in the terminal)
+        self.rng = turn_rng(opt.config.seed)
 
     def _object(self) -> SceneObject:
         cfg = self.opt.config
@@ -99,22 +81,6 @@ class TwoSided:
 
     def _simulated(self) -> bool:
         return self.opt.station is None or load_station(self.opt.station).capabilities.simulated
-
-    def _turn(self, first: SceneObject, side1: AutoscanResult) -> tuple[SceneObject | None, dict]:
-        """The object turned over: by physics in simulation, by the operator on a real cell."""
-        if self._simulated():
-            t = turn_over(first, self.rng)
-            return turned(first, t), {"by": "physics", "tilt_deg": t.tilt_deg, "settle_s": t.settle_s,
-                                      "down_object": [float(v) for v in t.down_object]}
-        t0 = time.monotonic()
-        prompt = ("turn the object over onto another face and put it back on the same spot, then press Enter "
-                  "(Ctrl-C stops; the first side's scans are kept)")
-        if self.ask is not None:
-            self.ask(prompt)
-        else:
-            console.print(prompt)
-            input()
-        return None, {"by": "operator", "pause_s": time.monotonic() - t0}
 
     def run(self) -> TwoSidedResult:
         opt = self.opt
@@ -128,21 +94,17 @@ class TwoSided:
         if side1.interrupted:
             return self._stopped((side1,), t0)
         try:
-            second, turn = self._turn(first, side1)
+            turn = turn_object(first, self._simulated(), self.rng, self.ask)
         except KeyboardInterrupt:
             return self._stopped((side1,), t0)
         box = None
-        if second is None and side1.cloud is not None:  # a real cell: the box of what side 1 saw, any way up
-            pts = np.asarray(read_cloud(side1.cloud, "side 1 cloud", points=False).points)
-            lo, hi = pts.min(axis=0), pts.max(axis=0)
-            d = float(np.linalg.norm(hi - lo)) + 2 * opt.config.scene.box_margin
-            c = (lo + hi) / 2.0
-            box = ((float(c[0]), float(c[1]), float(lo[2] + d / 2.0)), (d, d, d))
-        side2 = Autoscan(replace(side_opt, out=opt.out / "side_2", scene_object=second, box=box,
+        if turn.scene_object is None and side1.cloud is not None:  # a real cell: around what side 1 saw
+            box = any_way_up_box(side1.cloud, opt.config.scene.box_margin)
+        side2 = Autoscan(replace(side_opt, out=opt.out / "side_2", scene_object=turn.scene_object, box=box,
                                  prior=self._prior(side1)), self.progress).run()
         if side2.interrupted:
             return self._stopped((side1, side2), t0)
-        return self._merge(first, second, (side1, side2), turn, t0)
+        return self._merge(first, turn.scene_object, (side1, side2), turn.record, t0)
 
     @staticmethod
     def _prior(side1: AutoscanResult) -> SidePrior | None:
@@ -161,59 +123,13 @@ class TwoSided:
     def _merge(self, first: SceneObject, second: SceneObject | None, sides: tuple[AutoscanResult, ...], turn: dict,
                t0: float) -> TwoSidedResult:
         opt, cfg = self.opt, self.opt.config
-        import open3d as o3d
-
-        paths = [s.cloud for s in sides if s.cloud is not None]
-        if len(paths) != len(sides):
+        models = [SideModel(s.cloud, s.scans, s.seconds) for s in sides if s.cloud is not None]
+        if len(models) != len(sides):
             raise ReconError("a side has no registered cloud: the sides cannot be merged",
                              hint="see side_1/autoscan_report.json and side_2/autoscan_report.json")
-        clouds = [read_cloud(p, f"side {i + 1} cloud", points=False) for i, p in enumerate(paths)]
-        reg = register_sides(clouds[0], clouds[1], SIDES_VOXEL, seed=cfg.seed)
-        truth = None
-        if second is not None:  # side-2 world points onto side 1: W1 inv(W2)
-            true_T = first.world_T_object @ invert(second.world_T_object)
-            dT = reg.side1_T_side2 @ invert(true_T)
-            centre = first.world_vertices().mean(axis=0)
-            truth = {"rotation_deg": _angle_deg(dT[:3, :3]),
-                     "translation_mm": float(np.linalg.norm(dT[:3, :3] @ centre + dT[:3, 3] - centre) * 1e3)}
-        out = opt.out / "reconstruction"
-        cloud = mesh = None
-        coverage = accuracy = None
-        contributions: dict[str, float] = {}
-        error = None
-        if reg.reason is not None:
-            error = ReconError(f"the two sides cannot be registered by their shape: {reg.reason}; nothing was merged",
-                               hint="each side's model is in side_1/ and side_2/; turn the object onto a face that "
-                                    "shows more of the first side's shape and scan the second side again")
-        else:
-            second_cloud = o3d.geometry.PointCloud(clouds[1])
-            second_cloud.transform(reg.side1_T_side2)
-            merged = clouds[0] + second_cloud
-            merged = merged.voxel_down_sample(cfg.registration.surface.voxel)
-            cloud = write_cloud(out / "cloud.ply", merged)
-            if opt.mesh:
-                m, _ = poisson_mesh(merged, cfg.registration.surface)
-                mesh = write_mesh(out / "mesh.ply", m)
-            if second is not None:
-                pts = np.asarray(merged.points)
-                shares = _coverages(first, {"merged": pts, "side_1": np.asarray(clouds[0].points),
-                                            "side_2": np.asarray(second_cloud.points)},
-                                    np.random.default_rng(cfg.seed))
-                coverage = shares.pop("merged")
-                contributions = shares
-                d = signed_distances(pts, first.mesh_world())
-                accuracy = {"mean_mm": float(d.mean() * 1e3), "std_mm": float(d.std() * 1e3),
-                            "within": within_shares(d)}
-        seconds = time.perf_counter() - t0
-        report = sides_file.write(opt.out, sides_file.SidesReport(
-            object=first.name, sides=2, turn=turn, seconds=seconds,
-            side_seconds=[float(s.seconds) for s in sides], side_scans=[s.scans for s in sides],
-            side_2_prior=sides[1].prior,
-            registration=sides_file.registration_entry(reg.to_dict(), truth),
-            coverage_whole=coverage, contributions=contributions, accuracy=accuracy,
-            error=None if error is None else error.one_line(),
-            cloud=None if cloud is None else str(cloud), mesh=None if mesh is None else str(mesh)))
-        result = TwoSidedResult(opt.out, sides, reg, cloud, mesh, report, seconds, coverage, error)
-        if error is not None:
-            raise error
-        return result
+        merged = merge_sides(opt.out, (models[0], models[1]), first, second, turn, cfg.registration.surface,
+                             cfg.seed, t0, mesh=opt.mesh, prior=sides[1].prior)
+        if merged.error is not None:
+            raise merged.error
+        return TwoSidedResult(opt.out, sides, merged.registration, merged.cloud, merged.mesh, merged.report,
+                              time.perf_counter() - t0, merged.coverage)

@@ -371,3 +371,53 @@ def test_two_sided_autoscan_on_a_real_cell_asks_the_operator_and_ctrl_c_keeps_si
                         Cell(CellConfig(kind=CellName.parse("fr3"))).kin.limits)
     assert np.abs(robot.measured_joints() - HOME).max() < 0.01
     robot.close()
+
+
+TWO_SIDED_SCRIPT = """\
+<?xml version="1.0"?>
+<recon name="FR3 stand-in: two sides" on_failure="skip">
+  <cell kind="fr3" backend="hardware"/>
+  <object name="bottle"/>
+  <move focus="0.1925 0.1225 0.08" radius="0.22" theta="50" phi="170" frame="marker"/>
+  <scan name="a"/>
+  <move focus="0.1925 0.1225 0.08" radius="0.22" theta="50" phi="230" frame="marker"/>
+  <scan name="b"/>
+  <turn_over/>
+  <move focus="0.1925 0.1225 0.08" radius="0.22" theta="50" phi="170" frame="marker"/>
+  <scan name="c"/>
+</recon>
+"""
+
+
+def test_a_script_turn_on_a_real_cell_asks_the_operator_and_ctrl_c_keeps_side_1(standin, tmp_path, capsys,
+                                                                                 monkeypatch):
+    """A script's <turn_over/> on a real cell parks the robot at its home posture and asks the
+    operator; Ctrl-C at that prompt ends the run with exit 130 and keeps side 1's scans."""
+    station, _ = _files(tmp_path)
+    script = tmp_path / "two.xml"
+    script.write_text(TWO_SIDED_SCRIPT)
+    asked = []
+
+    def operator(prompt: str = "") -> str:
+        asked.append(prompt)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("builtins.input", operator)
+    out = tmp_path / "run"
+    code = main(["run", str(script), "--out", str(out), "--station", str(station)])
+    text = capsys.readouterr()
+    assert code == 130, text.out + text.err + standin.log_tail(60)
+    assert len(asked) == 1 and "turn the object over" in text.out and "press Enter" in text.out
+    lines = text.err.strip().splitlines()
+    assert len(lines) == 1 and "during two.xml:9 (turn the object over" in lines[0], text.err
+    assert f"2 completed scan(s) kept in {out / 'side_1' / 'scans'}" in lines[0]
+    assert [json.loads(s.read_text())["name"] for s in sorted((out / "side_1" / "scans").glob("scan_*/scan.json"))] \
+        == ["a", "b"]
+    assert not (out / "side_2").exists() and (out / "side_1" / "reconstruction" / "cloud.ply").exists()
+    report = json.loads((out / "run_report.json").read_text())
+    assert report["status"] == "interrupted" and report["exit_code"] == 130 and report["scans"] == 2
+    assert report["commands"][-1]["status"] == "interrupted" and report["commands"][-1]["source"] == "two.xml:9"
+    robot = FrankaRobot(CONFIG, Cell(CellConfig(kind=CellName.parse("fr3"))).joint_names,
+                        Cell(CellConfig(kind=CellName.parse("fr3"))).kin.limits)
+    assert np.abs(robot.measured_joints() - HOME).max() < 0.01  # it waited at the cell's home posture
+    robot.close()

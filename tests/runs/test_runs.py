@@ -172,7 +172,8 @@ def test_every_report_schema_bounds_every_number():
             for i, v in enumerate(node):
                 walk(v, f"{where}[{i}]")
 
-    for name in ("run_report", "autoscan_report", "capture_report", "register_report", "evaluation_report"):
+    for name in ("run_report", "autoscan_report", "capture_report", "register_report", "evaluation_report",
+                 "sides_report"):
         walk(json.loads((SCHEMA_DIR / f"{name}.schema.json").read_text()), name)
 
 

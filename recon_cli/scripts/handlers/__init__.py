@@ -3,6 +3,7 @@
     setup            <cell>, <object>, <box>, <planner>
     motion           moves (views, poses, joints, home), scans, waits
     reconstruction   <register>, <reconstruct>, <export>, <evaluate>
+    sides            <turn_over/>, and the merge of the two sides at the end of the run
     fragments        the thesis dialect's named fragments and display commands
 
 A handler is ``handle(state, command, report)``: it changes the run state, fills the
@@ -42,4 +43,4 @@ def handler_for(cmd: C.Command) -> Handler:
     raise TypeError(f"no handler for {type(cmd).__name__}")  # every command class has one
 
 
-from recon_cli.scripts.handlers import fragments, motion, reconstruction, setup  # noqa: E402,F401  (registration)
+from recon_cli.scripts.handlers import fragments, motion, reconstruction, setup, sides  # noqa: E402,F401  (registration)

@@ -1,4 +1,5 @@
-"""<register>, <reconstruct>, <export>, <evaluate>: results from all scans of the run."""
+"""<register>, <reconstruct>, <export>, <evaluate>: results from all scans of the run (of the
+side being scanned, in a script that turns the object over)."""
 
 from __future__ import annotations
 
@@ -35,7 +36,7 @@ def register_scans(state: RunState, local=True, board=True, loop_closures="icp",
     opts = replace(opts, multiway=replace(opts.multiway, loop_closure_init=loop_closures))
     if surface is not None:
         opts = replace(opts, surface=surface)
-    state.registered = run_register(state.store.root, state.out / "reconstruction", opts, seed=state.config.seed)
+    state.registered = run_register(state.store.root, state.side_out / "reconstruction", opts, seed=state.config.seed)
     if state.recorder is not None:
 
         record_registration(state.recorder, state.registered, state.store.root)
@@ -65,7 +66,7 @@ def reconstruct(state: RunState, cmd: C.Reconstruct, report: CommandReport) -> N
                       poisson_depth=cmd.depth, density_quantile=cmd.trim)
     r = state.registered or register_scans(state, surface=surface)
     fused = fuse(r.clouds, surface)
-    folder = state.out / "reconstruction"
+    folder = state.side_out / "reconstruction"
     cloud = write_cloud(folder / "cloud.ply", fused, r.out_T_marker)
     mesh, _ = poisson_mesh(fused, surface)
     mesh_path = write_mesh(folder / "mesh.ply", mesh, r.out_T_marker)
@@ -105,12 +106,12 @@ def evaluate(state: RunState, cmd: C.Evaluate, report: CommandReport) -> None:
         if state.scene_object is None or state.capabilities is None or not state.capabilities.ground_truth:
             raise ReconError(f"{cmd.source}: ground truth exists only in simulation",
                              hint="give reference=\"path/to/mesh.ply\"")
-        reference = state.out / "scans" / "ground_truth" / f"{state.scene_object.name}.ply"
+        reference = state.store.root / "ground_truth" / f"{state.scene_object.name}.ply"
     else:
         reference = readable_file(state.script, cmd.reference, cmd.source, "reference mesh")
     result = run_evaluate(state.reconstruction["cloud"], reference, cmd.tolerance,
-                          state.out / "scans" if state.store else None, cmd.align,
-                          out=state.out / "reconstruction")
+                          state.store.root if state.store else None, cmd.align,
+                          out=state.side_out / "reconstruction")
     e = result.evaluation
     report.details.update(mean_mm=e.mean * 1e3, std_mm=e.std * 1e3, coverage=e.coverage,
                           coverage_visible=e.coverage_visible, tolerance_mm=e.tolerance * 1e3)

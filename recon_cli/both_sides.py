@@ -1,0 +1,196 @@
+"""An object scanned on both sides: turned over between them, its two side models merged.
+
+Shared by ``recon autoscan --sides 2`` (recon_cli/workflows/two_sided.py) and scripts with
+``<turn_over/>`` (recon_cli/scripts/handlers/sides.py):
+
+- :func:`turn_object`: in simulation MuJoCo turns the object over and lets it settle
+  (recon_cli/backends/sim/turnover.py); on a real cell the operator is asked in the terminal
+  while the robot waits at its home posture (Ctrl-C at the prompt is a KeyboardInterrupt);
+- :func:`any_way_up_box`: the crop and collision box of a turned object whose pose nobody
+  measured (a real cell): a cube around what side 1 saw, large enough for any way up;
+- :func:`merge_sides`: the two side models registered by shape
+  (recon_cli/reconstruction/sides.py), merged into one cloud and Poisson mesh
+  (``reconstruction/``), and ``sides_report.json`` with the registration's confidence and, in
+  simulation, its error against the true turn, the coverage of the whole surface and the
+  accuracy of the merged cloud;
+- :func:`confidence_line`: the registration's confidence in one line for the terminal.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from recon_cli.backends.sim.turnover import turn_over, turned
+from recon_cli.console import console
+from recon_cli.errors import ReconError
+from recon_cli.geometry.transforms import invert
+from recon_cli.inputs.meshes import read_cloud
+from recon_cli.objects import SceneObject
+from recon_cli.reconstruction.evaluation import signed_distances, within_shares
+from recon_cli.reconstruction.options import COVERAGE_TOLERANCE, SurfaceOptions
+from recon_cli.reconstruction.sides import SideRegistration, register_sides
+from recon_cli.reconstruction.surface import poisson_mesh, write_cloud, write_mesh
+from recon_cli.runs import sides as sides_file
+
+#: [m] the side registration's voxel
+SIDES_VOXEL = 0.003
+#: the turn's random draws come from the run's seed plus this (apart from the run's other draws)
+TURN_SEED_OFFSET = 7919
+OPERATOR_PROMPT = ("turn the object over onto another face and put it back on the same spot, then press Enter "
+                   "(Ctrl-C stops; the first side's scans are kept)")
+
+Ask = Callable[[str], None]
+"""Asks the operator and returns when the object is turned (raises KeyboardInterrupt to stop)."""
+
+
+def turn_rng(seed: int) -> np.random.Generator:
+    """The generator of the physics turn for a run's seed."""
+    return np.random.default_rng(seed + TURN_SEED_OFFSET)
+
+
+@dataclass(frozen=True)
+class Turn:
+    """How the object was turned over."""
+
+    scene_object: SceneObject | None  # where it lies now (simulation); None: turned by the operator, pose unknown
+    record: dict[str, Any]  # by physics (tilt [deg], settle time [s], face down) or by the operator (pause [s])
+
+
+def _ask_in_terminal(prompt: str) -> None:
+    console.print(prompt)
+    try:
+        input()
+    except EOFError:
+        raise ReconError("nobody can be asked to turn the object over: the standard input is closed",
+                         hint="run recon in a terminal on a real cell; the first side's scans are kept") from None
+
+
+def turn_object(obj: SceneObject, simulated: bool, rng: np.random.Generator, ask: Ask | None = None) -> Turn:
+    """The object turned over: by physics in simulation (``obj`` as it lies, drawn from
+    ``rng``), by the operator on a real cell (``ask``, default: a prompt in the terminal)."""
+    if simulated:
+        t = turn_over(obj, rng)
+        return Turn(turned(obj, t), {"by": "physics", "tilt_deg": t.tilt_deg, "settle_s": t.settle_s,
+                                     "down_object": [float(v) for v in t.down_object]})
+    t0 = time.monotonic()
+    (ask or _ask_in_terminal)(OPERATOR_PROMPT)
+    return Turn(None, {"by": "operator", "pause_s": time.monotonic() - t0})
+
+
+def any_way_up_box(side_1: Path, margin: float) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """(centre, size) [m] of a cube standing where the bounding box of side 1's cloud (world
+    frame) stood, with edges of its diagonal plus twice ``margin`` [m]: it holds the object
+    however it was turned over."""
+    pts = np.asarray(read_cloud(side_1, "side 1 cloud", points=False).points)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    d = float(np.linalg.norm(hi - lo)) + 2 * margin
+    c = (lo + hi) / 2.0
+    return (float(c[0]), float(c[1]), float(lo[2] + d / 2.0)), (d, d, d)
+
+
+@dataclass(frozen=True)
+class SideModel:
+    """One side's registered cloud (world frame) and what it took."""
+
+    cloud: Path
+    scans: int
+    seconds: float  # wall clock of the side [s]
+
+
+@dataclass(frozen=True)
+class MergedSides:
+    registration: SideRegistration
+    cloud: Path | None  # the merged cloud (None: not merged)
+    mesh: Path | None
+    report: Path  # sides_report.json
+    coverage: float | None  # of the whole surface, the resting faces included (simulation)
+    truth: dict[str, float] | None  # the registration's error against the true turn (simulation)
+    error: ReconError | None  # why the sides were not merged
+
+
+def _coverages(obj: SceneObject, clouds: dict[str, np.ndarray], rng: np.random.Generator,
+               samples: int = 100_000) -> dict[str, float]:
+    """Share of the object's whole surface (the resting faces included) with a point of each
+    cloud within the coverage tolerance (one sample of the surface for all)."""
+    import open3d as o3d
+
+    truth = obj.surface_points(samples, rng, exclude_base=-np.inf)
+    ref = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(truth))
+    out = {}
+    for name, points in clouds.items():
+        rec = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, float)))
+        out[name] = float(np.mean(np.asarray(ref.compute_point_cloud_distance(rec)) <= COVERAGE_TOLERANCE))
+    return out
+
+
+def _angle_deg(R: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
+
+
+def merge_sides(out: Path, sides: tuple[SideModel, SideModel], first: SceneObject, second: SceneObject | None,
+                turn: dict[str, Any], surface: SurfaceOptions, seed: int, t0: float, *, mesh: bool = True,
+                prior: dict | None = None) -> MergedSides:
+    """Register side 2 onto side 1 by shape, merge them into ``out/reconstruction/`` (cloud,
+    and with ``mesh`` the Poisson mesh of ``surface``) and write ``out/sides_report.json``.
+
+    ``first``: the object as side 1 saw it; ``second``: as side 2 saw it in simulation (then
+    the report has the registration's error against the truth, the coverage of the whole
+    surface and the accuracy), None on a real cell. ``t0``: ``time.perf_counter()`` at the
+    start of side 1. A registration the shape cannot fix is not merged: ``error`` says why
+    (the report is written all the same)."""
+    import open3d as o3d
+
+    clouds = [read_cloud(s.cloud, f"side {i + 1} cloud", points=False) for i, s in enumerate(sides)]
+    reg = register_sides(clouds[0], clouds[1], SIDES_VOXEL, seed=seed)
+    truth = None
+    if second is not None:  # side-2 world points onto side 1: W1 inv(W2)
+        true_T = first.world_T_object @ invert(second.world_T_object)
+        dT = reg.side1_T_side2 @ invert(true_T)
+        centre = first.world_vertices().mean(axis=0)
+        truth = {"rotation_deg": _angle_deg(dT[:3, :3]),
+                 "translation_mm": float(np.linalg.norm(dT[:3, :3] @ centre + dT[:3, 3] - centre) * 1e3)}
+    folder = Path(out) / "reconstruction"
+    cloud = mesh_path = None
+    coverage = accuracy = None
+    contributions: dict[str, float] = {}
+    error = None
+    if reg.reason is not None:
+        error = ReconError(f"the two sides cannot be registered by their shape: {reg.reason}; nothing was merged",
+                           hint="each side's model is in side_1/ and side_2/; turn the object onto a face that "
+                                "shows more of the first side's shape and scan the second side again")
+    else:
+        second_cloud = o3d.geometry.PointCloud(clouds[1])
+        second_cloud.transform(reg.side1_T_side2)
+        merged = (clouds[0] + second_cloud).voxel_down_sample(surface.voxel)
+        cloud = write_cloud(folder / "cloud.ply", merged)
+        if mesh:
+            m, _ = poisson_mesh(merged, surface)
+            mesh_path = write_mesh(folder / "mesh.ply", m)
+        if second is not None:
+            pts = np.asarray(merged.points)
+            shares = _coverages(first, {"merged": pts, "side_1": np.asarray(clouds[0].points),
+                                        "side_2": np.asarray(second_cloud.points)}, np.random.default_rng(seed))
+            coverage = shares.pop("merged")
+            contributions = shares
+            d = signed_distances(pts, first.mesh_world())
+            accuracy = {"mean_mm": float(d.mean() * 1e3), "std_mm": float(d.std() * 1e3), "within": within_shares(d)}
+    report = sides_file.write(out, sides_file.SidesReport(
+        object=first.name, sides=2, turn=turn, seconds=time.perf_counter() - t0,
+        side_seconds=[float(s.seconds) for s in sides], side_scans=[s.scans for s in sides], side_2_prior=prior,
+        registration=sides_file.registration_entry(reg.to_dict(), truth),
+        coverage_whole=coverage, contributions=contributions, accuracy=accuracy,
+        error=None if error is None else error.one_line(),
+        cloud=None if cloud is None else str(cloud), mesh=None if mesh_path is None else str(mesh_path)))
+    return MergedSides(reg, cloud, mesh_path, report, coverage, truth, error)
+
+
+def confidence_line(reg: SideRegistration) -> str:
+    """The registration of the sides in one line (fitness, RMSE, overlap, symmetry)."""
+    return (f"sides registered by shape: fitness {reg.fitness:.3f}, rmse {reg.rmse * 1e3:.3f} mm, overlap "
+            f"{reg.overlap:.2f}" + (", ambiguous (symmetric shape)" if reg.ambiguous else ""))

@@ -40,6 +40,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 from recon_cli.config import DEFAULTS
 from recon_cli.session import resolve_object_name
@@ -161,7 +162,7 @@ def run_profile(folder: Path, object_name: str = "bottle", n: int = MAIN_N, seed
     t_end = time.perf_counter()
     stats = pstats.Stats(profiler)
     stats.dump_stats(folder / PSTATS_FILE)
-    rows = stage_rows(stats.stats, t_run - t0, t_end - t0)
+    rows = stage_rows(stats.stats, t_run - t0, t_end - t0)  # type: ignore[attr-defined]
     settings = {"command": f"recon autoscan --dc {MAIN_DC:g} --n {n}", "object": opts.config.scene.object_name,
                 "n": n, "d_c": MAIN_DC, "seed": seed, "resolution": resolution,
                 "cell": opts.config.cell.kind.value, "realism": opts.config.realism.name}
@@ -173,7 +174,7 @@ def run_profile(folder: Path, object_name: str = "bottle", n: int = MAIN_N, seed
 def function_key(module: str, qualname: str) -> Key | None:
     """pstats' key of a Python function (None: no such function, or not a Python one)."""
     try:
-        obj = importlib.import_module(module)
+        obj: Any = importlib.import_module(module)
         for part in qualname.split("."):
             obj = getattr(obj, part)
     except (ImportError, AttributeError):

@@ -157,13 +157,13 @@ class _PathModel:
         self.cuts += 1
 
     def solve(self, time_limit: float):
-        from scipy.optimize import LinearConstraint, milp
+        from scipy.optimize import Bounds, LinearConstraint, milp
         from scipy.sparse import csr_array
 
         indptr = np.cumsum([0] + [len(r) for r in self.rows])
         indices = np.concatenate([np.asarray(r, dtype=int) for r in self.rows]) if self.rows else np.zeros(0, int)
         a = csr_array((np.ones(len(indices)), indices, indptr), shape=(len(self.rows), len(self.arcs)))
-        return milp(self.c, integrality=np.ones(len(self.arcs)), bounds=(0.0, 1.0),
+        return milp(self.c, integrality=np.ones(len(self.arcs), dtype=np.int64), bounds=Bounds(0.0, 1.0),
                     constraints=LinearConstraint(a, np.array(self.lb), np.array(self.ub)),
                     options={"time_limit": max(time_limit, 1e-3), "mip_rel_gap": 0.0})
 

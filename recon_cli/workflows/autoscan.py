@@ -175,6 +175,7 @@ class Autoscan:
         """Scan where the robot is; add the registered, cropped points to the partial object."""
 
         scan = self.acq.scan(view_record(None, view_T))
+        assert scan.path is not None  # a stored scan knows its folder
         registration = self.opt.config.registration
         pose = self.memo.pose(scan.path.name, scan, registration.board or self.board, self.cell.world_T_marker,
                               registration)

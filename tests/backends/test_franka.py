@@ -74,6 +74,18 @@ def _when(condition, action, timeout: float = 120.0) -> threading.Thread:
     return thread
 
 
+def interrupted_operator(monkeypatch) -> list[str]:
+    """The operator answers the prompt with Ctrl-C; the prompts asked."""
+    asked: list[str] = []
+
+    def operator(prompt: str = "") -> str:
+        asked.append(prompt)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("builtins.input", operator)
+    return asked
+
+
 # --------------------------------------------------------------------- the adapter
 def test_planned_trajectory_executes_and_measured_joints_match(fr3, standin):
     robot = FrankaRobot(CONFIG, fr3.joint_names, fr3.kin.limits)
@@ -352,13 +364,7 @@ def test_two_sided_autoscan_on_a_real_cell_asks_the_operator_and_ctrl_c_keeps_si
     """On a real cell the robot parks at its home posture and the operator is asked to turn
     the object over; Ctrl-C at that prompt ends the run with exit 130 and keeps side 1."""
     station, _ = _files(tmp_path)
-    asked = []
-
-    def operator(prompt: str = "") -> str:
-        asked.append(prompt)
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr("builtins.input", operator)
+    asked = interrupted_operator(monkeypatch)
     out = tmp_path / "two"
     code = main(["autoscan", "--sides", "2", "--station", str(station), "--object", "bottle", "--n", "3",
                  "--no-pictures", "--out", str(out)])
@@ -398,13 +404,7 @@ def test_a_script_turn_on_a_real_cell_asks_the_operator_and_ctrl_c_keeps_side_1(
     station, _ = _files(tmp_path)
     script = tmp_path / "two.xml"
     script.write_text(TWO_SIDED_SCRIPT)
-    asked = []
-
-    def operator(prompt: str = "") -> str:
-        asked.append(prompt)
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr("builtins.input", operator)
+    asked = interrupted_operator(monkeypatch)
     out = tmp_path / "run"
     code = main(["run", str(script), "--out", str(out), "--station", str(station)])
     text = capsys.readouterr()

@@ -47,6 +47,7 @@ def fr3() -> Cell:
 def standin(fr3):
     s = start_standin(fr3.config)
     yield s
+    print(f"franka-sim's log (the end):\n{s.log_tail(60)}")  # captured: shown when the test failed
     s.stop()
 
 
@@ -100,6 +101,20 @@ def test_planned_trajectory_executes_and_measured_joints_match(fr3, standin):
     assert np.all(report.max_tracking_error < 0.02)
     assert report.duration == pytest.approx(traj.duration, abs=0.02)
     assert moves(standin) == 1 and robot.errors() == []
+    robot.close()
+
+
+def test_the_standins_arm_at_rest_stays_where_it_stands(fr3, standin):
+    """The stand-in's position servo is stable on the cell's arm (its damping bounded by the
+    arm's inertia, servo_damping_bound): at rest no joint moves by 10 µrad in a second. (With
+    franka-sim's own wrist gains the wrist rang at its torque limit and drifted 2 mrad.)"""
+    robot = FrankaRobot(CONFIG, fr3.joint_names, fr3.kin.limits)
+    first = robot.measured_joints()
+    worst = 0.0
+    for _ in range(20):
+        time.sleep(0.05)
+        worst = max(worst, float(np.abs(robot.measured_joints() - first).max()))
+    assert worst < 1e-5
     robot.close()
 
 

@@ -19,6 +19,7 @@ reflex mode is refused with its errors.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import gc
 import os
@@ -41,6 +42,8 @@ from recon_cli.robot.limits import JointLimits
 PERIOD = 0.001
 #: longest hold of the interpreter lock by another thread during the 1 kHz loop [s]
 SWITCH_INTERVAL = 0.0002
+#: controller cycles of the loop's recent history a control fault reports lost cycles from
+RECENT_CYCLES = 200
 #: how long a stop may take to bring the joints to rest before it counts as unconfirmed
 STOP_BOUND = 2.0
 
@@ -107,6 +110,7 @@ class FrankaRobot:
         self.joint_names = tuple(joint_names)
         self.limits = limits
         self.lost_cycles = 0  # controller cycles the 1 kHz loop missed, over all motions
+        self._recent: collections.deque[int] = collections.deque(maxlen=RECENT_CYCLES)  # cycles per step
         self._measured_lo = np.asarray(limits.lower, dtype=float) - config.tracking_bound
         self._measured_hi = np.asarray(limits.upper, dtype=float) + config.tracking_bound
         realtime = p.RealtimeConfig.kEnforce if config.realtime == "enforce" else p.RealtimeConfig.kIgnore
@@ -234,6 +238,8 @@ class FrankaRobot:
         deadline = time.monotonic() + stream.duration + cfg.time_margin
         arrived = time.monotonic()  # when the last setpoint was first sent
         window: list[np.ndarray] = []
+        recent = self._recent
+        recent.clear()
         try:
             while True:
                 state, period = control.readOnce()
@@ -254,6 +260,7 @@ class FrankaRobot:
                         raise self._settle_fault(final)
                 else:
                     step = round(period.to_sec() / PERIOD)
+                    recent.append(step)
                     self.lost_cycles += max(step - 1, 0)
                     index = min(index + step, last)
                     sent = q[index]
@@ -316,11 +323,15 @@ class FrankaRobot:
         text = _library_text(exc)
         names = [n for n in names if n not in text]
         flags = f" (errors: {', '.join(names)})" if names else ""
+        lost = sum(max(step - 1, 0) for step in self._recent)
+        late = (f"; the control loop missed {lost} of the last {sum(self._recent)} controller cycles"
+                if lost else "")
         stopped = self._halt()
-        return RobotFault(f"the Franka controller aborted the motion: {text}{flags}; "
+        return RobotFault(f"the Franka controller aborted the motion: {text}{flags}{late}; "
                           f"{self._stop_text(stopped)}", kind="control", stopped=stopped,
-                          hint="find the cause, clear the error with recon station recover STATION; completed scans "
-                               "are kept")
+                          hint=("the controller extrapolates a missed cycle: run recon on a real-time kernel with "
+                                "nothing else on its cores (docs/hardware.md); " if lost else "find the cause, ")
+                               + "clear the error with recon station recover STATION; completed scans are kept")
 
     def _lost(self, exc: BaseException, moving: bool) -> RobotFault:
         what = "in a motion" if moving else "at rest"

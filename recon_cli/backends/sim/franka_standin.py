@@ -43,6 +43,12 @@ if TYPE_CHECKING:
 else:
     mujoco = lazy_module("mujoco")
 
+#: franka-sim's physics step [s] (its DEFAULT_DT, the FCI's 1 kHz cycle)
+SIM_STEP = 0.001
+#: share of the explicit-damping stability bound (KD dt / M < 2) the stand-in's position servo
+#: may use: with KD dt / M <= 1 each step shrinks a velocity error without changing its sign
+DAMPING_SHARE = 0.5
+
 #: libfranka's command port (fixed in libfranka: a robot is reached by its address alone)
 COMMAND_PORT = 1337
 VENV_ENV = "RECON_FRANKA_SIM_VENV"
@@ -70,6 +76,8 @@ from franka_sim import FrankaSimServer
 host, port = sys.argv[1], int(sys.argv[2])
 if len(sys.argv) > 3:  # where the arm stands at start-up (the module's start pose, changed in place)
     arm.ARM_INITIAL_Q[:] = [float(v) for v in sys.argv[3].split(",")]
+if len(sys.argv) > 4:  # the position servo's damping gains, bounded for this arm (changed in place)
+    arm.ARM_POSITION_KD[:] = [min(float(b), k) for b, k in zip(sys.argv[4].split(","), arm.ARM_POSITION_KD)]
 server = FrankaSimServer(host=host, port=port, enable_gripper=False, enforce_motion_limits=True)
 def _quit(*_):
     raise KeyboardInterrupt
@@ -117,6 +125,41 @@ def standin_mjcf(config: CellConfig) -> str:
             exclude.bodyname1, exclude.bodyname2 = a, b
     spec.compile()
     return spec.to_xml()
+
+
+def servo_damping_bound(mjcf: str, samples: int = 64, seed: int = 0) -> list[float]:
+    """Upper bounds [N m s/rad] on franka-sim's position-servo damping gains for this arm.
+
+    franka-sim's servo applies ``KD (dq_c - dq)`` as an applied force, which MuJoCo integrates
+    explicitly: the velocity error is multiplied by ``1 - KD dt / M`` every step, stable only
+    while ``KD dt / M < 2`` for the joint's inertia ``M``. Its gains are tuned for its own
+    FR3 with the Franka Hand; on an arm whose wrist carries a lighter camera, joints 5-7 sit
+    near the reflected rotor inertia alone and the wrist servo rings at the actuator's torque
+    limit (the arm at rest drifts 2 mrad and chatters at 0.08 rad/s). The bound is
+    ``2 DAMPING_SHARE M_min / dt`` with ``M_min`` the smallest diagonal of the joint-space
+    inertia over seeded configurations within the joint ranges (and the zero pose)."""
+    import numpy as np
+
+    model = mujoco.MjModel.from_xml_string(mjcf)
+    data = mujoco.MjData(model)
+    joints = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]
+    qpos = model.jnt_qposadr[joints]
+    dofs = model.jnt_dofadr[joints]
+    low, high = model.jnt_range[joints].T
+    rng = np.random.default_rng(seed)
+    m_min = np.full(len(joints), np.inf)
+    dense = np.zeros((model.nv, model.nv))
+    for k in range(samples + 1):
+        data.qpos[:] = 0.0
+        if k:
+            data.qpos[qpos] = rng.uniform(low, high)
+        mujoco.mj_forward(model, data)
+        try:
+            mujoco.mj_fullM(model, data, dense)
+        except TypeError:  # MuJoCo before 3.3.6: mj_fullM(m, dst, qM)
+            mujoco.mj_fullM(model, dense, data.qM)
+        m_min = np.minimum(m_min, np.diag(dense)[dofs])
+    return [float(v) for v in 2.0 * DAMPING_SHARE * m_min / SIM_STEP]
 
 
 @dataclass
@@ -183,7 +226,9 @@ def start_standin(config: CellConfig, host: str = "127.0.0.1", port: int = COMMA
                          hint="stop it first")
     workdir = Path(tempfile.mkdtemp(prefix="recon-franka-sim-"))
     model = workdir / "fr3.xml"
-    model.write_text(standin_mjcf(config))
+    mjcf = standin_mjcf(config)
+    model.write_text(mjcf)
+    damping = servo_damping_bound(mjcf)
     if start is None:
         start = [float(v) for v in named_configuration(config.kind, "home", Cell(config).joint_names)]
     log_path = workdir / "server.log"
@@ -191,7 +236,7 @@ def start_standin(config: CellConfig, host: str = "127.0.0.1", port: int = COMMA
     env.pop("PYTHONPATH", None)
     with log_path.open("wb") as log:
         process = subprocess.Popen([str(venv / "bin" / "python"), "-c", _LAUNCHER, host, str(port),
-                                    ",".join(repr(float(v)) for v in start)],
+                                    ",".join(repr(float(v)) for v in start), ",".join(map(repr, damping))],
                                    stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
                                    cwd=workdir, start_new_session=True)
     standin = FrankaStandin(host, port, process, log_path, workdir)

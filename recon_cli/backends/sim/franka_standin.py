@@ -29,6 +29,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from recon_cli.backends.sim.scene import drives, mujoco_urdf
 from recon_cli.errors import ReconError
 from recon_cli.lazy import lazy_module
@@ -138,8 +140,6 @@ def servo_damping_bound(mjcf: str, samples: int = 64, seed: int = 0) -> list[flo
     limit (the arm at rest drifts 2 mrad and chatters at 0.08 rad/s). The bound is
     ``2 DAMPING_SHARE M_min / dt`` with ``M_min`` the smallest diagonal of the joint-space
     inertia over seeded configurations within the joint ranges (and the zero pose)."""
-    import numpy as np
-
     model = mujoco.MjModel.from_xml_string(mjcf)
     data = mujoco.MjData(model)
     joints = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]

@@ -64,6 +64,31 @@ def test_a_script_scans_both_sides_and_merges_them(tmp_path, capsys):
     assert "sides registered by shape: fitness" in text.out and "of the whole surface" in text.out
 
 
+def test_a_symmetric_object_merged_from_few_views_names_the_pose_it_cannot_tell_apart(tmp_path, capsys):
+    """The mug (a closed cylinder with a handle at mid-height: turned by 180 deg about the axis
+    through its handle it is itself) from the script's 5 + 5 small views: the sides fit under
+    two poses 180 deg apart, both are reported, the truth is one of them, and as both give the
+    same shape the merged model is trusted and right."""
+    out = tmp_path / "run"
+    code = main(["run", str(SCRIPTS_DIR / "two_sided_toy_blocks.xml"), "--object", "mug", "--out", str(out)])
+    text = capsys.readouterr()
+    assert code == 0, text.out + text.err
+    reg = sides_file.read(out).registration
+    assert reg["ambiguous"] and not reg["shape_ambiguous"] and reg["reason"] is None
+    w1, w2 = (np.asarray(ScanStore(out / f"side_{k}" / "scans").session().world_T_object) for k in (1, 2))
+    truth = w1 @ np.linalg.inv(w2)
+    centre = w2[:, 3]  # the object's origin on side 2 (homogeneous)
+    poses = [np.asarray(reg["side1_T_side2"]), *(np.asarray(a["side1_T_side2"]) for a in reg["alternatives"])]
+    errors = [(np.degrees(np.arccos(np.clip((np.trace(T[:3, :3].T @ truth[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))),
+               1e3 * np.linalg.norm((T @ centre - truth @ centre)[:3]))
+              for T in poses]
+    assert any(angle <= 0.2 and shift <= 0.5 for angle, shift in errors), errors
+    assert all(a["shape_difference_m"] < 0.5e-3 for a in reg["alternatives"])
+    report = sides_file.read(out)
+    assert report.accuracy["std_mm"] <= 0.29 and abs(report.accuracy["mean_mm"]) < 0.1
+    assert "ambiguous" in text.out
+
+
 @pytest.mark.parametrize("body, line, words", [
     (VIEW.format(phi=0) + "<turn_over/>\n  " + VIEW.format(phi=90) + '<turn_over seed="3"/>\n  '
      + VIEW.format(phi=180), 10, "a second <turn_over/> (the first is at s.xml:7)"),

@@ -271,8 +271,12 @@ Alignment = Literal["none", "icp"]
 
 @app.command()
 def evaluate(
-    reconstruction: Annotated[Path, typer.Argument(help="Reconstructed cloud or mesh (PLY, ...).")],
-    reference: Annotated[Path, typer.Option(help="Reference mesh (ground truth).")],
+    reconstruction: Annotated[Path, typer.Argument(help="Reconstructed cloud or mesh (PLY, ...), or the folder "
+                                                        "of a two-sided run (its merged cloud, and what each side "
+                                                        "covers alone).")],
+    reference: Annotated[Path | None, typer.Option(help="Reference mesh (ground truth); default for a two-sided "
+                                                        "simulation run of a built-in or YCB object: the "
+                                                        "simulated object.")] = None,
     tolerance: Annotated[float, typer.Option(min=1e-5, max=0.1, help="Coverage tolerance [m].")]
     = COVERAGE_TOLERANCE,
     scan_store: Annotated[Path | None, typer.Option(help="Scan store whose camera poses define the visible "
@@ -285,12 +289,10 @@ def evaluate(
                                                                  "reconstruction).")] = None,
 ) -> None:
     """Signed distances to a reference mesh, their statistics and histogram, and coverage."""
-
-
-    target = out or reconstruction.parent
+    merged = reconstruction / "reconstruction" / "cloud.ply" if reconstruction.is_dir() else reconstruction
+    target = out or merged.parent
     if target.is_dir():  # beside another command's results: only its two files, never through a link
-
-        stem = reconstruction.stem
+        stem = merged.stem
         claim_output(target, OutputMode.APPEND, command="evaluate",
                      names=(f"{stem}_evaluation.json", f"{stem}_distances.png"))
     result = run_evaluate(reconstruction, reference, tolerance, scan_store, align, samples, target)
@@ -302,6 +304,10 @@ def evaluate(
         line += (f", {e.coverage_visible * 100:.2f} % of the part the cameras could see "
                  f"({e.visible_share * 100:.1f} % of the surface)")
     console.print(line)
+    if e.contributions:
+        console.print("alone: " + ", ".join(f"{name.replace('_', ' ')} covers {share * 100:.2f} %"
+                                            for name, share in e.contributions.items())
+                      + f"; together {e.coverage * 100:.2f} %")
     if result.alignment is not None:
         console.print(f"aligned to the reference by ICP: moved {result.alignment[0] * 1e3:.3f} mm / "
                       f"{np.degrees(result.alignment[1]):.4f}°")

@@ -4,25 +4,33 @@ Loads both files, optionally aligns the reconstruction to the reference by point
 ICP (only when asked: ``align="icp"``; the transform is reported), computes the signed
 distances and coverage of ``evaluation.evaluate`` (coverage of the visible part when a scan
 store gives the camera poses), writes a JSON report and a histogram PNG.
+
+A two-sided run folder (``sides_report.json``) is evaluated as a whole: its merged cloud, and
+what each side's cloud covers alone (side 2's moved by the registration of the sides, and
+with the merged cloud by the alignment); without a reference, the simulated object's surface
+where side 1 saw it (a simulation of a built-in or YCB object).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from recon_cli.errors import FileError
-from recon_cli.geometry.transforms import pose_error
+from recon_cli.errors import FileError, InputError
+from recon_cli.geometry.transforms import pose_error, transform_points
+from recon_cli.inputs.jsonschemas import check_pose
 from recon_cli.inputs.meshes import CLOUD_SUFFIXES, MESH_SUFFIXES, read_cloud, read_mesh
+from recon_cli.objects import BUILTIN, SceneObject, load_object, ycb_names
 from recon_cli.perception.sensor import motioncam_3d_m
 from recon_cli.randomness import open3d_draws
 from recon_cli.reconstruction.evaluation import CameraView, Evaluation, evaluate, histogram_png, signed_distances
 from recon_cli.reconstruction.options import SurfaceOptions
 from recon_cli.reconstruction.scan_store import ScanStore
 from recon_cli.runs import evaluation as evaluation_file
+from recon_cli.runs import sides as sides_file
 from recon_cli.runs.codec import from_json, plain
 
 _SURFACE = SurfaceOptions()  # its voxel and normal radius serve the ICP alignment to a reference
@@ -90,28 +98,93 @@ def align_icp(points: np.ndarray, reference, distance: float = 0.005, seed: int 
     return np.asarray(T)
 
 
-def run_evaluate(reconstruction: Path, reference: Path, tolerance: float = 0.001, views: Path | None = None,
+@dataclass(frozen=True)
+class TwoSidedRun:
+    """A run folder of an object scanned on both sides, as ``recon evaluate`` reads it."""
+
+    folder: Path
+    merged: Path  # reconstruction/cloud.ply
+    sides: dict[str, np.ndarray]  # side_1, side_2: each side's points (N, 3) in the merged cloud's frame
+
+
+def two_sided_run(folder: Path) -> TwoSidedRun:
+    """The merged cloud and both sides' points of a two-sided run folder (FileError or
+    MetadataError, one line, when its sides were not merged or a file is missing or broken)."""
+    folder = Path(folder)
+    if not (folder / sides_file.SIDES_REPORT).exists():
+        raise FileError(f"{folder} is a folder but not a two-sided run (no {sides_file.SIDES_REPORT})",
+                        hint="give a cloud or mesh file, e.g. RUN/reconstruction/cloud.ply")
+    report = sides_file.read(folder)
+    merged = folder / "reconstruction" / "cloud.ply"
+    if report.cloud is None or not merged.is_file():
+        why = f" ({report.error})" if report.error else ""
+        raise FileError(f"{folder}: its two sides were not merged{why}",
+                        hint="evaluate one side's cloud: side_1/reconstruction/cloud.ply or side_2/...")
+    T = report.registration.get("side1_T_side2")
+    check_pose(T, folder / sides_file.SIDES_REPORT, "sides report", "registration.side1_T_side2")
+    sides = {}
+    for k in (1, 2):
+        cloud = read_cloud(folder / f"side_{k}" / "reconstruction" / "cloud.ply", f"side {k} cloud",
+                           hint=f"the run's side_{k}/ is incomplete: run the scan again")
+        points = np.asarray(cloud.points)
+        sides[f"side_{k}"] = points if k == 1 else transform_points(np.asarray(T, dtype=float), points)
+    return TwoSidedRun(folder, merged, sides)
+
+
+def simulated_object(folder: Path) -> SceneObject | None:
+    """The simulated object where side 1 of a two-sided simulation run saw it; None when the
+    run was not a simulation of a built-in or YCB object."""
+    store = Path(folder) / "side_1" / "scans"
+    if not store.is_dir():
+        return None
+    session = ScanStore(store).session()
+    if (session.backend != "sim" or session.world_T_object is None
+            or session.object_name not in (*BUILTIN, *ycb_names())):
+        return None
+    return replace(load_object(session.object_name), world_T_object=np.asarray(session.world_T_object, dtype=float))
+
+
+def run_evaluate(reconstruction: Path, reference: Path | None, tolerance: float = 0.001, views: Path | None = None,
                  align: str = "none", samples: int = 200_000, out: Path | None = None,
                  seed: int = 0) -> EvaluateResult:
-    """``seed``: of every sampling (the reconstruction when it is a mesh, the reference)."""
-
-    points = load_points(reconstruction, seed=seed)
-    mesh = load_mesh(reference)
+    """``reconstruction``: a cloud or mesh file, or a two-sided run folder (then ``reference``
+    may be None in a simulation: the simulated object). ``seed``: of every sampling (the
+    reconstruction when it is a mesh, the reference)."""
+    run = two_sided_run(reconstruction) if Path(reconstruction).is_dir() else None
+    if run is not None and views is not None:
+        raise InputError("--scan-store does not apply to a two-sided run folder: its sides saw the object lying "
+                         "two ways", hint="evaluate the coverage of the whole surface (leave out --scan-store)")
+    source = run.merged if run is not None else Path(reconstruction)
+    points = load_points(source, seed=seed)
+    parts = dict(run.sides) if run is not None else {}
+    surface = None
+    if reference is not None:
+        mesh, reference_name = load_mesh(reference), str(reference)
+    elif run is not None and (obj := simulated_object(run.folder)) is not None:
+        # the whole true surface: the resting faces too, not the faces hidden inside a union of primitives
+        mesh, reference_name = obj.mesh_world(), f"the simulated {obj.name}"
+        surface = obj.surface_points(samples, np.random.default_rng(seed), exclude_base=-np.inf)
+    else:
+        raise FileError(f"{reconstruction}: no reference to evaluate against",
+                        hint="give --reference MESH (the truth; a simulation run of a built-in or YCB object "
+                             "has its own)")
     alignment = None
     T = np.eye(4)
     if align == "icp":
         T = align_icp(points, mesh, seed=seed)
-        points = points @ T[:3, :3].T + T[:3, 3]
+        points = transform_points(T, points)
+        parts = {name: transform_points(T, p) for name, p in parts.items()}
         alignment = pose_error(T, np.eye(4))
     cams = camera_views(views) if views is not None else None
-    result = evaluate(points, mesh, tolerance, samples, cams, seed=seed)
-    out = Path(out or Path(reconstruction).parent)
+    result = evaluate(points, mesh, tolerance, samples, cams, seed=seed, parts=parts, surface=surface)
+    out = Path(out or source.parent)
     out.mkdir(parents=True, exist_ok=True)
-    stem = Path(reconstruction).stem
+    stem = source.stem
     hist = out / f"{stem}_distances.png"
-    histogram_png(hist, {stem: signed_distances(points, mesh)},
-                  f"{Path(reconstruction).name} vs {Path(reference).name}")
+    histogram_png(hist, {"both sides" if run is not None else stem: signed_distances(points, mesh),
+                         **{name.replace("_", " "): signed_distances(p, mesh) for name, p in parts.items()}},
+                  f"{source.name} vs {Path(reference_name).name}")
     report = evaluation_file.write(out, from_json(evaluation_file.EvaluationReport, plain({
-        "reconstruction": str(reconstruction), "reference": str(reference), "alignment": align,
+        "reconstruction": str(source), "reference": reference_name, "alignment": align,
         "alignment_transform": T if alignment else None, **result.to_dict()})))
     return EvaluateResult(result, alignment, report, hist)

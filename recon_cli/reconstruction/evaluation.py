@@ -12,7 +12,7 @@ what CloudCompare did there).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +45,7 @@ class Evaluation:
     visible_share: float | None  # share of the reference samples a camera could see
     tolerance: float  # [m] coverage tolerance
     samples: int  # reference surface samples
+    contributions: dict[str, float] = field(default_factory=dict)  # coverage of each part alone (both sides)
 
     def to_dict(self) -> dict:
         return {
@@ -52,7 +53,7 @@ class Evaluation:
             "rms_mm": self.rms * 1e3, "median_abs_mm": self.median_abs * 1e3, "within": self.within,
             "coverage": self.coverage, "coverage_visible": self.coverage_visible,
             "visible_share": self.visible_share, "coverage_tolerance_mm": self.tolerance * 1e3,
-            "reference_samples": self.samples,
+            "reference_samples": self.samples, "contributions": self.contributions,
         }
 
 
@@ -125,18 +126,31 @@ def visible_from(samples: np.ndarray, normals: np.ndarray, reference, views: lis
 
 
 def evaluate(points: np.ndarray, reference, tolerance: float = 0.001, samples: int = 200_000,
-             views: list[CameraView] | None = None, seed: int = 0) -> Evaluation:
-    """Accuracy (signed distances) and coverage of points (N, 3) against a reference mesh."""
+             views: list[CameraView] | None = None, seed: int = 0,
+             parts: dict[str, np.ndarray] | None = None, surface: np.ndarray | None = None) -> Evaluation:
+    """Accuracy (signed distances) and coverage of points (N, 3) against a reference mesh;
+    ``parts``: clouds the points were merged from (an object's two sides), whose coverage
+    alone is measured on the same surface samples; ``surface``: samples (M, 3) of the
+    reference surface to measure coverage on (default: ``samples`` drawn from the mesh; not
+    with ``views``, which need the samples' normals)."""
     import open3d as o3d
 
     points = np.asarray(points, dtype=float)
     d = signed_distances(points, reference)
     within = within_shares(d)
-    surf, normals = sample_surface(reference, samples, seed)
+    if surface is None:
+        surf, normals = sample_surface(reference, samples, seed)
+    elif views:
+        raise ValueError("coverage of the visible part needs the normals of the surface samples")
+    else:
+        surf, samples = np.asarray(surface, dtype=float), len(surface)
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     ref = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(surf))
     nearest = np.asarray(ref.compute_point_cloud_distance(cloud))
     covered = nearest <= tolerance
+    contributions = {name: float(np.mean(np.asarray(ref.compute_point_cloud_distance(
+        o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(part, dtype=float))))) <= tolerance))
+        for name, part in (parts or {}).items()}
     cov_vis = vis_share = None
     if views:
         vis = visible_from(surf, normals, reference, views)
@@ -144,7 +158,7 @@ def evaluate(points: np.ndarray, reference, tolerance: float = 0.001, samples: i
         cov_vis = float(covered[vis].mean()) if vis.any() else 0.0
     return Evaluation(len(points), float(d.mean()), float(d.std()), float(np.sqrt(np.mean(d**2))),
                       float(np.median(np.abs(d))), within, float(covered.mean()), cov_vis, vis_share,
-                      tolerance, samples)
+                      tolerance, samples, contributions)
 
 
 def histogram_png(path: Path, distances_by_label: dict[str, np.ndarray], title: str,

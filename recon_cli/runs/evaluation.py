@@ -36,6 +36,7 @@ class EvaluationReport:
     median_abs_mm: float | None = None
     within: Mapping[str, float] = field(default_factory=dict)  # "±0.5 mm" -> share of the points
     coverage: float | None = None  # share of the reference surface
+    contributions: Mapping[str, float] = field(default_factory=dict)  # two sides: each one's coverage alone
     coverage_visible: float | None = None  # among the samples a camera could see
     visible_share: float | None = None
     coverage_tolerance_mm: float | None = None

@@ -7,6 +7,7 @@ parking move and turns nothing."""
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -62,6 +63,32 @@ def test_a_script_scans_both_sides_and_merges_them(tmp_path, capsys):
     assert run["outputs"]["cloud"] == str(out / "reconstruction" / "cloud.ply")
     assert run["outputs"]["sides_report"] == str(out / "sides_report.json")
     assert "sides registered by shape: fitness" in text.out and "of the whole surface" in text.out
+    _evaluate_the_two_sided_folder(out, report, tmp_path, capsys)
+
+
+def _evaluate_the_two_sided_folder(out, report, tmp_path, capsys):
+    """`recon evaluate RUN` on the two-sided folder: against the simulated object by default,
+    the whole surface's coverage and each side's alone as the run measured them; a folder
+    whose side is missing, a folder of another kind, or a scan store are one line each."""
+    assert main(["evaluate", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "alone: side 1 covers" in text and "side 2 covers" in text, text
+    ev = json.loads((out / "reconstruction" / "cloud_evaluation.json").read_text())
+    assert ev["reference"] == "the simulated toy_blocks" and ev["coverage"] == pytest.approx(report.coverage_whole,
+                                                                                            abs=0.01)
+    assert ev["contributions"] == pytest.approx(dict(report.contributions), abs=0.01)
+    assert ev["std_mm"] == pytest.approx(report.accuracy["std_mm"], rel=0.05)
+    assert (out / "reconstruction" / "cloud_distances.png").stat().st_size > 10_000
+    broken = tmp_path / "broken"
+    shutil.copytree(out, broken)
+    (broken / "side_2" / "reconstruction" / "cloud.ply").unlink()
+    cases = [(["evaluate", str(broken)], "side 2 cloud"),
+             (["evaluate", str(out / "side_1")], "not a two-sided run (no sides_report.json)"),
+             (["evaluate", str(out), "--scan-store", str(out / "side_1" / "scans")], "two-sided run folder")]
+    for argv, words in cases:
+        assert main(argv) != 0
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and words in err and "Traceback" not in err, (argv, err)
 
 
 def test_a_symmetric_object_merged_from_few_views_names_the_pose_it_cannot_tell_apart(tmp_path, capsys):

@@ -156,3 +156,5 @@ def _two_sided(opts: AutoscanOptions, object_name: str) -> None:
         console.print(f"ground truth: coverage {result.coverage * 100:.2f} % of the whole surface (1 mm)")
     console.print(f"mesh: {result.mesh}\ncloud: {result.cloud}\nreport: {result.report}\n"
                   f"{object_name} on two sides in {result.seconds:.1f} s")
+    if result.page is not None:
+        console.print(f"page: {result.page}")

@@ -1,6 +1,7 @@
 """The page's own pictures: charts drawn with matplotlib where a run has the numbers but no
-figure (plan times, coverage and accuracy, ICP residuals), and thumbnails of the scans'
-colour images. Each function writes one file and returns its path."""
+figure (plan times, coverage and accuracy, ICP residuals, the two sides of an object as
+registered onto each other), and thumbnails of the scans' colour images. Each function writes
+one file and returns its path."""
 
 from __future__ import annotations
 
@@ -11,7 +12,9 @@ import numpy as np
 
 from recon_cli.errors import ReconError
 from recon_cli.inputs.images import read_color, read_depth
-from recon_cli.report.model import Edge, Evaluation, Move, Scan
+from recon_cli.inputs.jsonschemas import check_pose
+from recon_cli.inputs.meshes import read_cloud
+from recon_cli.report.model import Edge, Evaluation, Move, Scan, TwoSides
 
 _BLUE, _ORANGE, _GREEN, _GREY = "#1f77b4", "#ff7f0e", "#2ca02c", "#7f7f7f"
 
@@ -174,3 +177,55 @@ def thumbnail(path: Path, scan: Scan, width: int) -> Path | None:
     small = cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA)
     path.parent.mkdir(parents=True, exist_ok=True)
     return path if cv2.imwrite(str(path), small, [cv2.IMWRITE_JPEG_QUALITY, 85]) else None
+
+
+def sides_png(path: Path, sides: TwoSides, points_per_side: int = 12_000, seed: int = 0) -> Path | None:
+    """Both sides' clouds as registered onto each other (side 1 blue, side 2 orange, side 2
+    placed by the registration of the sides), seen from the front, the side and above, with
+    the registration's confidence; None when a side's cloud or the pose cannot be read."""
+    reg = sides.report.registration
+    clouds = [side.cloud for side in sides.sides if side.cloud is not None]
+    if len(clouds) != 2:
+        return None
+    try:
+        check_pose(reg.get("side1_T_side2"), sides.sides[0].folder.parent / "sides_report.json", "sides report",
+                   "registration.side1_T_side2")
+        points = [np.asarray(read_cloud(c, f"{side.label} cloud").points)
+                  for c, side in zip(clouds, sides.sides, strict=True)]
+    except ReconError:
+        return None
+    T = np.asarray(reg["side1_T_side2"], dtype=float)
+    points[1] = points[1] @ T[:3, :3].T + T[:3, 3]
+    rng = np.random.default_rng(seed)
+    points = [p[rng.choice(len(p), points_per_side, replace=False)] if len(p) > points_per_side else p
+              for p in points]
+    plt = _pyplot()
+    fig = plt.figure(figsize=(12, 4.4))
+    everything = np.vstack(points)
+    centre, half = (everything.min(axis=0) + everything.max(axis=0)) / 2.0, np.ptp(everything, axis=0).max() / 2.0
+    colours = np.array([_BLUE] * len(points[0]) + [_ORANGE] * len(points[1]))
+    order = rng.permutation(len(everything))
+    for k, (name, elevation, azimuth) in enumerate((("front", 10, -90), ("side", 10, 0), ("above", 80, -90))):
+        ax = fig.add_subplot(1, 3, k + 1, projection="3d")
+        # one scatter in a shuffled order: neither side is drawn over the other as a whole
+        ax.scatter(everything[order, 0], everything[order, 1], everything[order, 2], s=0.3, c=colours[order],
+                   depthshade=False)
+        for side, colour in zip(sides.sides, (_BLUE, _ORANGE), strict=True):
+            ax.scatter([], [], [], s=0.3, c=colour, label=side.label)
+        ax.set_xlim(centre[0] - half, centre[0] + half)
+        ax.set_ylim(centre[1] - half, centre[1] + half)
+        ax.set_zlim(centre[2] - half, centre[2] + half)
+        ax.set_box_aspect((1, 1, 1))
+        ax.view_init(elev=elevation, azim=azimuth)
+        ax.set_axis_off()
+        ax.set_title(name, fontsize=9)
+        if k == 0:
+            ax.legend(loc="upper left", markerscale=20, fontsize=8)
+    fitness, reverse, rmse = (reg.get(key) for key in ("fitness", "fitness_reverse", "rmse_m"))
+    confidence = ("not trusted: " + str(reg["reason"]) if reg.get("reason") else
+                  "ambiguous in pose, not in shape" if reg.get("ambiguous") else "unique")
+    numbers = ""
+    if isinstance(fitness, (int, float)) and isinstance(reverse, (int, float)) and isinstance(rmse, (int, float)):
+        numbers = f"fitness {fitness:.3f} / {reverse:.3f}, RMSE {rmse * 1e3:.3f} mm; "
+    fig.suptitle(_short(f"the two sides registered by shape: {numbers}{confidence}", 150), fontsize=10)
+    return _save(fig, path)

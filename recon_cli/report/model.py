@@ -21,6 +21,7 @@ from recon_cli.runs.autoscan import AutoscanReport
 from recon_cli.runs.capture import CaptureReport
 from recon_cli.runs.register import PoseError
 from recon_cli.runs.script_run import ScriptRunReport
+from recon_cli.runs.sides import SidesReport
 
 
 class RunKind(StrEnum):
@@ -30,11 +31,13 @@ class RunKind(StrEnum):
     AUTOSCAN = "autoscan"  # recon autoscan: autoscan_report.json, iterations/*.png, reconstruction/
     SCANS = "scans"  # a scan store (recon capture, or any store): session.json, scan_NNNN/
     REGISTER = "register"  # recon register's output folder: report.json
+    SIDES = "sides"  # recon autoscan --sides 2: sides_report.json, side_1/ and side_2/ (autoscans), reconstruction/
 
     @property
     def label(self) -> str:
         return {RunKind.RUN: "recon run", RunKind.AUTOSCAN: "recon autoscan",
-                RunKind.SCANS: "scan store (recon capture)", RunKind.REGISTER: "recon register"}[self]
+                RunKind.SCANS: "scan store (recon capture)", RunKind.REGISTER: "recon register",
+                RunKind.SIDES: "recon autoscan --sides 2"}[self]
 
 
 @dataclass(frozen=True)
@@ -142,6 +145,33 @@ class OutputFile:
 
 
 @dataclass(frozen=True)
+class Side:
+    """One side of an object scanned on both sides: its own scans and registration."""
+
+    name: str  # side_1, side_2 (its folder's name)
+    folder: Path
+    scans: tuple[Scan, ...]
+    registration: Registration | None  # the side's own (its reconstruction/report.json)
+    cloud: Path | None  # its registered cloud (world frame of the side)
+    seconds: float | None  # wall clock of the side
+    coverage: float | None  # share of the whole surface this side covers alone (simulation)
+
+    @property
+    def label(self) -> str:
+        return self.name.replace("_", " ")
+
+
+@dataclass(frozen=True)
+class TwoSides:
+    """``sides_report.json`` and the two sides of a folder: a script with ``<turn_over/>`` or
+    ``recon autoscan --sides 2``."""
+
+    report: SidesReport
+    sides: tuple[Side, ...]
+    cloud: Path | None  # the merged cloud (None: the sides were not merged)
+
+
+@dataclass(frozen=True)
 class RunFolder:
     """Everything a page shows about one folder."""
 
@@ -159,6 +189,7 @@ class RunFolder:
     plys: tuple[OutputFile, ...] = ()
     reports: tuple[OutputFile, ...] = ()  # JSON reports, configuration, expanded script
     notes: tuple[str, ...] = ()  # what the folder lacks or could not be read
+    two_sides: TwoSides | None = None  # an object scanned on both sides
 
     @property
     def status(self) -> str:
@@ -168,6 +199,8 @@ class RunFolder:
             return self.autoscan.status
         if self.capture is not None:
             return self.capture.status
+        if self.two_sides is not None and self.two_sides.cloud is None:
+            return "failed"
         return "done"
 
     @property
@@ -175,5 +208,6 @@ class RunFolder:
         if self.script_run is not None:
             return f"{self.kind.label}: {self.script_run.name}"
         obj = (self.autoscan.object if self.autoscan else None) or (
+            self.two_sides.report.object if self.two_sides else None) or (
             self.session.object_name if self.session else None)
         return f"{self.kind.label}" + (f": {obj}" if obj else "")

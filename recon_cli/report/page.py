@@ -78,11 +78,18 @@ def _draw(run: RunFolder, options: ReportOptions, out: Path) -> Assets:
     if run.registration is not None and run.registration.edges:
         pictures.append(Picture(figures.icp_png(out / "icp_residuals.png", run.registration.edges),
                                 "fitness and inlier RMSE of every pairwise ICP result"))
+    if run.two_sides is not None:
+        drawn = figures.sides_png(out / "sides.png", run.two_sides)
+        if drawn is not None:
+            pictures.insert(0, Picture(drawn, "the two sides as registered onto each other by their shape"))
     thumbs = {}
-    for s in run.scans:
-        path = figures.thumbnail(out / "scans" / f"{s.folder}.jpg", s, options.thumbnail_width)
+    scans = [(s.folder, s) for s in run.scans]
+    if run.two_sides is not None:  # keyed side_k/scan_NNNN
+        scans += [(f"{side.name}/{s.folder}", s) for side in run.two_sides.sides for s in side.scans]
+    for key, s in scans:
+        path = figures.thumbnail(out / "scans" / f"{key}.jpg", s, options.thumbnail_width)
         if path is not None:
-            thumbs[s.folder] = path
+            thumbs[key] = path
     return Assets(mesh, views, why, tuple(pictures), thumbs)
 
 

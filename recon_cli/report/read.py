@@ -29,18 +29,23 @@ from recon_cli.report.model import (
     RunKind,
     Scan,
     ScanPose,
+    Side,
+    TwoSides,
 )
 from recon_cli.runs import autoscan as autoscan_file
 from recon_cli.runs import capture as capture_file
 from recon_cli.runs import evaluation as evaluation_file
 from recon_cli.runs import register as register_file
 from recon_cli.runs import script_run as run_file
+from recon_cli.runs import sides as sides_file
 from recon_cli.runs.autoscan import AutoscanReport
 from recon_cli.runs.register import RegisterReport
 from recon_cli.runs.script_run import ScriptRunReport
+from recon_cli.runs.sides import SidesReport
 
-RUN_REPORT, AUTOSCAN_REPORT, CAPTURE_REPORT, REGISTER_REPORT = (
-    run_file.RUN_REPORT, autoscan_file.AUTOSCAN_REPORT, capture_file.CAPTURE_REPORT, register_file.REGISTER_REPORT)
+RUN_REPORT, AUTOSCAN_REPORT, CAPTURE_REPORT, REGISTER_REPORT, SIDES_REPORT = (
+    run_file.RUN_REPORT, autoscan_file.AUTOSCAN_REPORT, capture_file.CAPTURE_REPORT, register_file.REGISTER_REPORT,
+    sides_file.SIDES_REPORT)
 PAGE_FILES = "report_files"
 T = TypeVar("T")  # the page's own images, beside it
 _HINT = "give the folder a recon run, autoscan, capture or register wrote (its --out)"
@@ -101,12 +106,14 @@ def run_kind(folder: Path) -> RunKind:
         return RunKind.RUN
     if (folder / AUTOSCAN_REPORT).is_file():
         return RunKind.AUTOSCAN
+    if (folder / SIDES_REPORT).is_file():
+        return RunKind.SIDES
     if (folder / REGISTER_REPORT).is_file() and register_file.is_registration(folder / REGISTER_REPORT):
         return RunKind.REGISTER
     if (folder / "session.json").is_file() or _scan_folders(folder):
         return RunKind.SCANS
-    raise FileError(f"{folder} is not a run folder (no {RUN_REPORT}, {AUTOSCAN_REPORT}, registration "
-                    f"{REGISTER_REPORT}, session.json or scan_NNNN folder in it)", hint=_HINT)
+    raise FileError(f"{folder} is not a run folder (no {RUN_REPORT}, {AUTOSCAN_REPORT}, {SIDES_REPORT}, "
+                    f"registration {REGISTER_REPORT}, session.json or scan_NNNN folder in it)", hint=_HINT)
 
 
 # ----------------------------------------------------------------------------- reports
@@ -131,6 +138,49 @@ def _autoscan(path: Path, report: AutoscanReport, reg_dir: Path) -> tuple[tuple[
             rms_mm=(mean**2 + std**2) ** 0.5, within=dict(accuracy.within), coverage=report.coverage_1mm,
             coverage_visible=None, tolerance_mm=1.0)
     return moves, evaluation
+
+
+def _sides_evaluation(path: Path, report: SidesReport) -> Evaluation | None:
+    """The merged model of both sides against the object's true whole surface (simulation)."""
+    accuracy = _dict(report.accuracy)
+    mean, std = _float(accuracy.get("mean_mm")), _float(accuracy.get("std_mm"))
+    if report.coverage_whole is None or mean is None or std is None:
+        return None
+    within = {str(k): v for k, v in _dict(accuracy.get("within")).items() if _float(v) is not None}
+    return Evaluation(report=path, name="cloud (both sides)", reference=f"true whole {report.object or 'object'} "
+                      "surface", histogram=None, points=None, mean_mm=mean, std_mm=std,
+                      rms_mm=(mean**2 + std**2) ** 0.5, within=within, coverage=report.coverage_whole,
+                      coverage_visible=None, tolerance_mm=1.0)
+
+
+def _two_sides(folder: Path, kind: RunKind, notes: _Notes) -> tuple[TwoSides | None, tuple[Move, ...]]:
+    """Both sides of a folder with ``sides_report.json`` (a script run keeps each side's scan
+    store in ``side_k/scans``, an autoscan's side is an autoscan folder), and the autoscan
+    sides' moves."""
+    report = notes.read(folder / SIDES_REPORT, sides_file.read)
+    if report is None:
+        return None, ()
+    sides, moves = [], []
+    for k in (1, 2):
+        name = f"side_{k}"
+        base = folder / name
+        store = base / "scans" if kind is RunKind.RUN else base
+        scans = _scans(store, notes) if store.is_dir() else ()
+        reg_path = base / "reconstruction" / REGISTER_REPORT
+        rep = notes.read(reg_path, register_file.read)
+        registration = None if rep is None else replace(_registration(reg_path, rep), scan_store=store)
+        cloud = base / "reconstruction" / "cloud.ply"
+        side = Side(name, base, scans, registration, cloud if cloud.is_file() else None,
+                    report.side_seconds[k - 1] if len(report.side_seconds) >= k else None,
+                    report.contributions.get(name))
+        sides.append(side)
+        autoscan = notes.read(base / AUTOSCAN_REPORT, autoscan_file.read)
+        if autoscan is not None:
+            side_moves, _ = _autoscan(base / AUTOSCAN_REPORT, autoscan, base / "reconstruction")
+            moves += [replace(m, label=f"{side.label}, {m.label}") for m in side_moves]
+    merged = folder / "reconstruction" / "cloud.ply"
+    return TwoSides(report, tuple(sides), merged if report.cloud is not None and merged.is_file() else None), \
+        tuple(moves)
 
 
 def _scan_store_of(report_dir: Path, text: str | None, names: set[str]) -> Path | None:
@@ -291,6 +341,8 @@ def read_run_folder(folder: Path) -> RunFolder:
             extra = () if evaluation is None else (evaluation,)
     elif kind is RunKind.SCANS:
         capture = notes.read(folder / CAPTURE_REPORT, capture_file.read)
+    elif kind is RunKind.SIDES:
+        store = None
     else:
         reg_dir = folder
     report = notes.read(reg_dir / REGISTER_REPORT, register_file.read)
@@ -306,10 +358,19 @@ def read_run_folder(folder: Path) -> RunFolder:
     if store is not None and store.is_dir():
         session = notes.read(store / "session.json", lambda path: read_session(path.parent))
         scans = _scans(store, notes)
+    two_sides, side_moves = _two_sides(folder, kind, notes) if (folder / SIDES_REPORT).is_file() else (None, ())
+    if two_sides is not None:
+        moves = moves or side_moves
+        if session is None:  # what produced side 1's scans
+            store_1 = folder / "side_1" / "scans" if kind is RunKind.RUN else folder / "side_1"
+            session = notes.read(store_1 / "session.json", lambda path: read_session(path.parent))
+        evaluation = _sides_evaluation(folder / SIDES_REPORT, two_sides.report)
+        extra += () if evaluation is None else (evaluation,)
     if not moves:
         moves = tuple(s.move for s in scans if s.move is not None)
     pictures = tuple(sorted((folder / "iterations").glob("iteration_*.png"))) if kind is RunKind.AUTOSCAN else ()
     return RunFolder(kind=kind, folder=folder, session=session, script_run=script_run, autoscan=autoscan,
                      capture=capture, scans=scans, moves=moves, registration=registration,
                      evaluations=extra + (_evaluations(reg_dir, notes) if reg_dir.is_dir() else ()), pictures=pictures,
-                     plys=_plys(folder, exports), reports=_reports(folder), notes=tuple(notes.items))
+                     plys=_plys(folder, exports), reports=_reports(folder), notes=tuple(notes.items),
+                     two_sides=two_sides)

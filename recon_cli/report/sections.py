@@ -24,7 +24,7 @@ from recon_cli.report.markup import (
     tag,
 )
 from recon_cli.report.mesh_view import MeshView
-from recon_cli.report.model import Edge, RunFolder, RunKind, Scan
+from recon_cli.report.model import Edge, Registration, RunFolder, RunKind, Scan, Side, TwoSides
 from recon_cli.runs.register import PoseError
 from recon_cli.runs.script_run import ScriptRunReport
 
@@ -139,10 +139,10 @@ def _icp(edges: tuple[Edge, ...]) -> str | None:
     return text + (f", {rejected} rejected" if rejected else "")
 
 
-def _scan_row(run: RunFolder, s: Scan, assets: Assets) -> list[Content]:
-    g = run.registration
+def _scan_row(run: RunFolder, s: Scan, assets: Assets, g: Registration | None, key: str) -> list[Content]:
+    """One scan's row; ``g``: the registration it belongs to, ``key``: of its thumbnail."""
     pose = None if g is None else g.pose_of(s.folder)
-    thumb = assets.thumbnails.get(s.folder)
+    thumb = assets.thumbnails.get(key)
     picture = None if thumb is None else tag("a", image(thumb, run.folder, f"{s.folder} colour image"),
                                              href=None if s.color is None else href(s.color, run.folder))
     move = s.move
@@ -158,22 +158,33 @@ def _scan_row(run: RunFolder, s: Scan, assets: Assets) -> list[Content]:
             "; ".join(notes)]
 
 
+_SCAN_HEAD = ("scan", "colour", "size [px]", "move", "pose source", "corners", "reprojection [px]", "points in box",
+              "ICP (pose graph)", "pose error vs truth", "note")
+_SCAN_NOTE = ("Pose source: the ChArUco board in the colour image, else the robot's kinematics. ICP: the scan's "
+              "pairwise registrations in the pose graph (fitness: share of points with a correspondence; RMSE of "
+              "the inliers). Pose error: simulation only.")
+
+
 def scans(run: RunFolder, assets: Assets) -> Html:
     parts: list[Content] = []
+    sides = run.two_sides.sides if run.two_sides is not None else ()
+    count = len(run.scans) + sum(len(side.scans) for side in sides)
     if run.scans:
-        head = ("scan", "colour", "size [px]", "move", "pose source", "corners", "reprojection [px]",
-                "points in box", "ICP (pose graph)", "pose error vs truth", "note")
-        parts += [table(head, [_scan_row(run, s, assets) for s in run.scans], numeric=(5, 6, 7)),
-                  tag("p", "Pose source: the ChArUco board in the colour image, else the robot's kinematics. "
-                           "ICP: the scan's pairwise registrations in the pose graph (fitness: share of points "
-                           "with a correspondence; RMSE of the inliers). Pose error: simulation only.",
-                      class_="meta")]
+        parts.append(table(_SCAN_HEAD, [_scan_row(run, s, assets, run.registration, s.folder) for s in run.scans],
+                           numeric=(5, 6, 7)))
+    for side in sides:  # each side its own scans and registration
+        parts.append(tag("h3", f"{side.label.capitalize()} ({len(side.scans)} scans)"))
+        parts.append(table(_SCAN_HEAD, [_scan_row(run, s, assets, side.registration, f"{side.name}/{s.folder}")
+                                        for s in side.scans], numeric=(5, 6, 7)) if side.scans
+                     else note(f"no scans of {side.label} in {side.folder}"))
+    if count:
+        parts.append(tag("p", _SCAN_NOTE, class_="meta"))
     else:
         parts.append(note("no scans in this folder"))
     if run.capture is not None and run.capture.failures:
         parts += [tag("h3", "Skipped views"),
                   table(("view", "why"), [(str(f.view), f.message) for f in run.capture.failures], numeric=(0,))]
-    return section("scans", f"Scans ({len(run.scans)})", *parts)
+    return section("scans", f"Scans ({count})", *parts)
 
 
 def registration(run: RunFolder) -> Html:
@@ -194,6 +205,68 @@ def registration(run: RunFolder) -> Html:
     else:
         parts.append(note("no pose graph: global registration only (or a single scan)"))
     return section("registration", "Registration and pose graph", *parts)
+
+
+def _side_row(run: RunFolder, side: Side) -> list[Content]:
+    g = side.registration
+    return [side.label, num(len(side.scans)), num(side.seconds, ".1f", "s"),
+            None if g is None else f"{g.registered} of {g.registered + g.skipped}",
+            None if g is None or g.final_error_mean is None else _error(g.final_error_mean),
+            pct(side.coverage, 2),
+            None if side.cloud is None else link(side.cloud, run.folder, str(side.cloud.relative_to(run.folder))
+                                                 if side.cloud.is_relative_to(run.folder) else str(side.cloud))]
+
+
+def two_sides(run: RunFolder, sides: TwoSides) -> Html:
+    """How the object was turned over, each side, the registration of the sides by shape and
+    its confidence, the merged model."""
+    r, reg = sides.report, sides.report.registration
+    turn = dict(r.turn)
+    numbers = {k: v for k, v in turn.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    how = (f"by physics: tipped {num(numbers.get('tilt_deg'), '.1f', '°')}, settled in "
+           f"{num(numbers.get('settle_s'), '.2f', 's')}" if turn.get("by") == "physics" else
+           f"by the operator (pause {num(numbers.get('pause_s'), '.1f', 's')})" if turn.get("by") == "operator"
+           else "not recorded")
+    truth = reg.get("truth") if isinstance(reg.get("truth"), dict) else None
+    confidence = ("not trusted: " + str(reg["reason"]) if reg.get("reason") else
+                  "ambiguous in pose and in shape" if reg.get("shape_ambiguous") else
+                  "ambiguous in pose, not in shape (the merged shape is right)" if reg.get("ambiguous") else "unique")
+    rows: list[tuple[str, Content]] = [
+        ("turned over", how),
+        ("registration of the sides", f"fitness {num(reg.get('fitness'), '.3f')} (side 2 onto side 1) / "
+                                      f"{num(reg.get('fitness_reverse'), '.3f')} (side 1 onto side 2), RMSE "
+                                      f"{num(None if reg.get('rmse_m') is None else reg['rmse_m'] * 1e3, '.3f', 'mm')},"
+                                      f" overlap {pct(reg.get('overlap'))}, {num(reg.get('candidates'))} poses tried"),
+        ("confidence", confidence),
+        ("error vs the true turn", None if truth is None else
+         f"{num(truth.get('rotation_deg'), '.4f', '°')}, {num(truth.get('translation_mm'), '.3f', 'mm')}"),
+        ("whole surface covered", pct(r.coverage_whole, 2)),
+        ("not merged", r.error),
+        ("wall time", num(r.seconds, ".1f", "s")),
+        ("merged cloud", None if sides.cloud is None else link(sides.cloud, run.folder,
+                                                                str(sides.cloud.relative_to(run.folder))
+                                                                if sides.cloud.is_relative_to(run.folder)
+                                                                else str(sides.cloud)))]
+    parts: list[Content] = [facts(rows),
+                            table(("side", "scans", "wall time", "registered", "pose error vs truth (mean)",
+                                   "whole surface alone", "cloud"), [_side_row(run, side) for side in sides.sides],
+                                  numeric=(1, 2, 5))]
+    alternatives = [a for a in reg.get("alternatives", ()) if isinstance(a, dict)]
+    if alternatives:
+        parts += [tag("h3", "Other poses that fit as well"),
+                  table(("turned from the reported pose", "moved at the centre", "fitness", "RMSE [mm]",
+                         "shape difference [mm]"),
+                        [(num(a.get("angle_deg"), ".2f", "°"), num(None if a.get("translation_m") is None
+                                                                   else a["translation_m"] * 1e3, ".2f", "mm"),
+                          f"{num(a.get('fitness'), '.3f')} / {num(a.get('fitness_reverse'), '.3f')}",
+                          num(None if a.get("rmse_m") is None else a["rmse_m"] * 1e3, ".3f"),
+                          num(None if a.get("shape_difference_m") is None else a["shape_difference_m"] * 1e3, ".2f"))
+                         for a in alternatives], numeric=(0, 1, 3, 4))]
+    parts.append(tag("p", "Side 2 is registered onto side 1 by shape alone (docs/two_sided.md): fitness is the share "
+                          "of each side's points where the other could see them that have a partner; other poses that "
+                          "fit as well make the pose ambiguous, and when they give another shape the sides are not "
+                          "merged.", class_="meta"))
+    return section("sides", "Two sides", *parts)
 
 
 def evaluations(run: RunFolder) -> Html:
@@ -246,6 +319,8 @@ def body(run: RunFolder, assets: Assets) -> tuple[list[tuple[str, str]], list[Ht
     """The navigation entries and the sections of the page, in order."""
     parts = [("summary", "Summary", summary(run)), ("mesh", "Mesh", mesh(run, assets)),
              ("figures", "Figures", figures(run, assets))]
+    if run.two_sides is not None:
+        parts.append(("sides", "Two sides", two_sides(run, run.two_sides)))
     if run.script_run is not None:
         parts.append(("commands", "Commands", commands(run.script_run)))
     parts.append(("scans", "Scans", scans(run, assets)))

@@ -43,6 +43,8 @@ from recon_cli.errors import ReconError
 from recon_cli.inputs.meshes import read_cloud
 from recon_cli.objects import SceneObject, load_object
 from recon_cli.reconstruction.sides import SideRegistration
+from recon_cli.report import write_page_after_run
+from recon_cli.runs import sides as sides_file
 from recon_cli.session import resolve_object_name
 from recon_cli.viewplan.policy import Status
 from recon_cli.workflows.autoscan import Autoscan, AutoscanOptions, AutoscanResult, SidePrior
@@ -60,6 +62,7 @@ class TwoSidedResult:
     coverage: float | None  # of the whole surface (simulation)
     error: ReconError | None = None
     interrupted: bool = False  # Ctrl-C in a side or at the turn: what was scanned is kept
+    page: Path | None = None  # report.html of both sides (None: not written)
 
 
 class TwoSided:
@@ -83,6 +86,24 @@ class TwoSided:
         return self.opt.station is None or load_station(self.opt.station).capabilities.simulated
 
     def run(self) -> TwoSidedResult:
+        """Both sides, merged; the page of the folder is written once the sides report is,
+        however the merge ended."""
+        try:
+            result = self._run()
+        except ReconError:
+            self._page()
+            raise
+        if not result.interrupted:
+            result.page = self._page()
+        return result
+
+    def _page(self) -> Path | None:
+        if not (self.opt.page and (self.opt.out / sides_file.SIDES_REPORT).is_file()):
+            return None
+        written = write_page_after_run(self.opt.out)
+        return None if written is None else written.path
+
+    def _run(self) -> TwoSidedResult:
         opt = self.opt
         t0 = time.perf_counter()
         first = self._object()

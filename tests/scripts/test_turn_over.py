@@ -63,6 +63,9 @@ def test_a_script_scans_both_sides_and_merges_them(tmp_path, capsys):
     assert run["outputs"]["cloud"] == str(out / "reconstruction" / "cloud.ply")
     assert run["outputs"]["sides_report"] == str(out / "sides_report.json")
     assert "sides registered by shape: fitness" in text.out and "of the whole surface" in text.out
+    html = (out / "report.html").read_text()  # the run's page: both sides and their registration
+    assert "Scans (10)" in html and "Side 2 (5 scans)" in html and 'id="sides"' in html
+    assert (out / "report_files" / "sides.png").is_file()
     _evaluate_the_two_sided_folder(out, report, tmp_path, capsys)
 
 

@@ -27,3 +27,21 @@ def test_two_sided_autoscan_end_to_end(tmp_path, capsys):
     for side in ("side_1", "side_2"):
         assert json.loads((out / side / "autoscan_report.json").read_text())["scans"] == 5
     assert "sides registered by shape" in text.out and "of the whole surface" in text.out
+    _the_page_shows_both_sides(out, report, text.out)
+
+
+def _the_page_shows_both_sides(out, report, printed: str):
+    """report.html: the two sides section (the turn, the registration and its confidence, each
+    side's share), the picture of the sides registered onto each other, both sides' scans
+    with their own registration, the merged model against the whole surface."""
+    page = out / "report.html"
+    assert f"page: {page}" in printed
+    html = page.read_text()
+    assert "<h1>recon autoscan --sides 2: toy_blocks" in html and 'id="sides"' in html
+    assert "by physics: tipped" in html and "confidence" in html and ">unique<" in html
+    assert f"{report.contributions['side_1'] * 100:.2f} %" in html and f"{report.coverage_whole * 100:.2f} %" in html
+    assert (out / "report_files" / "sides.png").stat().st_size > 20_000 and "report_files/sides.png" in html
+    assert "Scans (10)" in html and "Side 1 (5 scans)" in html and "Side 2 (5 scans)" in html
+    assert "report_files/scans/side_2/scan_0004.jpg" in html
+    assert html.count(">charuco<") + html.count(">kinematics<") == 10  # each scan's pose source
+    assert "cloud (both sides)" in html and "true whole toy_blocks surface" in html

@@ -29,6 +29,7 @@ class RecordingSummary:
     mesh: bool = False
     registered: int = 0  # scans with clouds before and after registration
     distances: bool = False  # signed distances to the ground truth
+    sides: int = 0  # an object's sides, registered onto each other
 
     @property
     def scans(self) -> list[str]:
@@ -45,6 +46,8 @@ class RecordingSummary:
             parts.append("mesh")
         if self.distances:
             parts.append("signed distances")
+        if self.sides:
+            parts.append(f"{self.sides} sides registered onto each other")
         return f"{self.path.name}: " + ", ".join(parts) + f" ({self.size_bytes / 1e6:.1f} MB)"
 
 
@@ -114,6 +117,7 @@ def _summarize(path: Path, size: int) -> RecordingSummary:
     out.clouds = sum(1 for e in out.entities if re.fullmatch(r"/world/scans/scan_\d+/cloud", e))
     out.registered = sum(1 for e in out.entities if e.startswith("/registration/after/"))
     out.iterations = ellipsoid_rows
+    out.sides = sum(1 for e in out.entities if re.fullmatch(r"/sides/side_\d", e))
     if times:
         out.time_range_s = (min(times) * 1e-9, max(times) * 1e-9)
     return out

@@ -16,6 +16,7 @@ recording joins to the world):
     viewplan/ellipsoid, viewplan/views/<status>   each autoscan iteration
     registration/before|after/scan_NNNN           cropped clouds, global vs final poses
     reconstruction/mesh, reconstruction/distances the surface and the cloud's signed distances
+    sides/side_1, sides/side_2        an object's two sides as registered onto each other (side 1's frame)
     log                               one line per event
 
 Timelines: ``robot_time`` (seconds the robot spent moving and settling; scans and
@@ -72,7 +73,7 @@ class Recorder:
         depth = {f"/world/scans/scan_{k:04d}/camera/depth": hidden for k in self.scans}
         cell = rrb.Spatial3DView(
             name="cell", origin="/", contents=["+ /cell/**", "+ /world/**", "+ /viewplan/**",
-                                               "+ /registration/**", "+ /reconstruction/**"],
+                                               "+ /registration/**", "+ /reconstruction/**", "+ /sides/**"],
             overrides={"/cell/recon_cell/collision_geometries": hidden, "/registration/before": hidden,
                        "/world/camera": hidden, **depth},
             eye_controls=rrb.EyeControls3D(position=(2.3, -2.6, 2.0), look_target=(0.0, 0.0, 0.85),
@@ -256,6 +257,16 @@ class Recorder:
         self._line(
             f"signed distances to the ground truth: mean {np.mean(d) * 1e3:+.3f} mm, std {np.std(d) * 1e3:.3f} mm "
             f"(colours: blue -{S.DISTANCE_RANGE_M * 1e3:.1f} mm, white 0, red +{S.DISTANCE_RANGE_M * 1e3:.1f} mm)")
+
+    def sides(self, clouds: dict[str, np.ndarray], text: str) -> None:
+        """Both sides' clouds (N, 3) as registered onto each other (side 1 blue, side 2
+        orange), and a line with the registration's confidence."""
+        self._at(self.clock)
+        for (name, points), color in zip(clouds.items(), ((31, 119, 180), (255, 127, 14)), strict=False):
+            sub = slice(None, None, max(1, len(points) // 50_000))
+            self.rec.log(f"sides/{name}", self.rr.Points3D(np.asarray(points[sub], np.float32), colors=[color],
+                                                           radii=0.0006))
+        self._line(text)
 
     # ------------------------------------------------------------------ end
     def close(self) -> None:

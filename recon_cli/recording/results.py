@@ -6,7 +6,8 @@ cropped clouds before and after local registration, the mesh and, where the scan
 holds the simulated object, the fused cloud's signed distances to it.
 :func:`record_store` records a scan store that was written without a recording
 (``recon register --record``): the cell of its session, the robot at each scan's joint
-readings, each scan's frustum, images and cloud.
+readings, each scan's frustum, images and cloud. :func:`record_sides` records an object's two
+sides as their registration by shape put them together.
 """
 
 from __future__ import annotations
@@ -105,3 +106,10 @@ def record_store(recorder, store_root: Path) -> int:
         recorder.clock += 1.0  # one second between scans on the timeline: their joint readings
         count += 1
     return count
+
+
+def record_sides(recorder, clouds: tuple[Path, Path], side1_T_side2: np.ndarray, text: str) -> None:
+    """Both sides' registered clouds (world frames of their sides), side 2 moved onto side 1."""
+    points = [np.asarray(read_cloud(c, f"side {k + 1} cloud").points) for k, c in enumerate(clouds)]
+    T = np.asarray(side1_T_side2, dtype=float)
+    recorder.sides({"side_1": points[0], "side_2": points[1] @ T[:3, :3].T + T[:3, 3]}, text)

@@ -35,6 +35,7 @@ from recon_cli.both_sides import (
     Ask,
     SideModel,
     any_way_up_box,
+    confidence_line,
     merge_sides,
     turn_object,
     turn_rng,
@@ -43,6 +44,8 @@ from recon_cli.errors import ReconError
 from recon_cli.inputs.meshes import read_cloud
 from recon_cli.objects import SceneObject, load_object
 from recon_cli.reconstruction.sides import SideRegistration
+from recon_cli.recording import closing, open_recorder
+from recon_cli.recording.results import record_sides
 from recon_cli.report import write_page_after_run
 from recon_cli.runs import sides as sides_file
 from recon_cli.session import resolve_object_name
@@ -150,6 +153,11 @@ class TwoSided:
                              hint="see side_1/autoscan_report.json and side_2/autoscan_report.json")
         merged = merge_sides(opt.out, (models[0], models[1]), first, second, turn, cfg.registration.surface,
                              cfg.seed, t0, mesh=opt.mesh, prior=sides[1].prior)
+        if opt.record:  # the sides as registered onto each other, beside each side's own recording
+            recorder = open_recorder(opt.out, f"{first.name}: two sides")
+            with closing(recorder):
+                record_sides(recorder, (models[0].cloud, models[1].cloud), merged.registration.side1_T_side2,
+                             confidence_line(merged.registration))
         if merged.error is not None:
             raise merged.error
         return TwoSidedResult(opt.out, sides, merged.registration, merged.cloud, merged.mesh, merged.report,

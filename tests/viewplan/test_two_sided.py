@@ -4,6 +4,7 @@ covers more of the whole surface (the resting faces included) than either side."
 
 from __future__ import annotations
 
+import importlib.util
 import json
 
 from recon_cli.cli import main
@@ -13,7 +14,7 @@ from recon_cli.runs import sides as sides_file
 def test_two_sided_autoscan_end_to_end(tmp_path, capsys):
     out = tmp_path / "two"
     code = main(["autoscan", "--sides", "2", "--object", "toy_blocks", "--n", "5", "--resolution", "0.3",
-                 "--no-pictures", "--seed", "0", "--out", str(out)])
+                 "--no-pictures", "--seed", "0", "--record", "--out", str(out)])
     text = capsys.readouterr()
     assert code == 0, text.out + text.err
     report = sides_file.read(out)
@@ -28,6 +29,11 @@ def test_two_sided_autoscan_end_to_end(tmp_path, capsys):
         assert json.loads((out / side / "autoscan_report.json").read_text())["scans"] == 5
     assert "sides registered by shape" in text.out and "of the whole surface" in text.out
     _the_page_shows_both_sides(out, report, text.out)
+    if importlib.util.find_spec("rerun") is not None:  # the recordings: each side's, and the sides registered
+        from recon_cli.recording.readback import summarize
+
+        assert summarize(out / "recording.rrd").sides == 2
+        assert all(len(summarize(out / side / "recording.rrd").scans) == 5 for side in ("side_1", "side_2"))
 
 
 def _the_page_shows_both_sides(out, report, printed: str):

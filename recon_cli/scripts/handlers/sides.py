@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import time
 
-from recon_cli.both_sides import SideModel, any_way_up_box, merge_sides, turn_object, turn_rng
+from recon_cli.both_sides import SideModel, any_way_up_box, confidence_line, merge_sides, turn_object, turn_rng
 from recon_cli.errors import ReconError
+from recon_cli.recording.results import record_sides
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.handlers import handles
 from recon_cli.scripts.handlers.motion import move_home
@@ -65,6 +66,8 @@ def merge(state: RunState, cmd: C.MergeSides, report: CommandReport) -> None:
                                         turned.turn.record, state.config.registration.surface, state.config.seed,
                                         state.started)
     reg = merged.registration
+    if state.recorder is not None:  # the sides as registered onto each other
+        record_sides(state.recorder, (turned.side_1.cloud, side_2.cloud), reg.side1_T_side2, confidence_line(reg))
     report.details.update(fitness=reg.fitness, fitness_reverse=reg.fitness_reverse, rmse_m=reg.rmse,
                           overlap=reg.overlap, ambiguous=reg.ambiguous, shape_ambiguous=reg.shape_ambiguous,
                           side_scans=[turned.side_1.scans, side_2.scans])

@@ -11,8 +11,9 @@ Shared by ``recon autoscan --sides 2`` (recon_cli/workflows/two_sided.py) and sc
 - :func:`merge_sides`: the two side models registered by shape
   (recon_cli/reconstruction/sides.py), merged into one cloud and Poisson mesh
   (``reconstruction/``), and ``sides_report.json`` with the registration's confidence and, in
-  simulation, its error against the true turn, the coverage of the whole surface and the
-  accuracy of the merged cloud;
+  simulation, its error against the true turn (and against the pose that puts the two
+  clouds onto each other as they are, each side's own errors removed), the coverage of the
+  whole surface and the accuracy of the merged cloud;
 - :func:`confidence_line`: the registration's confidence in one line for the terminal.
 """
 
@@ -32,6 +33,7 @@ from recon_cli.errors import ReconError
 from recon_cli.geometry.transforms import invert
 from recon_cli.inputs.meshes import read_cloud
 from recon_cli.objects import SceneObject
+from recon_cli.reconstruction.assessment import align_icp
 from recon_cli.reconstruction.evaluation import signed_distances, within_shares
 from recon_cli.reconstruction.options import COVERAGE_TOLERANCE, SurfaceOptions
 from recon_cli.reconstruction.sides import SideRegistration, register_sides
@@ -133,6 +135,13 @@ def _angle_deg(R: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
 
 
+def _apart(a: np.ndarray, b: np.ndarray, centre: np.ndarray) -> dict[str, float]:
+    """Rotation [deg] between two poses, and how far apart [mm] they put ``centre``."""
+    dT = a @ invert(b)
+    return {"rotation_deg": _angle_deg(dT[:3, :3]),
+            "translation_mm": float(np.linalg.norm(dT[:3, :3] @ centre + dT[:3, 3] - centre) * 1e3)}
+
+
 def merge_sides(out: Path, sides: tuple[SideModel, SideModel], first: SceneObject, second: SceneObject | None,
                 turn: dict[str, Any], surface: SurfaceOptions, seed: int, t0: float, *, mesh: bool = True,
                 prior: dict | None = None) -> MergedSides:
@@ -151,10 +160,15 @@ def merge_sides(out: Path, sides: tuple[SideModel, SideModel], first: SceneObjec
     truth = None
     if second is not None:  # side-2 world points onto side 1: W1 inv(W2)
         true_T = first.world_T_object @ invert(second.world_T_object)
-        dT = reg.side1_T_side2 @ invert(true_T)
         centre = first.world_vertices().mean(axis=0)
-        truth = {"rotation_deg": _angle_deg(dT[:3, :3]),
-                 "translation_mm": float(np.linalg.norm(dT[:3, :3] @ centre + dT[:3, 3] - centre) * 1e3)}
+        truth = _apart(reg.side1_T_side2, true_T, centre)
+        # each side's cloud lies off its true surface by that side's own errors (a realism
+        # profile's calibration and kinematic errors); the pose that puts side 2's cloud onto
+        # side 1's as they are: inv(D1) true_T D2, with D_k aligning side k's cloud to its truth
+        D1, D2 = (align_icp(np.asarray(c.points), obj.mesh_world())
+                  for c, obj in zip(clouds, (first, second), strict=True))
+        clouds_T = invert(D1) @ true_T @ D2
+        truth |= {f"clouds_{k}": v for k, v in _apart(reg.side1_T_side2, clouds_T, centre).items()}
     folder = Path(out) / "reconstruction"
     cloud = mesh_path = None
     coverage = accuracy = None

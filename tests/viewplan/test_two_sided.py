@@ -22,6 +22,8 @@ def test_two_sided_autoscan_end_to_end(tmp_path, capsys):
     reg = report.registration
     assert reg["reason"] is None and not reg["shape_ambiguous"]
     assert reg["truth"]["rotation_deg"] <= 0.2 and reg["truth"]["translation_mm"] <= 0.5, reg["truth"]
+    # against the pose that puts the two clouds onto each other as they are (each side's own offset removed)
+    assert reg["truth"]["clouds_rotation_deg"] <= 0.2 and reg["truth"]["clouds_translation_mm"] <= 0.5, reg["truth"]
     assert report.coverage_whole is not None
     assert report.coverage_whole > max(report.contributions.values()) + 0.1, report
     assert (out / "reconstruction" / "mesh.ply").stat().st_size > 10_000

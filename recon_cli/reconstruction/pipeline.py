@@ -196,6 +196,15 @@ class CloudMemo:
         self._poses[folder] = (key, pose)
         return pose
 
+    def has(self, folder: str, board, world_T_marker: np.ndarray | None, options: RegisterOptions) -> bool:
+        """Whether the scan's pose (with these board settings) and a cloud at that pose are
+        known: then its images need not be read."""
+        known = self._poses.get(folder)
+        if known is None or known[0] != _pose_key(board, world_T_marker, options) or known[1] is None:
+            return False
+        cloud = self._clouds.get(folder)
+        return cloud is not None and np.array_equal(cloud[0], known[1].marker_T_camera)
+
     def put(self, folder: str, marker_T_camera: np.ndarray, box: CropBox | None, surface: SurfaceOptions,
             cloud) -> None:
         import open3d as o3d
@@ -290,6 +299,8 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
 
     def add_cloud(pos: int, rec: ScanRecord, scan) -> None:
         known = None if memo is None else memo.get(rec.folder, rec.placed_pose.marker_T_camera, box, options.surface)
+        if known is None and scan.depth.size == 0:  # read without its images: the memo's cloud was for other inputs
+            scan = read_scan(folder / rec.folder)
         cloud = known if known is not None else scan_cloud(scan, rec.placed_pose, box, options.surface)
         rec.points = len(cloud.points)
         if rec.points < 100:
@@ -305,7 +316,9 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
     for k, (index, scan_folder) in enumerate(scan_folders):
         try:
             store.check_inside(scan_folder)
-            scan = read_scan(scan_folder)
+            # the images only when the memo does not know the scan's pose and cloud already
+            scan = read_scan(scan_folder, images=memo is None or options.perturb is not None
+                             or not memo.has(scan_folder.name, board, world_T_marker, options))
         except MetadataError as exc:  # a bad scan is skipped with its reason, the others go on
             records.append(ScanRecord(index, None, skipped=exc.one_line(), folder=scan_folder.name))
             step("global registration", k + 1, len(scan_folders))

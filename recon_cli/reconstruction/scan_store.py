@@ -298,15 +298,19 @@ def _ground_truth(path: Path) -> dict[str, Any] | None:
     return gt
 
 
-def read_scan(folder: Path) -> Scan:
+def read_scan(folder: Path, images: bool = True) -> Scan:
     """Read one scan folder (from simulation or hardware); a broken or inconsistent scan, or
     one that is (or holds) a link leading out of its store (the folder's parent), raises a
-    MetadataError that names the file and what is wrong with it."""
+    MetadataError that names the file and what is wrong with it. ``images=False``: its
+    records alone (the depth an empty (0, 0) array, no colour), for a reader that has the
+    images' results already."""
     folder = Path(folder)
     ScanStore(folder.parent).check_inside(folder)
     meta = read_scan_meta(folder)
     intr = meta["intrinsics"]
     size = (int(intr["height"]), int(intr["width"]))
+    if not images:
+        return _scan(folder, meta, None, np.zeros((0, 0)))
     depth_raw = _read_image(folder / "depth.png", cv2.IMREAD_UNCHANGED, "depth image")
     if depth_raw.ndim != 2 or depth_raw.dtype != np.uint16:
         raise MetadataError(f"{folder / 'depth.png'}: depth image is {depth_raw.dtype} with "
@@ -324,6 +328,11 @@ def read_scan(folder: Path) -> Scan:
                                 f"depth image {size[1]} x {size[0]}", path=str(folder / "color.png"),
                                 hint="register colour to depth before storing the scan")
         color = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    return _scan(folder, meta, color, depth)
+
+
+def _scan(folder: Path, meta: dict[str, Any], color: np.ndarray | None, depth: np.ndarray) -> Scan:
+    intr = meta["intrinsics"]
     gt = _ground_truth(folder / "ground_truth.json")
     marker = meta.get("marker_T_camera")
     known = {"format", "index", "intrinsics", "depth_scale", "depth_unit", "joints",

@@ -147,3 +147,36 @@ def test_errors(session, tmp_path, capsys):
     assert not (tmp_path / "r").exists()
     assert main(["evaluate", str(tmp_path / "nothing.ply"), "--reference", str(tmp_path / "x.ply")]) == 1
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_a_memo_of_the_poses_and_clouds_gives_the_same_cloud_without_reading_the_images(session, registered, tmp_path,
+                                                                                          monkeypatch):
+    """What a run made of its scans already (CloudMemo: each scan's board pose and cloud, as
+    an autoscan makes them) is reused: the registration gives the very same cloud, and reads
+    the images of no scan but the one whose pose waits for the board's correction."""
+    from recon_cli.perception.charuco import recorded_board
+    from recon_cli.reconstruction import scan_store
+    from recon_cli.reconstruction.pipeline import CloudMemo, crop_box_marker, scan_cloud
+
+    folder, _ = session
+    options = RegisterOptions()
+    store = scan_store.ScanStore(folder)
+    info = store.session()
+    box, board = crop_box_marker(options, info), recorded_board(info.board)
+    memo = CloudMemo()
+    for _, scan_folder in store.scan_folders():
+        scan = scan_store.read_scan(scan_folder)
+        pose = memo.pose(scan_folder.name, scan, board, info.world_T_marker, options)
+        memo.put(scan_folder.name, pose.marker_T_camera, box, options.surface, scan_cloud(scan, pose, box,
+                                                                                           options.surface))
+    read = scan_store._read_image
+    images: list[str] = []
+
+    def counted(path, *args, **kwargs):
+        images.append(path.parent.name)
+        return read(path, *args, **kwargs)
+
+    monkeypatch.setattr(scan_store, "_read_image", counted)
+    again = run_register(folder, tmp_path / "memo", options, memo=memo)
+    assert again.cloud.read_bytes() == registered.cloud.read_bytes()
+    assert set(images) == {f"scan_{COVERED - 1:04d}"}, images

@@ -42,6 +42,9 @@ from recon_cli.runs import sides as sides_file
 
 #: [m] the side registration's voxel
 SIDES_VOXEL = 0.003
+#: samples of an object's true surface that each side's cloud is aligned to (simulation): a
+#: point every millimetre or so on objects of 0.1-0.3 m
+ALIGN_SAMPLES = 50_000
 #: the turn's random draws come from the run's seed plus this (apart from the run's other draws)
 TURN_SEED_OFFSET = 7919
 OPERATOR_PROMPT = ("turn the object over onto another face and put it back on the same spot, then press Enter "
@@ -165,7 +168,7 @@ def merge_sides(out: Path, sides: tuple[SideModel, SideModel], first: SceneObjec
         # each side's cloud lies off its true surface by that side's own errors (a realism
         # profile's calibration and kinematic errors); the pose that puts side 2's cloud onto
         # side 1's as they are: inv(D1) true_T D2, with D_k aligning side k's cloud to its truth
-        D1, D2 = (align_icp(np.asarray(c.points), obj.mesh_world())
+        D1, D2 = (align_icp(np.asarray(c.points), obj.mesh_world(), samples=ALIGN_SAMPLES)
                   for c, obj in zip(clouds, (first, second), strict=True))
         clouds_T = invert(D1) @ true_T @ D2
         truth |= {f"clouds_{k}": v for k, v in _apart(reg.side1_T_side2, clouds_T, centre).items()}

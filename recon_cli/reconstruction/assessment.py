@@ -81,15 +81,16 @@ def camera_views(folder: Path) -> list[CameraView]:
     return [CameraView(s.world_T_camera_fk, s.intrinsics, z_min, z_max, incidence) for s in store]
 
 
-def align_icp(points: np.ndarray, reference, distance: float = 0.005, seed: int = 0) -> np.ndarray:
+def align_icp(points: np.ndarray, reference, distance: float = 0.005, seed: int = 0,
+              samples: int = 200_000) -> np.ndarray:
     """Rigid transform taking the points onto the reference surface (point-to-plane ICP;
-    the reference sampled with Open3D's generator seeded with ``seed``)."""
+    the reference sampled at ``samples`` points with Open3D's generator seeded with ``seed``)."""
     import open3d as o3d
 
     reg = o3d.pipelines.registration
     src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)).voxel_down_sample(_SURFACE.voxel)
     with open3d_draws(seed):
-        tgt = reference.sample_points_uniformly(number_of_points=200_000)
+        tgt = reference.sample_points_uniformly(number_of_points=samples)
     tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=_SURFACE.normal_radius, max_nn=30))
     T = np.eye(4)
     for d in (distance, distance / 2, distance / 5):

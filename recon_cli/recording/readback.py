@@ -33,7 +33,8 @@ class RecordingSummary:
 
     @property
     def scans(self) -> list[str]:
-        return sorted({m.group(1) for e in self.entities if (m := re.match(r"/world/scans/(scan_\d+)/", e))})
+        return sorted({m.group(1) for e in self.entities
+                       if (m := re.match(r"/world/scans/((?:side_\d+/)?scan_\d+)/", e))})
 
     def describe(self) -> str:
         t0, t1 = self.time_range_s
@@ -113,8 +114,8 @@ def _summarize(path: Path, size: int) -> RecordingSummary:
             out.mesh = True
         elif entity == "/reconstruction/distances":
             out.distances = True
-    out.camera_poses = sum(1 for e in out.entities if re.fullmatch(r"/world/scans/scan_\d+/camera", e))
-    out.clouds = sum(1 for e in out.entities if re.fullmatch(r"/world/scans/scan_\d+/cloud", e))
+    out.camera_poses = sum(1 for e in out.entities if re.fullmatch(r"/world/scans/(side_\d+/)?scan_\d+/camera", e))
+    out.clouds = sum(1 for e in out.entities if re.fullmatch(r"/world/scans/(side_\d+/)?scan_\d+/cloud", e))
     out.registered = sum(1 for e in out.entities if e.startswith("/registration/after/"))
     out.iterations = ellipsoid_rows
     out.sides = sum(1 for e in out.entities if re.fullmatch(r"/sides/side_\d", e))

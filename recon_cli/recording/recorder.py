@@ -12,6 +12,7 @@ recording joins to the world):
     world/camera                      the camera now: frustum, colour and depth images
     world/scans/scan_NNNN/camera      frustum, colour and depth image of each scan
     world/scans/scan_NNNN/cloud       the scan's points by forward kinematics
+    world/scans/side_2/scan_NNNN/...  an object's second side (its scans numbered from 0 again)
     world/scans/scan_NNNN/camera/color/board   board corners found in the image
     viewplan/ellipsoid, viewplan/views/<status>   each autoscan iteration
     registration/before|after/scan_NNNN           cropped clouds, global vs final poses
@@ -58,7 +59,9 @@ class Recorder:
         self.joints: dict[str, UrdfJoint | None] = {}  # recon joint name -> its joint in the URDF tree
         self.kin = None
         self.depth_scale = 20000.0
-        self.scans: list[int] = []  # indices of the scans recorded
+        self.scans: list[str] = []  # entities of the scans recorded (world/scans/[group]scan_NNNN)
+        self.group = ""  # scans from here on: world/scans/<group>scan_NNNN (e.g. "side_2/")
+        self._offset = 0  # added to a scan's index on the scan timeline (scans of earlier groups)
         self._closed = False
         self.rec.send_blueprint(self._layout())
         self._at(0.0)
@@ -70,7 +73,7 @@ class Recorder:
         import rerun.blueprint as rrb
 
         hidden = rrb.EntityBehavior(visible=False)
-        depth = {f"/world/scans/scan_{k:04d}/camera/depth": hidden for k in self.scans}
+        depth = {f"/{name}/camera/depth": hidden for name in self.scans}
         cell = rrb.Spatial3DView(
             name="cell", origin="/", contents=["+ /cell/**", "+ /world/**", "+ /viewplan/**",
                                                "+ /registration/**", "+ /reconstruction/**", "+ /sides/**"],
@@ -158,16 +161,26 @@ class Recorder:
         self.clock += float(trajectory.duration) + float(settle_s)
 
     # ------------------------------------------------------------------ scans
+    def begin_group(self, group: str) -> None:
+        """The scans from here on are another store's (an object's second side, numbered from
+        0 again): recorded under ``world/scans/<group>/`` and after the earlier ones on the scan
+        timeline."""
+        self._offset = len(self.scans)
+        self.group = f"{group.strip('/')}/"
+
+    def _scan_entity(self, index: int) -> str:
+        return f"world/scans/{self.group}scan_{index:04d}"
+
     def scan(self, scan) -> None:
         """A scan at the current time: frustum and images at the pose by forward kinematics,
         and its points in the world."""
         rr = self.rr
         T = scan.world_T_camera_fk
-        self._at(self.clock, scan.index)
-        self.scans.append(scan.index)
+        self._at(self.clock, self._offset + scan.index)
+        name = self._scan_entity(scan.index)
+        self.scans.append(name)
         K = scan.intrinsics
         colour, depth_m = scan.pinhole_images()  # undistorted where the scan has a lens distortion
-        name = f"world/scans/scan_{scan.index:04d}"
         pose = rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3])
         # each scan's frustum keeps its images at full size; the current camera (the 2D view
         # beside the cell) shows a preview of the latest scan
@@ -186,8 +199,8 @@ class Recorder:
     def board(self, index: int, image_points: np.ndarray, marker_outlines: np.ndarray, text: str) -> None:
         """Board corners (N, 2) and marker outlines (M, 4, 2) found in a scan's colour image."""
         rr = self.rr
-        self._at(self.clock, index)
-        entity = f"world/scans/scan_{index:04d}/camera/color/board"
+        self._at(self.clock, self._offset + index)
+        entity = f"{self._scan_entity(index)}/camera/color/board"
         self.rec.log(f"{entity}/corners", rr.Points2D(image_points, colors=[(44, 160, 44)], radii=3.0))
         if len(marker_outlines):
             strips = [np.vstack([m, m[:1]]) for m in marker_outlines]
@@ -233,7 +246,7 @@ class Recorder:
             sub = slice(None, None, max(1, len(after) // 20_000))
             for stage, pts in (("before", before), ("after", after)):
                 w = pts[sub] @ out_T_marker[:3, :3].T + out_T_marker[:3, 3]
-                self.rec.log(f"registration/{stage}/scan_{rec.index:04d}", rr.Points3D(w.astype(np.float32),
+                self.rec.log(f"registration/{stage}/{self.group}scan_{rec.index:04d}", rr.Points3D(w.astype(np.float32),
                                                                                       radii=0.0006))
             source = rec.pose.source.value if rec.pose is not None else "-"
             self._line(f"scan {rec.index}: pose from {source}")

@@ -6,6 +6,7 @@ parking move and turns nothing."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import shutil
 
@@ -32,9 +33,15 @@ def _script(tmp_path, body: str):
 
 def test_a_script_scans_both_sides_and_merges_them(tmp_path, capsys):
     out = tmp_path / "run"
-    code = main(["run", str(SCRIPTS_DIR / "two_sided_toy_blocks.xml"), "--out", str(out)])
+    record = importlib.util.find_spec("rerun") is not None
+    code = main(["run", str(SCRIPTS_DIR / "two_sided_toy_blocks.xml"), "--out", str(out), *(["--record"] * record)])
     text = capsys.readouterr()
     assert code == 0, text.out + text.err
+    if record:  # one recording: both sides' scans (side 2's under side_2/) and the sides registered
+        from recon_cli.recording.readback import summarize
+
+        summary = summarize(out / "recording.rrd")
+        assert len(summary.scans) == 10 and summary.sides == 2 and summary.registered == 10, summary.describe()
     # each side its own scan store; side 2's is of the object as physics laid it down
     side_1, side_2 = ScanStore(out / "side_1" / "scans"), ScanStore(out / "side_2" / "scans")
     assert len(side_1) == 5 and len(side_2) == 5 and not (out / "scans").exists()

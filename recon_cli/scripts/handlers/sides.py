@@ -52,6 +52,8 @@ def turn_over(state: RunState, cmd: C.TurnOver, report: CommandReport) -> None:
     if turn.scene_object is None:  # a real cell: nobody measured how it lies
         box = any_way_up_box(side_1.cloud, state.config.scene.box_margin)
     state.begin_side_2(Turned(cmd, side_1, first, turn, box, time.perf_counter()))
+    if state.recorder is not None:  # side 2's scans are numbered from 0 again: a group of their own
+        state.recorder.begin_group("side_2")
     report.details.update(turn=turn.record, side_1_scans=side_1.scans)
 
 

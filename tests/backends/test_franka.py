@@ -228,13 +228,18 @@ def test_unreachable_controller_and_config_mistakes_are_one_line(fr3):
 
 
 # --------------------------------------------------------------------- station files and runs
+# The station of a machine without a real-time kernel (as CI's): its 1 kHz loop loses runs of a
+# few cycles (7 of 200 before a reflex, seen in CI), so the stream is smoothed to absorb 5
+# consecutive lost cycles instead of the default 3 (a smoother stream; at the default speed
+# scale it is within the deviation bound; the careless cell's moves are not: that station keeps
+# the default)
 STATION = """\
 format: 1
 name: FR3 stand-in
 cell: {{kind: {cell}}}
 robot:
   adapter: franka
-  franka: {{ip: 127.0.0.1, realtime: ignore}}
+  franka: {{ip: 127.0.0.1, realtime: ignore{lost}}}
 camera:
   adapter: sim
   sim: {{noise: true, resolution: 0.5}}
@@ -261,8 +266,9 @@ SCRIPT = """\
 
 
 def _files(tmp_path: Path, cell: str = "fr3", speed1: float = 0.3, accel1: float = 0.3,
-           accel2: float = 0.3) -> tuple[Path, Path]:
-    (tmp_path / "station.yaml").write_text(STATION.format(cell=cell))
+           accel2: float = 0.3, lost_cycles: int | None = 5) -> tuple[Path, Path]:
+    lost = "" if lost_cycles is None else f", lost_cycles: {lost_cycles}"
+    (tmp_path / "station.yaml").write_text(STATION.format(cell=cell, lost=lost))
     (tmp_path / "scan.xml").write_text(SCRIPT.format(speed1=speed1, accel1=accel1, accel2=accel2))
     return tmp_path / "station.yaml", tmp_path / "scan.xml"
 
@@ -324,7 +330,7 @@ def test_run_with_station_three_moves_scans_registration_mesh(standin, tmp_path,
     robot.close()
     # the same robot with the replay camera playing the run's scans back
     replay = tmp_path / "replay.yaml"
-    replay.write_text(STATION.format(cell="fr3").split("camera:")[0]
+    replay.write_text(STATION.format(cell="fr3", lost="").split("camera:")[0]
                       + f"camera:\n  adapter: replay\n  replay: {{source: {out / 'scans'}}}\n")
     assert main(["station", "check", str(replay)]) == 0
     text = capsys.readouterr().out
@@ -334,7 +340,7 @@ def test_run_with_station_three_moves_scans_registration_mesh(standin, tmp_path,
 def test_control_error_mid_run_stops_and_keeps_the_scans(standin, tmp_path, capsys):
     cell = _careless_cell(tmp_path)
     # the first move slow and gentle (within what the FR3 takes), the second at 30 % of the careless accelerations
-    station, script = _files(tmp_path, cell=cell, speed1=0.05, accel1=0.01, accel2=0.3)
+    station, script = _files(tmp_path, cell=cell, speed1=0.05, accel1=0.01, accel2=0.3, lost_cycles=None)
     out = tmp_path / "run"
     code = main(["run", str(script), "--out", str(out), "--station", str(station)])
     err = capsys.readouterr().err

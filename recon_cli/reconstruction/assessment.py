@@ -123,13 +123,17 @@ def two_sided_run(folder: Path) -> TwoSidedRun:
                         hint="evaluate one side's cloud: side_1/reconstruction/cloud.ply or side_2/...")
     T = report.registration.get("side1_T_side2")
     check_pose(T, folder / sides_file.SIDES_REPORT, "sides report", "registration.side1_T_side2")
-    sides = {}
-    for k in (1, 2):
-        cloud = read_cloud(folder / f"side_{k}" / "reconstruction" / "cloud.ply", f"side {k} cloud",
-                           hint=f"the run's side_{k}/ is incomplete: run the scan again")
-        points = np.asarray(cloud.points)
-        sides[f"side_{k}"] = points if k == 1 else transform_points(np.asarray(T, dtype=float), points)
-    return TwoSidedRun(folder, merged, sides)
+    clouds = (folder / "side_1" / "reconstruction" / "cloud.ply", folder / "side_2" / "reconstruction" / "cloud.ply")
+    return TwoSidedRun(folder, merged, registered_sides(clouds, np.asarray(T, dtype=float)))
+
+
+def registered_sides(clouds: tuple[Path, Path], side1_T_side2: np.ndarray) -> dict[str, np.ndarray]:
+    """Both sides' points (side_1, side_2) from their registered clouds (each in the world
+    frame of its side), side 2's moved onto side 1 by the registration of the sides."""
+    points = [np.asarray(read_cloud(c, f"side {k + 1} cloud",
+                                    hint=f"the run's side_{k + 1}/ is incomplete: run the scan again").points)
+              for k, c in enumerate(clouds)]
+    return {"side_1": points[0], "side_2": transform_points(side1_T_side2, points[1])}
 
 
 def simulated_object(folder: Path) -> SceneObject | None:

@@ -19,6 +19,7 @@ import numpy as np
 from recon_cli.errors import FileError, MetadataError
 from recon_cli.inputs.meshes import read_cloud, read_mesh
 from recon_cli.perception.charuco import detect, recorded_board
+from recon_cli.reconstruction.assessment import registered_sides
 from recon_cli.reconstruction.evaluation import signed_distances
 from recon_cli.reconstruction.global_registration import PoseSource
 from recon_cli.reconstruction.scan_store import ScanStore, read_scan
@@ -110,6 +111,4 @@ def record_store(recorder, store_root: Path) -> int:
 
 def record_sides(recorder, clouds: tuple[Path, Path], side1_T_side2: np.ndarray, text: str) -> None:
     """Both sides' registered clouds (world frames of their sides), side 2 moved onto side 1."""
-    points = [np.asarray(read_cloud(c, f"side {k + 1} cloud").points) for k, c in enumerate(clouds)]
-    T = np.asarray(side1_T_side2, dtype=float)
-    recorder.sides({"side_1": points[0], "side_2": points[1] @ T[:3, :3].T + T[:3, 3]}, text)
+    recorder.sides(registered_sides(clouds, np.asarray(side1_T_side2, dtype=float)), text)

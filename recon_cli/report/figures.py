@@ -13,7 +13,7 @@ import numpy as np
 from recon_cli.errors import ReconError
 from recon_cli.inputs.images import read_color, read_depth
 from recon_cli.inputs.jsonschemas import check_pose
-from recon_cli.inputs.meshes import read_cloud
+from recon_cli.reconstruction.assessment import registered_sides
 from recon_cli.report.model import Edge, Evaluation, Move, Scan, TwoSides
 
 _BLUE, _ORANGE, _GREEN, _GREY = "#1f77b4", "#ff7f0e", "#2ca02c", "#7f7f7f"
@@ -190,12 +190,10 @@ def sides_png(path: Path, sides: TwoSides, points_per_side: int = 12_000, seed: 
     try:
         check_pose(reg.get("side1_T_side2"), sides.sides[0].folder.parent / "sides_report.json", "sides report",
                    "registration.side1_T_side2")
-        points = [np.asarray(read_cloud(c, f"{side.label} cloud").points)
-                  for c, side in zip(clouds, sides.sides, strict=True)]
+        points = list(registered_sides((clouds[0], clouds[1]), np.asarray(reg["side1_T_side2"], dtype=float))
+                      .values())
     except ReconError:
         return None
-    T = np.asarray(reg["side1_T_side2"], dtype=float)
-    points[1] = points[1] @ T[:3, :3].T + T[:3, 3]
     rng = np.random.default_rng(seed)
     points = [p[rng.choice(len(p), points_per_side, replace=False)] if len(p) > points_per_side else p
               for p in points]

@@ -33,6 +33,7 @@ import numpy as np
 from recon_cli import install_hint
 from recon_cli.backends.base import ExecutionReport
 from recon_cli.backends.hardware.franka_config import REST_SPREAD, SETTLE_STATES, FrankaConfig
+from recon_cli.backends.hardware.resume import Reference, Resumption, history_age
 from recon_cli.backends.hardware.setpoint_stream import SetpointStream, jerk_share_for, setpoint_stream
 from recon_cli.errors import HardwareUnavailable, InputError, RobotFault
 from recon_cli.planning.trajectory import Trajectory
@@ -44,6 +45,14 @@ PERIOD = 0.001
 SWITCH_INTERVAL = 0.0002
 #: controller cycles of the loop's recent history a control fault reports lost cycles from
 RECENT_CYCLES = 200
+#: a state not answered within this of reading it is left to the controller's extrapolation [s]
+LATE_ANSWER = 0.0008
+#: a read that returned within this had its state waiting: published before the read began [s]
+WAITED = 0.0001
+#: consecutive states after a gap left unanswered so that the next is answered at the start of its cycle
+MAX_SKIPS = 3
+#: commands kept to match the controller's reported reference against
+HISTORY = 64
 #: how long a stop may take to bring the joints to rest before it counts as unconfirmed
 STOP_BOUND = 2.0
 
@@ -110,7 +119,8 @@ class FrankaRobot:
         self.joint_names = tuple(joint_names)
         self.limits = limits
         self.lost_cycles = 0  # controller cycles the 1 kHz loop missed, over all motions
-        self._recent: collections.deque[int] = collections.deque(maxlen=RECENT_CYCLES)  # cycles per step
+        # per state read: [controller cycles since the last one, of them not answered]
+        self._recent: collections.deque[list[int]] = collections.deque(maxlen=RECENT_CYCLES)
         self._measured_lo = np.asarray(limits.lower, dtype=float) - config.tracking_bound
         self._measured_hi = np.asarray(limits.upper, dtype=float) + config.tracking_bound
         realtime = p.RealtimeConfig.kEnforce if config.realtime == "enforce" else p.RealtimeConfig.kIgnore
@@ -226,11 +236,18 @@ class FrankaRobot:
         are noise at rest) and only then finish the motion: a controller takes over the pose
         the robot *has* when the motion finishes, so finishing while the arm still lags its
         command would leave it short of the goal. The largest tracking error per joint, the
-        final error and the settle time."""
+        final error and the settle time.
+
+        Lost cycles: a state read after a gap (or one the loop could not answer within
+        LATE_ANSWER of reading it) is not answered; the next one is, at the start of its
+        cycle, from the controller's own reference (``q_d``, ``dq_d``, ``ddq_d``) and blended
+        back onto the stream (:mod:`~recon_cli.backends.hardware.resume`), instead of a jump
+        back onto the stream that the controller would judge as a jerk."""
         p, cfg = self._p, self.config
         q = stream.q
         last = len(q) - 1
         goal = q[last]
+        resumption = Resumption(stream, self.limits)
         control = self.robot.start_joint_position_control(p.ControllerMode.JointImpedance)
         index = 0
         sent = q[0]
@@ -240,9 +257,19 @@ class FrankaRobot:
         window: list[np.ndarray] = []
         recent = self._recent
         recent.clear()
+        cycle = 0  # the controller's cycle of the state in hand
+        history = np.zeros((HISTORY, 7))  # the commands sent (a ring) and the cycles they answered
+        history_cycles = np.full(HISTORY, -(10**9), dtype=np.int64)
+        count = reads = 0
+        resync = False  # the controller extrapolated: answer from its reference
+        skipped = 0
+        blend: np.ndarray | None = None  # offsets to the setpoints of the cycles after blend_at
+        blend_at = 0
         try:
             while True:
+                asked_at = time.perf_counter()
                 state, period = control.readOnce()
+                read_at = time.perf_counter()
                 measured = np.asarray(state.q, dtype=float)
                 err = np.abs(measured - sent)
                 max_err = np.maximum(max_err, err)
@@ -250,28 +277,61 @@ class FrankaRobot:
                     control = None
                     raise self._tracking_fault(err, f"at setpoint {index} of {last + 1}")
                 now = time.monotonic()
+                step = round(period.to_sec() / PERIOD) if reads else 0
+                reads += 1
+                cycle += step
+                if step:
+                    recent.append([step, step - 1])
+                    self.lost_cycles += step - 1
+                if index < last <= index + step:
+                    arrived = now
+                index = min(index + step, last)
+                resync = resync or step > 1
+                # after a gap, answer a state the read waited for: one published after the
+                # last command went out (so it reports that command, however late it came)
+                # and answered at the start of its cycle
+                if resync and skipped < MAX_SKIPS and (step > 1 or read_at - asked_at < WAITED):
+                    skipped += 1
+                    self._unanswered()
+                    continue
+                if resync:
+                    ref = Reference(np.asarray(state.q_d, dtype=float), np.asarray(state.dq_d, dtype=float),
+                                    np.asarray(state.ddq_d, dtype=float))
+                    age = history_age(ref, history, history_cycles, cycle, PERIOD)
+                    command, blend = resumption.resume(ref, age, index)
+                    blend_at = cycle
+                    resync = False
+                elif blend is not None and cycle - blend_at <= len(blend):
+                    command = resumption.planned(index) + blend[cycle - blend_at - 1]
+                else:
+                    blend = None
+                    command = q[index]
                 finished = False
                 if index == last:
                     final = np.abs(measured - goal)
                     window = [*window, measured][-SETTLE_STATES:] if np.all(final <= cfg.settle_tolerance) else []
-                    finished = len(window) == SETTLE_STATES and _spread(window) < REST_SPREAD
+                    finished = blend is None and len(window) == SETTLE_STATES and _spread(window) < REST_SPREAD
                     if not finished and now - arrived > cfg.settle_timeout:
                         control = None
                         raise self._settle_fault(final)
-                else:
-                    step = round(period.to_sec() / PERIOD)
-                    recent.append(step)
-                    self.lost_cycles += max(step - 1, 0)
-                    index = min(index + step, last)
-                    sent = q[index]
-                    if index == last:
-                        arrived = now
-                    elif now > deadline:
-                        control = None
-                        raise self._timeout_fault(stream.duration + cfg.time_margin, f"setpoint {index} of {last + 1}")
-                command = p.JointPositions(sent.tolist())
-                command.motion_finished = finished
-                control.writeOnce(command)
+                elif now > deadline:
+                    control = None
+                    raise self._timeout_fault(stream.duration + cfg.time_margin, f"setpoint {index} of {last + 1}")
+                if time.perf_counter() - read_at > LATE_ANSWER and not finished and skipped < MAX_SKIPS:
+                    resync = True  # the controller extrapolates this cycle: answering late would contradict it
+                    skipped += 1
+                    self._unanswered()
+                    continue
+                skipped = 0
+                sent = command
+                out = p.JointPositions(command.tolist())
+                out.motion_finished = finished
+                control.writeOnce(out)
+                history[count % HISTORY] = command
+                history_cycles[count % HISTORY] = cycle
+                count += 1
+                if time.perf_counter() - read_at > LATE_ANSWER:
+                    resync = True  # it may have come late: the controller extrapolated meanwhile
                 if finished:
                     return max_err, final, now - arrived
         except BaseException:
@@ -280,6 +340,12 @@ class FrankaRobot:
             # collector reaches the traceback that holds this frame
             control = None
             raise
+
+    def _unanswered(self) -> None:
+        """The state in hand is left to the controller's extrapolation: a lost cycle."""
+        self.lost_cycles += 1
+        if self._recent:
+            self._recent[-1][1] += 1
 
     # ------------------------------------------------------------------ faults and stopping
     def _tracking_fault(self, err: np.ndarray, where: str) -> RobotFault:
@@ -323,8 +389,8 @@ class FrankaRobot:
         text = _library_text(exc)
         names = [n for n in names if n not in text]
         flags = f" (errors: {', '.join(names)})" if names else ""
-        lost = sum(max(step - 1, 0) for step in self._recent)
-        late = (f"; the control loop missed {lost} of the last {sum(self._recent)} controller cycles"
+        lost = sum(missed for _, missed in self._recent)
+        late = (f"; the control loop missed {lost} of the last {sum(c for c, _ in self._recent)} controller cycles"
                 if lost else "")
         stopped = self._halt()
         return RobotFault(f"the Franka controller aborted the motion: {text}{flags}{late}; "

@@ -1,0 +1,152 @@
+"""Resuming a setpoint stream after controller cycles the client did not answer.
+
+A controller with a fixed command rate (Franka's FCI at 1 kHz) judges each command by its
+backward finite differences against the commands it applied before. A cycle the client does
+not answer in time is extrapolated by the controller at constant acceleration, and the
+controller reports the reference it applied in every state (Franka: ``q_d``, ``dq_d``,
+``ddq_d``). Jumping back onto the planned stream after such a gap makes a jerk as large as
+the stream's own jerk times ``(n + 1)^3 / 6`` after ``n`` lost cycles, which is over the
+limit after a few milliseconds of silence.
+
+So a client resumes from the controller's reference instead:
+
+* :func:`history_age` finds how many cycles lie between the controller's last applied
+  command and the cycle about to be answered: normally one, more when a controller (or a
+  simulator of one) threw its extrapolation away for a command that arrived late. It walks
+  the reported reference back along its constant-acceleration chain and matches it against
+  the commands the client sent.
+* :class:`Resumption` makes the first command continue that reference with a zero third
+  difference over those cycles, then blends from the extrapolated motion back onto the
+  planned stream with a quintic (value, velocity and acceleration of the offset matched at
+  the start, all three zero at the end), the shortest blend whose own velocity,
+  acceleration and jerk fit into what the stream leaves of the limits.
+
+Everything is in discrete time, as the controller differences it: the first command's
+differences over the gap are the reference's own, and the blend is fitted through the last
+three samples of the reference, so its finite differences are those of a smooth polynomial.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from recon_cli.backends.hardware.setpoint_stream import SetpointStream
+from recon_cli.robot.limits import JointLimits
+
+#: blend lengths tried, shortest first [cycles]
+BLEND_CYCLES = (6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256)
+#: share of each limit the stream and a blend together may use
+LIMIT_SHARE = 0.9
+#: the most recent commands sent that a reported reference is matched against
+RECENT = 8
+#: the oldest reference a match is looked for [cycles] (the controller stops a motion after 20 lost)
+MAX_AGE = 32
+#: a reported reference matches a sent command within this [rad]: Franka's state carries
+#: ``q_d`` as 32-bit floats (half a unit in the last place of 4 rad is 2.4e-7)
+MATCH_TOLERANCE = 4e-7
+
+
+@dataclass(frozen=True)
+class Reference:
+    """The controller's applied reference of one state: joints, velocity and acceleration
+    (the backward differences it judges the next command against)."""
+
+    q: npt.NDArray[np.float64]
+    dq: npt.NDArray[np.float64]
+    ddq: npt.NDArray[np.float64]
+
+
+def history_age(ref: Reference, sent: npt.NDArray[np.float64], sent_cycles: npt.NDArray[np.int64], cycle: int,
+                dt: float, tolerance: float = MATCH_TOLERANCE) -> int:
+    """Cycles between the controller's last applied command and ``cycle`` (the cycle of the
+    state that reported ``ref``, which the next command answers): 1 when the reference is a
+    command the client sent, or its extrapolation, as old as the gap since. ``sent``
+    (R, n) and ``sent_cycles`` (R,): the commands sent and the cycles they answered. 1 when
+    the reference matches no sent command (the motion's start, a controller's own hold)."""
+    if len(sent) == 0:
+        return 1
+    recent = np.argsort(sent_cycles)[-RECENT:]
+    sent, sent_cycles = sent[recent], sent_cycles[recent]
+    back = int(min(max(cycle - int(sent_cycles.min()), 0), MAX_AGE + RECENT))
+    # the reference walked back along its constant-acceleration chain: chain[j] is the value
+    # j cycles before (semi-implicit Euler backwards: x_j-1 = x_j - v_j dt, v_j-1 = v_j - a dt)
+    j = np.arange(back + 1)[:, None]
+    velocities = ref.dq[None, :] - j * ref.ddq[None, :] * dt
+    chain = ref.q[None, :] - np.vstack([np.zeros((1, ref.q.size)), np.cumsum(velocities[:-1], axis=0)]) * dt
+    err = np.max(np.abs(chain[:, None, :] - sent[None, :, :]), axis=2)  # (back + 1, R)
+    # a match at chain step j with command r: the controller applied r, then extrapolated j cycles
+    applied = sent_cycles[None, :] + np.arange(back + 1)[:, None]
+    valid = (err <= tolerance) & (applied < cycle)
+    if not np.any(valid):
+        return 1
+    # the youngest match: where the arm moves too slowly for its commands to differ by more
+    # than the tolerance every hypothesis matches, and there a longer age would invent a step
+    return max(1, int(cycle - applied[valid].max()))
+
+
+def _quintic(cycles: int) -> npt.NDArray[np.float64]:
+    """(cycles, 3): the blend's samples at 1..cycles as a linear map of its values at -2, -1, 0,
+    for the quintic through those three that ends at zero with zero slope and curvature."""
+    s0 = np.array([-2.0, -1.0, 0.0]) / cycles
+    powers = np.arange(6)
+    a = np.vstack([s0[:, None] ** powers,
+                   np.ones(6),
+                   powers.astype(float),
+                   (powers * (powers - 1)).astype(float)])
+    inverse = np.linalg.inv(a)[:, :3]
+    s = np.arange(1, cycles + 1, dtype=float) / cycles
+    out: npt.NDArray[np.float64] = (s[:, None] ** powers) @ inverse
+    return out
+
+
+def _differences(cycles: int) -> tuple[npt.NDArray[np.float64], ...]:
+    """The first, second and third differences of the series [reference's last three
+    samples, blend of ``cycles``] as linear maps of the three samples."""
+    series = np.vstack([np.eye(3), _quintic(cycles)])  # (cycles + 3, 3)
+    return tuple(np.diff(series, order, axis=0) for order in (1, 2, 3))
+
+
+class Resumption:
+    """Resumes ``stream`` after lost cycles within ``limits`` (see the module)."""
+
+    def __init__(self, stream: SetpointStream, limits: JointLimits) -> None:
+        self.q = stream.q
+        self.dt = stream.dt
+        jerk = limits.jerk if limits.jerk is not None else np.full(limits.n, np.inf)
+        floor = 1.0 - LIMIT_SHARE
+        # what the stream leaves of each limit (at least a tenth of it), per finite difference order
+        self._budgets = tuple(np.maximum(LIMIT_SHARE * np.asarray(limit, dtype=float) - peak, floor * limit)
+                              * self.dt ** order
+                              for order, limit, peak in ((1, limits.velocity, stream.peak_velocity),
+                                                         (2, limits.acceleration, stream.peak_acceleration),
+                                                         (3, jerk, stream.peak_jerk)))
+        self._samples = [_quintic(k) for k in BLEND_CYCLES]
+        # each order's differences of every blend stacked, checked in one product
+        differences = [_differences(k) for k in BLEND_CYCLES]
+        self._stacked = [np.vstack([d[order] for d in differences]) for order in range(3)]
+        self._starts = [np.cumsum([0] + [len(d[order]) for d in differences[:-1]]) for order in range(3)]
+
+    def planned(self, index: int) -> npt.NDArray[np.float64]:
+        """The stream's setpoint at ``index`` (its start before it, its goal after it)."""
+        return self.q[min(max(index, 0), len(self.q) - 1)]
+
+    def resume(self, ref: Reference, age: int, index: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """The command answering the stream's setpoint ``index`` after the controller reported
+        ``ref`` as applied ``age`` cycles before it, and the offsets (K, n) to add to the
+        setpoints ``index + 1 ... index + K`` that bring the motion back onto the stream."""
+        dt = self.dt
+        velocity = ref.dq + ref.ddq * age * dt
+        command = ref.q + age * dt * velocity  # over `age` cycles: first difference `velocity`, second ref.ddq
+        # the command's last three samples as 1 ms steps with the same differences
+        before = command - velocity * dt
+        history = np.vstack([before - (velocity - ref.ddq * dt) * dt, before, command])
+        offsets = history - np.vstack([self.planned(index - 2), self.planned(index - 1), self.planned(index)])
+        fits = np.ones(len(BLEND_CYCLES), dtype=bool)
+        for stacked, starts, budget in zip(self._stacked, self._starts, self._budgets, strict=True):
+            peaks = np.maximum.reduceat(np.abs(stacked @ offsets), starts, axis=0)  # (blends, n)
+            fits &= np.all(peaks <= budget, axis=1)
+        chosen = int(np.argmax(fits)) if fits.any() else len(BLEND_CYCLES) - 1
+        return command, self._samples[chosen] @ offsets

@@ -1,0 +1,148 @@
+"""Resuming a 1 kHz stream after lost cycles, judged as a Franka controller judges it: the
+backward differences of the commands it applied (its own constant-acceleration extrapolation
+for the cycles it did not hear from the client), one cycle apart, or over the cycles since its
+last applied command when it threw its extrapolation away for a late command."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from recon_cli.backends.hardware.resume import Reference, Resumption, history_age
+from recon_cli.backends.hardware.setpoint_stream import jerk_share_for, setpoint_stream
+from recon_cli.planning.trajectory import parameterize
+from recon_cli.robot.cell import Cell
+from recon_cli.robot.description import CellConfig, CellName
+
+DT = 0.001
+HOME = np.radians([0.0, -10.0, 0.0, -130.0, 0.0, 110.0, 0.0])
+GOAL = HOME + np.radians([25.0, 8.0, -15.0, 12.0, 30.0, -15.0, 45.0])
+
+
+@pytest.fixture(scope="module")
+def fr3() -> Cell:
+    return Cell(CellConfig(kind=CellName.parse("fr3")))
+
+
+@pytest.fixture(scope="module")
+def stream(fr3):
+    lim = fr3.kin.limits
+    traj = parameterize(np.array([HOME, GOAL]), lim.velocity, lim.acceleration, 0.6, 0.6)
+    return setpoint_stream(traj, lim, fr3.joint_names, DT, jerk_share_for(3))
+
+
+class Controller:
+    """The controller's history as the FCI keeps it: value, first and second backward
+    difference of the last applied command; a missed cycle extrapolated at constant
+    acceleration (semi-implicit, as franka-sim does); what it reports as q_d, dq_d, ddq_d."""
+
+    def __init__(self, q: np.ndarray) -> None:
+        self.x, self.v, self.a = q.copy(), np.zeros_like(q), np.zeros_like(q)
+        self.peaks = np.zeros((3, q.size))
+
+    def apply(self, q: np.ndarray, cycles: int = 1) -> None:
+        v = (q - self.x) / (cycles * DT)
+        a = (v - self.v) / (cycles * DT)
+        j = (a - self.a) / (cycles * DT)
+        self.peaks = np.maximum(self.peaks, np.abs([v, a, j]))
+        self.x, self.v, self.a = q.copy(), v, a
+
+    def extrapolate(self) -> None:
+        self.v = self.v + self.a * DT
+        self.x = self.x + self.v * DT
+
+    def reported(self, float32: bool = True) -> Reference:
+        cast = (lambda x: x.astype(np.float32).astype(float)) if float32 else (lambda x: x)
+        return Reference(cast(self.x), cast(self.v), cast(self.a))
+
+
+def _within(peaks: np.ndarray, lim, share: float = 1.0) -> bool:
+    return bool(np.all(peaks[0] <= share * lim.velocity) and np.all(peaks[1] <= share * lim.acceleration)
+                and np.all(peaks[2] <= share * lim.jerk))
+
+
+def _run(stream, lim, gap_at: int, gap: int, resume: bool, late: int = 0) -> Controller:
+    """Stream to the controller with ``gap`` cycles unanswered from ``gap_at``; ``late``: the
+    last answer before the gap came ``late`` cycles after its cycle (applied then, its
+    extrapolation thrown away). The client then answers from the reference (``resume``) or
+    jumps back onto the stream."""
+    q = stream.q
+    ctl = Controller(q[0])
+    resumption = Resumption(stream, lim)
+    sent = np.zeros((0, 7))
+    cycles = np.zeros(0, dtype=np.int64)
+    blend, blend_at = None, 0
+    k = 0
+    while k < len(q) + 300:
+        index = min(k, len(q) - 1)
+        if k == gap_at:
+            for _ in range(gap):
+                ctl.extrapolate()
+            if late:  # the late answer to gap_at - 1 lands after `late` extrapolated cycles: rewound onto it
+                ctl.x, ctl.v, ctl.a = saved
+                ctl.extrapolate()  # the next missed cycle, from the rewound history
+                lag = late
+            else:
+                lag = 0
+            k += gap
+            index = min(k, len(q) - 1)
+            if resume:
+                ref = ctl.reported()
+                age = history_age(ref, sent, cycles, k, DT)
+                command, blend = resumption.resume(ref, age, index)
+                blend_at = k
+            else:
+                command = q[index]
+            ctl.apply(command, cycles=1 + lag)
+        else:
+            if blend is not None and k - blend_at <= len(blend):
+                command = resumption.planned(index) + blend[k - blend_at - 1]
+            else:
+                command = q[index]
+            ctl.apply(command)
+        if k == gap_at - 1:
+            saved = (ctl.x.copy(), ctl.v.copy(), ctl.a.copy())
+        sent = np.vstack([sent, command])[-64:]
+        cycles = np.append(cycles, k)[-64:]
+        k += 1
+    assert np.allclose(ctl.x, q[-1], atol=1e-9)  # the motion ends at the goal
+    return ctl
+
+
+@pytest.mark.parametrize("gap", [2, 4, 8, 15])
+def test_resuming_from_the_reference_stays_within_the_limits(fr3, stream, gap):
+    lim = fr3.kin.limits
+    # where the stream's jerk is largest: the worst place to lose cycles
+    at = int(np.argmax(np.abs(np.diff(stream.q, 3, axis=0)).max(axis=1))) + 1
+    assert _within(_run(stream, lim, at, gap, resume=True).peaks, lim, 0.95)
+    if gap >= 4:  # jumping back onto the stream: a jerk over the limit
+        assert not _within(_run(stream, lim, at, gap, resume=False).peaks, lim)
+
+
+@pytest.mark.parametrize("late", [2, 5])
+def test_a_late_answer_the_controller_rewound_to_is_matched_and_resumed(fr3, stream, late):
+    """The controller applied the late answer and extrapolated from it: its history is
+    ``late`` cycles older than the cycle answered next; the match finds the age and the resumed
+    command is differenced over it within the limits."""
+    lim = fr3.kin.limits
+    at = len(stream.q) // 3
+    assert _within(_run(stream, lim, at, late + 1, resume=True, late=late).peaks, lim, 0.95)
+
+
+def test_history_age_of_a_reference_and_its_extrapolations():
+    rng = np.random.default_rng(1)
+    sent = np.cumsum(rng.normal(0.0, 1e-4, (12, 7)), axis=0) + 1.0
+    cycles = np.arange(100, 112)
+    ctl = Controller(sent[-3])
+    ctl.apply(sent[-2])
+    ctl.apply(sent[-1])
+    assert history_age(ctl.reported(), sent, cycles, 112, DT) == 1  # answered on time
+    for _ in range(4):
+        ctl.extrapolate()
+    assert history_age(ctl.reported(), sent, cycles, 116, DT) == 1  # 4 extrapolated, then the next cycle
+    assert history_age(ctl.reported(), sent, cycles, 120, DT) == 5  # a history 4 cycles behind the answer
+    # a reference that is no command sent (the motion's start, a hold): the ordinary single cycle
+    assert history_age(Reference(np.zeros(7), np.zeros(7), np.zeros(7)), sent, cycles, 112, DT) == 1
+    # at rest every hypothesis matches: the youngest is taken
+    rest = np.ones((12, 7))
+    assert history_age(Reference(np.ones(7), np.zeros(7), np.zeros(7)), rest, cycles, 130, DT) == 1

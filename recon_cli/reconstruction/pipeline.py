@@ -33,7 +33,6 @@ from recon_cli.reconstruction.global_registration import (
     kinematic_correction,
 )
 from recon_cli.reconstruction.metadata import SessionInfo
-from recon_cli.reconstruction.normals_worker import NormalsWorker, PendingCloud
 from recon_cli.reconstruction.options import RegisterOptions
 from recon_cli.reconstruction.pose_graph import MultiwayResult, register_multiway
 from recon_cli.reconstruction.scan_store import ScanStore, read_scan
@@ -208,12 +207,9 @@ class CloudMemo:
 
     def put(self, folder: str, marker_T_camera: np.ndarray, box: CropBox | None, surface: SurfaceOptions,
             cloud) -> None:
-        """Keep the scan's cloud (copied), or one whose normals are being estimated (a
-        :class:`~recon_cli.reconstruction.normals_worker.PendingCloud`, kept as it is)."""
         import open3d as o3d
 
-        kept = cloud if isinstance(cloud, PendingCloud) else o3d.geometry.PointCloud(cloud)
-        self._clouds[folder] = (np.array(marker_T_camera, dtype=float), box, surface, kept)
+        self._clouds[folder] = (np.array(marker_T_camera, dtype=float), box, surface, o3d.geometry.PointCloud(cloud))
 
     def get(self, folder: str, marker_T_camera: np.ndarray, box: CropBox | None, surface: SurfaceOptions):
         """A copy of the scan's cloud made with these inputs, or None."""
@@ -224,8 +220,7 @@ class CloudMemo:
                 or not _same_box(known[1], box):
             return None
         self.hits += 1
-        cloud = known[3].result() if isinstance(known[3], PendingCloud) else known[3]
-        return o3d.geometry.PointCloud(cloud)
+        return o3d.geometry.PointCloud(known[3])
 
 
 def _pose_key(board, world_T_marker: np.ndarray | None, options: RegisterOptions) -> tuple:
@@ -244,18 +239,12 @@ def _same_box(a: CropBox | None, b: CropBox | None) -> bool:
 def scan_cloud(scan, pose: GlobalPose, box: CropBox | None, surface: SurfaceOptions):
     """A scan's points in the marker frame (placed by its global pose), cropped to the box
     (when given), with normals turned toward its camera."""
-    return oriented_cloud(cropped_cloud(scan, pose, box), pose.marker_T_camera[:3, 3], surface)
-
-
-def cropped_cloud(scan, pose: GlobalPose, box: CropBox | None):
-    """A scan's points in the marker frame (placed by its global pose), cropped to the box
-    (when given), without normals."""
     if box is not None:
         scan = in_box_pixels(scan, box, pose.marker_T_camera)
     cloud = scan.to_open3d_cloud(pose.marker_T_camera)
     if box is not None:
         cloud = crop_cloud(cloud, box)
-    return cloud
+    return oriented_cloud(cloud, pose.marker_T_camera[:3, 3], surface)
 
 
 def in_box_pixels(scan, box: CropBox, marker_T_camera: np.ndarray):
@@ -312,9 +301,8 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
         known = None if memo is None else memo.get(rec.folder, rec.placed_pose.marker_T_camera, box, options.surface)
         if known is None and scan.depth.size == 0:  # read without its images: the memo's cloud was for other inputs
             scan = read_scan(folder / rec.folder)
-        cloud = known if known is not None else normals.oriented(
-            cropped_cloud(scan, rec.placed_pose, box), rec.placed_pose.marker_T_camera[:3, 3], options.surface)
-        rec.points = len(cloud) if isinstance(cloud, PendingCloud) else len(cloud.points)
+        cloud = known if known is not None else scan_cloud(scan, rec.placed_pose, box, options.surface)
+        rec.points = len(cloud.points)
         if rec.points < 100:
             rec.skipped = f"{rec.points} points inside the crop box"
         else:
@@ -325,52 +313,49 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
         and world_T_marker is not None
     fk: dict[int, np.ndarray] = {}  # record position -> forward-kinematics pose (marker frame)
     deferred: list[tuple[int, Path]] = []
-    with NormalsWorker() as normals:  # the scans' normals beside the reading of the next scans
-        for k, (index, scan_folder) in enumerate(scan_folders):
-            try:
-                store.check_inside(scan_folder)
-                # the images only when the memo does not know the scan's pose and cloud already
-                scan = read_scan(scan_folder, images=memo is None or options.perturb is not None
-                                 or not memo.has(scan_folder.name, board, world_T_marker, options))
-            except MetadataError as exc:  # a bad scan is skipped with its reason, the others go on
-                records.append(ScanRecord(index, None, skipped=exc.one_line(), folder=scan_folder.name))
-                step("global registration", k + 1, len(scan_folders))
-                continue
-            pose = global_pose(scan, board, world_T_marker, options.min_corners, options.use_board,
-                               options.max_reprojection_px, options.board_plane, options.max_board_sigma) \
-                if memo is None else memo.pose(scan_folder.name, scan, board, world_T_marker, options)
-            if pose is not None and options.perturb is not None:
-                pose = replace(pose, marker_T_camera=perturbed(pose.marker_T_camera, *options.perturb, rng))
-            rec = ScanRecord(index, pose, folder=scan_folder.name)
-            records.append(rec)
-            if pose is None:
-                rec.skipped = "board not found and no world_T_marker for the kinematic fallback"
-            else:
-                if scan.ground_truth and world_T_marker is not None:
-                    truth = invert(world_T_marker) @ np.asarray(scan.ground_truth["world_T_camera"], dtype=float)
-                    rec.true_marker_T_camera = truth
-                    if pose.source is PoseSource.CHARUCO:  # the board's own pose (thesis Table 4.2)
-                        rec.charuco_error = pose_error(pose.source_pose, truth)
-                if correct and world_T_marker is not None:
-                    fk[len(records) - 1] = invert(world_T_marker) @ scan.world_T_camera_fk
-                if correct and pose.source is PoseSource.KINEMATICS:
-                    deferred.append((len(records) - 1, scan_folder))
-                else:
-                    add_cloud(len(records) - 1, rec, scan)
+    for k, (index, scan_folder) in enumerate(scan_folders):
+        try:
+            store.check_inside(scan_folder)
+            # the images only when the memo does not know the scan's pose and cloud already
+            scan = read_scan(scan_folder, images=memo is None or options.perturb is not None
+                             or not memo.has(scan_folder.name, board, world_T_marker, options))
+        except MetadataError as exc:  # a bad scan is skipped with its reason, the others go on
+            records.append(ScanRecord(index, None, skipped=exc.one_line(), folder=scan_folder.name))
             step("global registration", k + 1, len(scan_folders))
-        correction = None
-        if deferred:
-            pairs = [(records[i].placed_pose.source_pose, fk[i]) for i in fk
-                     if records[i].placed_pose.source is PoseSource.CHARUCO and not records[i].skipped]
-            correction = kinematic_correction([b for b, _ in pairs], [f for _, f in pairs])
-            for i, scan_folder in deferred:
-                rec, scan = records[i], read_scan(scan_folder)
-                if correction is not None:
-                    rec.pose = corrected_pose(scan, rec.placed_pose, correction.apply(fk[i]), board,
-                                              options.board_plane)
-                add_cloud(i, rec, scan)
-        clouds = [c.result() if isinstance(c, PendingCloud) else c
-                  for c in (cloud_of[i] for i, r in enumerate(records) if not r.skipped)]
+            continue
+        pose = global_pose(scan, board, world_T_marker, options.min_corners, options.use_board,
+                           options.max_reprojection_px, options.board_plane, options.max_board_sigma) \
+            if memo is None else memo.pose(scan_folder.name, scan, board, world_T_marker, options)
+        if pose is not None and options.perturb is not None:
+            pose = replace(pose, marker_T_camera=perturbed(pose.marker_T_camera, *options.perturb, rng))
+        rec = ScanRecord(index, pose, folder=scan_folder.name)
+        records.append(rec)
+        if pose is None:
+            rec.skipped = "board not found and no world_T_marker for the kinematic fallback"
+        else:
+            if scan.ground_truth and world_T_marker is not None:
+                truth = invert(world_T_marker) @ np.asarray(scan.ground_truth["world_T_camera"], dtype=float)
+                rec.true_marker_T_camera = truth
+                if pose.source is PoseSource.CHARUCO:  # the board's own pose (thesis Table 4.2)
+                    rec.charuco_error = pose_error(pose.source_pose, truth)
+            if correct and world_T_marker is not None:
+                fk[len(records) - 1] = invert(world_T_marker) @ scan.world_T_camera_fk
+            if correct and pose.source is PoseSource.KINEMATICS:
+                deferred.append((len(records) - 1, scan_folder))
+            else:
+                add_cloud(len(records) - 1, rec, scan)
+        step("global registration", k + 1, len(scan_folders))
+    correction = None
+    if deferred:
+        pairs = [(records[i].placed_pose.source_pose, fk[i]) for i in fk
+                 if records[i].placed_pose.source is PoseSource.CHARUCO and not records[i].skipped]
+        correction = kinematic_correction([b for b, _ in pairs], [f for _, f in pairs])
+        for i, scan_folder in deferred:
+            rec, scan = records[i], read_scan(scan_folder)
+            if correction is not None:
+                rec.pose = corrected_pose(scan, rec.placed_pose, correction.apply(fk[i]), board, options.board_plane)
+            add_cloud(i, rec, scan)
+    clouds = [cloud_of[i] for i, r in enumerate(records) if not r.skipped]
     used = [r for r in records if not r.skipped]
     if not used:
         reasons = sorted({r.skipped for r in records})

@@ -34,9 +34,8 @@ from recon_cli.planning.lower_bound import duration_lower_bound
 from recon_cli.planning.planner import MotionPlanner
 from recon_cli.reconstruction.crop import CropBox
 from recon_cli.reconstruction.evaluation import histogram_png, signed_distances, within_shares
-from recon_cli.reconstruction.normals_worker import NormalsWorker
 from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
-from recon_cli.reconstruction.pipeline import CloudMemo, cropped_cloud, run_register
+from recon_cli.reconstruction.pipeline import CloudMemo, run_register, scan_cloud
 from recon_cli.reconstruction.sides import register_sides
 from recon_cli.recording import open_recorder
 from recon_cli.recording.results import record_registration
@@ -133,7 +132,6 @@ class Autoscan:
         self.recorder = None
         self.drawing = PictureWorker()  # the iteration pictures, off the critical path
         self.memo = CloudMemo()  # each scan's cloud, made once for the planner and the registration
-        self.normals = NormalsWorker()  # the clouds' normals (for the registration), off the critical path
 
     # ------------------------------------------------------------------ set-up
     def _setup(self) -> None:
@@ -183,9 +181,8 @@ class Autoscan:
                               registration)
         assert pose is not None  # the kinematics place every scan (world_T_marker is known)
         surface = registration.surface
-        cloud = cropped_cloud(scan, pose, self.crop_marker)  # the planner needs only the points
-        self.memo.put(scan.path.name, pose.marker_T_camera, self.crop_marker, surface,
-                      self.normals.oriented(cloud, pose.marker_T_camera[:3, 3], surface))
+        cloud = scan_cloud(scan, pose, self.crop_marker, surface)
+        self.memo.put(scan.path.name, pose.marker_T_camera, self.crop_marker, surface, cloud)
         cloud.transform(self.cell.world_T_marker)
         pts = np.asarray(cloud.voxel_down_sample(self.vp.partial_voxel).points)
         if len(pts):
@@ -331,7 +328,6 @@ class Autoscan:
             error = exc
         except BaseException:
             self.drawing.close()
-            self.normals.close()
             self._close_recorder()
             raise
         finally:
@@ -340,7 +336,6 @@ class Autoscan:
             result, error = self._finish(views, pictures, t0, interrupted, error)
         finally:
             self.drawing.close()
-            self.normals.close()
             self._close_recorder()
         if opt.page:  # with the recording complete
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -98,11 +99,35 @@ def _incidence_cos(depth: np.ndarray, K: Intrinsics) -> tuple[np.ndarray, np.nda
     image), and the pixels where no normal can be made (neighbours missing or degenerate).
     The normal is the cross product of the central differences of the back-projected points
     (X, Y, Z) = depth (u, v, 1) along the image's columns and rows (zero on the border),
-    computed per component with few temporaries."""
+    computed per component with few temporaries, in two bands of rows at once (numpy lets go
+    of the interpreter lock in its array operations; each pixel's arithmetic is the same)."""
     h, w = depth.shape
     d = np.asarray(depth, dtype=np.float64)
     u = (np.arange(w) - K.cx) / K.fx
     v = (np.arange(h) - K.cy) / K.fy
+    if h < BAND_ROWS:
+        return _incidence_band(d, u, v)
+    m = h // 2
+    # each band one row beyond its half: that row is the band's border (no normal), and
+    # the inner neighbour of the other half
+    lower = _band_pool().submit(_incidence_band, d[m - 1:], u, v[m - 1:])
+    cos_top, edge_top = _incidence_band(d[:m + 1], u, v[:m + 1])
+    cos_low, edge_low = lower.result()
+    return np.vstack([cos_top[:m], cos_low[1:]]), np.vstack([edge_top[:m], edge_low[1:]])
+
+
+#: images with fewer rows are done in one piece
+BAND_ROWS = 64
+
+
+@functools.cache
+def _band_pool() -> ThreadPoolExecutor:
+    return ThreadPoolExecutor(1, thread_name_prefix="sensor-band")
+
+
+def _incidence_band(d: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_incidence_cos` of the rows of ``d`` whose ray coordinates are ``v``."""
+    h, w = d.shape
     right, left = d[1:-1, 2:], d[1:-1, :-2]  # neighbours along u (interior rows)
     down, up = d[2:, 1:-1], d[:-2, 1:-1]  # neighbours along v (interior columns)
     uc, vc = u[None, 1:-1], v[1:-1, None]

@@ -67,6 +67,26 @@ def test_sensor_figures():
     assert s.sigma(0.718) == pytest.approx(0.00025)
 
 
+def test_incidence_in_two_bands_is_the_whole_image_bit_for_bit():
+    """The incidence angles are computed in two bands of rows at once: the same numbers as
+    in one piece, at the seam too (an odd number of rows, a depth edge across the seam)."""
+    from dataclasses import replace
+
+    from recon_cli.perception.sensor import _incidence_band, _incidence_cos
+
+    K = replace(motioncam_3d_m().intrinsics(0.25), cx=201.234, cy=149.891, fx=436.3, fy=437.1)
+    h, w = 301, K.width
+    K = replace(K, height=h)
+    yy, xx = np.mgrid[0:h, 0:w]
+    depth = 0.5 + 0.05 * np.sin(xx / 13.0) * np.cos(yy / 17.0)
+    depth[:, :20] = 0.0
+    depth[148:152, 40:120] = 0.8  # a step across the seam (rows 149/150)
+    cos, edge = _incidence_cos(depth, K)
+    whole = _incidence_band(depth, (np.arange(w) - K.cx) / K.fx, (np.arange(h) - K.cy) / K.fy)
+    assert np.array_equal(cos, whole[0], equal_nan=True) and np.array_equal(edge, whole[1])
+    assert edge[0].all() and edge[-1].all() and not edge[h // 2, 60]
+
+
 def _probe_scene(geom_type, size, pos, quat, width=320, height=240, fovy=40.0):
     spec = mujoco.MjSpec()
     spec.visual.global_.offwidth, spec.visual.global_.offheight = width, height

@@ -72,6 +72,7 @@ def _run(stream, lim, gap_at: int, gap: int, resume: bool, late: int = 0) -> Con
     sent = np.zeros((0, 7))
     cycles = np.zeros(0, dtype=np.int64)
     blend, blend_at = None, 0
+    saved = (ctl.x.copy(), ctl.v.copy(), ctl.a.copy())  # the history after the answer to gap_at - 1
     k = 0
     while k < len(q) + 300:
         index = min(k, len(q) - 1)
@@ -127,6 +128,20 @@ def test_a_late_answer_the_controller_rewound_to_is_matched_and_resumed(fr3, str
     lim = fr3.kin.limits
     at = len(stream.q) // 3
     assert _within(_run(stream, lim, at, late + 1, resume=True, late=late).peaks, lim, 0.95)
+
+
+@pytest.mark.parametrize("at", [4, 5, 7, 10])
+def test_a_late_answer_in_the_first_cycles_of_a_motion(fr3, at):
+    """In a motion's first cycles the arm is nearly at rest: walking the reference back, the
+    chain passes within the match tolerance of older commands at other ages. The newest
+    command it matches is the one applied (the youngest match among all was wrong here: a
+    jerk reflex in 12 of these 36 places)."""
+    lim = fr3.kin.limits
+    traj = parameterize(np.array([HOME, GOAL]), lim.velocity, lim.acceleration, 0.6, 0.6)
+    # as the adapter streams it: from the controller's commanded joints, blended in
+    stream = setpoint_stream(traj, lim, fr3.joint_names, DT, jerk_share_for(3), start=HOME + 1e-7)
+    for late in (1, 2, 4):
+        assert _within(_run(stream, lim, at, late + 1, resume=True, late=late).peaks, lim, 0.95)
 
 
 def test_history_age_of_a_reference_and_its_extrapolations():

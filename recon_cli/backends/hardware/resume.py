@@ -14,7 +14,8 @@ So a client resumes from the controller's reference instead:
   command and the cycle about to be answered: normally one, more when a controller (or a
   simulator of one) threw its extrapolation away for a command that arrived late. It walks
   the reported reference back along its constant-acceleration chain and matches it against
-  the commands the client sent.
+  the commands the client sent: the newest command it matches (an older one can match too
+  where the arm was nearly at rest, in a motion's first cycles).
 * :class:`Resumption` makes the first command continue that reference with a zero third
   difference over those cycles, then blends from the extrapolated motion back onto the
   planned stream with a quintic (value, velocity and acceleration of the offset matched at
@@ -82,9 +83,11 @@ def history_age(ref: Reference, sent: npt.NDArray[np.float64], sent_cycles: npt.
     valid = (err <= tolerance) & (applied < cycle)
     if not np.any(valid):
         return 1
-    # the youngest match: where the arm moves too slowly for its commands to differ by more
-    # than the tolerance every hypothesis matches, and there a longer age would invent a step
-    return max(1, int(cycle - applied[valid].max()))
+    # the newest command matched is the last one applied: an older one can match too where the
+    # arm was nearly at rest (the motion's first cycles), at a place the chain only passes near;
+    # of its matches the youngest: at rest every one matches, and a longer age would invent a step
+    newest = int(sent_cycles[np.any(valid, axis=0)].max())
+    return max(1, int(cycle - applied[valid & (sent_cycles[None, :] == newest)].max()))
 
 
 def _quintic(cycles: int) -> npt.NDArray[np.float64]:

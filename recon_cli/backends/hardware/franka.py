@@ -33,7 +33,7 @@ import numpy as np
 from recon_cli import install_hint
 from recon_cli.backends.base import ExecutionReport
 from recon_cli.backends.hardware.franka_config import REST_SPREAD, SETTLE_STATES, FrankaConfig
-from recon_cli.backends.hardware.resume import Reference, Resumption, history_age
+from recon_cli.backends.hardware.resume import RECENT, Reference, Resumption, history_age
 from recon_cli.backends.hardware.setpoint_stream import SetpointStream, jerk_share_for, setpoint_stream
 from recon_cli.errors import HardwareUnavailable, InputError, RobotFault
 from recon_cli.planning.trajectory import Trajectory
@@ -51,8 +51,6 @@ LATE_ANSWER = 0.0008
 WAITED = 0.0001
 #: consecutive states after a gap left unanswered so that the next is answered at the start of its cycle
 MAX_SKIPS = 3
-#: commands kept to match the controller's reported reference against
-HISTORY = 64
 #: how long a stop may take to bring the joints to rest before it counts as unconfirmed
 STOP_BOUND = 2.0
 
@@ -258,8 +256,9 @@ class FrankaRobot:
         recent = self._recent
         recent.clear()
         cycle = 0  # the controller's cycle of the state in hand
-        history = np.zeros((HISTORY, 7))  # the commands sent (a ring) and the cycles they answered
-        history_cycles = np.full(HISTORY, -(10**9), dtype=np.int64)
+        # the latest commands sent (a ring: those the reference is matched against) and their cycles
+        history = np.zeros((RECENT, 7))
+        history_cycles = np.full(RECENT, -(10**9), dtype=np.int64)
         count = reads = 0
         resync = False  # the controller extrapolated: answer from its reference
         skipped = 0
@@ -302,7 +301,7 @@ class FrankaRobot:
                     blend_at = cycle
                     resync = False
                 elif blend is not None and cycle - blend_at <= len(blend):
-                    command = resumption.planned(index) + blend[cycle - blend_at - 1]
+                    command = q[index] + blend[cycle - blend_at - 1]
                 else:
                     blend = None
                     command = q[index]
@@ -327,8 +326,8 @@ class FrankaRobot:
                 out = p.JointPositions(command.tolist())
                 out.motion_finished = finished
                 control.writeOnce(out)
-                history[count % HISTORY] = command
-                history_cycles[count % HISTORY] = cycle
+                history[count % RECENT] = command
+                history_cycles[count % RECENT] = cycle
                 count += 1
                 if time.perf_counter() - read_at > LATE_ANSWER:
                     resync = True  # it may have come late: the controller extrapolated meanwhile

@@ -29,6 +29,7 @@ three samples of the reference, so its finite differences are those of a smooth 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,11 +106,27 @@ def _quintic(cycles: int) -> npt.NDArray[np.float64]:
     return out
 
 
-def _differences(cycles: int) -> tuple[npt.NDArray[np.float64], ...]:
-    """The first, second and third differences of the series [reference's last three
-    samples, blend of ``cycles``] as linear maps of the three samples."""
-    series = np.vstack([np.eye(3), _quintic(cycles)])  # (cycles + 3, 3)
-    return tuple(np.diff(series, order, axis=0) for order in (1, 2, 3))
+@dataclass(frozen=True)
+class _Blends:
+    """Every blend of BLEND_CYCLES: its samples, and for each difference order (1, 2, 3) the
+    differences of [reference's last three samples, blend] of all blends stacked, with the
+    row where each blend's part starts (checked in one product)."""
+
+    samples: list[npt.NDArray[np.float64]]
+    stacked: list[npt.NDArray[np.float64]]
+    starts: list[npt.NDArray[np.int64]]
+
+
+@functools.cache
+def _blends() -> _Blends:
+    samples = [_quintic(k) for k in BLEND_CYCLES]
+    series = [np.vstack([np.eye(3), q]) for q in samples]  # (cycles + 3, 3) each
+    stacked, starts = [], []
+    for order in (1, 2, 3):
+        parts = [np.diff(x, order, axis=0) for x in series]
+        stacked.append(np.vstack(parts))
+        starts.append(np.cumsum([0] + [len(d) for d in parts[:-1]]))
+    return _Blends(samples, stacked, starts)
 
 
 class Resumption:
@@ -126,11 +143,6 @@ class Resumption:
                               for order, limit, peak in ((1, limits.velocity, stream.peak_velocity),
                                                          (2, limits.acceleration, stream.peak_acceleration),
                                                          (3, jerk, stream.peak_jerk)))
-        self._samples = [_quintic(k) for k in BLEND_CYCLES]
-        # each order's differences of every blend stacked, checked in one product
-        differences = [_differences(k) for k in BLEND_CYCLES]
-        self._stacked = [np.vstack([d[order] for d in differences]) for order in range(3)]
-        self._starts = [np.cumsum([0] + [len(d[order]) for d in differences[:-1]]) for order in range(3)]
 
     def planned(self, index: int) -> npt.NDArray[np.float64]:
         """The stream's setpoint at ``index`` (its start before it, its goal after it)."""
@@ -147,9 +159,10 @@ class Resumption:
         before = command - velocity * dt
         history = np.vstack([before - (velocity - ref.ddq * dt) * dt, before, command])
         offsets = history - np.vstack([self.planned(index - 2), self.planned(index - 1), self.planned(index)])
+        blends = _blends()
         fits = np.ones(len(BLEND_CYCLES), dtype=bool)
-        for stacked, starts, budget in zip(self._stacked, self._starts, self._budgets, strict=True):
+        for stacked, starts, budget in zip(blends.stacked, blends.starts, self._budgets, strict=True):
             peaks = np.maximum.reduceat(np.abs(stacked @ offsets), starts, axis=0)  # (blends, n)
             fits &= np.all(peaks <= budget, axis=1)
         chosen = int(np.argmax(fits)) if fits.any() else len(BLEND_CYCLES) - 1
-        return command, self._samples[chosen] @ offsets
+        return command, blends.samples[chosen] @ offsets

@@ -289,6 +289,53 @@ def test_a_loop_that_stalls_for_milliseconds_resumes_within_the_limits(fr3, stan
     robot.close()
 
 
+class _Garbling(_Stalling):
+    """As :class:`_Stalling`, and from the stalled read on, every state reports ``dq_d`` of
+    the third joint as NaN (a controller's reference gone wrong)."""
+
+    def readOnce(self):  # noqa: N802
+        state, period = super().readOnce()
+        if self._reads < min(self._stalls):
+            return state, period
+        return _GarbledState(state), period
+
+
+class _GarbledState:
+    def __init__(self, state) -> None:
+        self._state = state
+
+    def __getattr__(self, name: str):
+        value = getattr(self._state, name)
+        if name == "dq_d":
+            value = list(value)
+            value[2] = float("nan")
+        return value
+
+
+class _GarblingRobot(_StallingRobot):
+    def start_joint_position_control(self, mode):
+        return _Garbling(self._robot.start_joint_position_control(mode), next(self._plans))
+
+
+def test_a_reference_that_is_not_finite_after_a_gap_stops_the_robot_in_one_line(fr3, standin):
+    """After missed cycles the loop answers from the controller's reported reference; a
+    reference with a NaN in it is a one-line measurement fault that stops the robot, not
+    libfranka's ValueError as a traceback."""
+    robot = FrankaRobot(CONFIG, fr3.joint_names, fr3.kin.limits)
+    robot.robot = _GarblingRobot(robot.robot, [{40: ("read", 0.005)}])
+    lim = fr3.kin.limits
+    goal = HOME + np.radians([10.0, 0.0, 0.0, 0.0, 0.0, 0.0, 10.0])
+    traj = parameterize(np.array([robot.measured_joints(), goal]), lim.velocity, lim.acceleration, 0.3, 0.3)
+    with pytest.raises(RobotFault) as info:
+        robot.execute(traj)
+    fault = info.value
+    assert fault.kind == "measurement" and fault.stopped
+    assert "\n" not in fault.message
+    assert "its reference dq_d of joint 3 is nan" in fault.message
+    assert robot.errors() == []
+    robot.close()
+
+
 # --------------------------------------------------------------------- station files and runs
 STATION = """\
 format: 1

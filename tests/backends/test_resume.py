@@ -161,3 +161,15 @@ def test_history_age_of_a_reference_and_its_extrapolations():
     # at rest every hypothesis matches: the youngest is taken
     rest = np.ones((12, 7))
     assert history_age(Reference(np.ones(7), np.zeros(7), np.zeros(7)), rest, cycles, 130, DT) == 1
+
+
+def test_a_reference_names_what_makes_it_unusable():
+    good = Reference(np.zeros(7), np.zeros(7), np.zeros(7))
+    assert good.problem() is None
+    bad_q = np.zeros(7)
+    bad_q[4] = np.inf
+    assert Reference(bad_q, np.zeros(7), np.zeros(7)).problem() == "its reference q_d of joint 5 is inf"
+    bad_ddq = np.zeros(7)
+    bad_ddq[0] = np.nan
+    assert Reference(np.zeros(7), np.zeros(7), bad_ddq).problem() == "its reference ddq_d of joint 1 is nan"
+    assert Reference(np.zeros(7), np.zeros(6), np.zeros(7)).problem() == "its reference dq_d has 6 values, not 7"

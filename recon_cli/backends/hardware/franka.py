@@ -296,6 +296,10 @@ class FrankaRobot:
                 if resync:
                     ref = Reference(np.asarray(state.q_d, dtype=float), np.asarray(state.dq_d, dtype=float),
                                     np.asarray(state.ddq_d, dtype=float))
+                    problem = ref.problem()
+                    if problem is not None:
+                        control = None
+                        raise self._reference_fault(problem, f"at setpoint {index} of {last + 1}")
                     age = history_age(ref, history, history_cycles, cycle, PERIOD)
                     command, blend = resumption.resume(ref, age, index)
                     blend_at = cycle
@@ -355,6 +359,12 @@ class FrankaRobot:
                           f"{cfg.tracking_bound:g} rad, {where}; {self._stop_text(stopped)}", kind="tracking",
                           joint=self.joint_names[j], value=float(err[j]), bound=cfg.tracking_bound, stopped=stopped,
                           hint="check the load and the collision thresholds; completed scans are kept")
+
+    def _reference_fault(self, problem: str, where: str) -> RobotFault:
+        stopped = self._halt()
+        return RobotFault(f"the Franka controller reported an unusable state after missed cycles ({problem}), "
+                          f"{where}; {self._stop_text(stopped)}", kind="measurement", stopped=stopped,
+                          hint="check the controller's firmware and the network; completed scans are kept")
 
     def _settle_fault(self, final: np.ndarray) -> RobotFault:
         j = int(np.argmax(final))

@@ -60,6 +60,17 @@ class Reference:
     dq: npt.NDArray[np.float64]
     ddq: npt.NDArray[np.float64]
 
+    def problem(self, joints: int = 7) -> str | None:
+        """What makes this reference unusable for a resumption (a wrong size or a value that
+        is not finite), as text naming the field and the joint; None when it is usable."""
+        for name, value in (("q_d", self.q), ("dq_d", self.dq), ("ddq_d", self.ddq)):
+            if value.shape != (joints,):
+                return f"its reference {name} has {value.size} values, not {joints}"
+            bad = np.flatnonzero(~np.isfinite(value))
+            if bad.size:
+                return f"its reference {name} of joint {int(bad[0]) + 1} is {value[bad[0]]}"
+        return None
+
 
 def history_age(ref: Reference, sent: npt.NDArray[np.float64], sent_cycles: npt.NDArray[np.int64], cycle: int,
                 dt: float, tolerance: float = MATCH_TOLERANCE) -> int:

@@ -35,7 +35,7 @@ from recon_cli.cell_check import check_layout
 from recon_cli.config import DEFAULTS, Config, write_config
 from recon_cli.console import write_json
 from recon_cli.errors import FileError, HardwareUnavailable, InputError
-from recon_cli.objects import SceneObject, available_objects, load_object
+from recon_cli.objects import SceneObject, load_object, ycb_path
 from recon_cli.outputs import atomic_write
 from recon_cli.perception.charuco import cell_board
 from recon_cli.perception.sensor import cell_sensor
@@ -68,7 +68,7 @@ def resolve_object_name(name: str) -> str:
     if name != "auto":
         return name
 
-    return "drill" if "drill" in available_objects() else "bottle"
+    return "drill" if ycb_path("drill").exists() else "bottle"
 
 
 # --------------------------------------------------------------------- the session

@@ -43,6 +43,17 @@ def test_help_is_fast_and_light():
     assert "HEAVY []" in out.stdout
 
 
+def test_open3d_loads_without_its_plotly_viewer_until_it_is_used():
+    """Open3D imported after recon_cli leaves its Plotly/Dash viewer (and Dash, Flask,
+    IPython) unloaded; the viewer's functions still work and load it on first call."""
+    code = ("import sys, recon_cli, open3d as o3d; print('DASH', 'dash' in sys.modules); "
+            "cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector([[0.0, 0, 0], [1, 1, 1]])); "
+            "figure = o3d.visualization.get_plotly_fig([cloud]); "
+            "print('FIGURE', type(figure).__name__, 'dash' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert "DASH False" in out.stdout and "FIGURE Figure True" in out.stdout
+
+
 def test_cell_prints_joints_shapes_camera(capsys, tmp_path):
     code, out, _ = run(capsys, "cell", "--urdf", str(tmp_path / "cell.urdf"))
     assert code == 0

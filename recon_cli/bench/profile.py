@@ -57,7 +57,7 @@ STAGES: tuple[tuple[str, str, str], ...] = (
     ("sensor model", "recon_cli.backends.sim.camera", "SimCamera._realism_effects"),
     ("scan storage", "recon_cli.reconstruction.scan_store", "ScanStore.write"),
     ("board poses", "recon_cli.reconstruction.global_registration", "global_pose"),
-    ("scan clouds and normals", "recon_cli.reconstruction.pipeline", "scan_cloud"),
+    ("scan clouds", "recon_cli.reconstruction.pipeline", "scan_points"),
     ("ellipsoid fits", "recon_cli.viewplan.ellipsoid", "Ellipsoid.from_cloud"),
     ("view sampling (potential field, IK)", "recon_cli.workflows.autoscan", "Autoscan._default_initial"),
     ("view sampling (potential field, IK)", "recon_cli.workflows.autoscan", "Autoscan._ellipsoid_candidates"),

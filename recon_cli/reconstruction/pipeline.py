@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from recon_cli.errors import FileError, InputError, MetadataError
+from recon_cli.errors import FileError, InputError, MetadataError, ReconError
 from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.outputs import OutputFolder
 from recon_cli.perception.charuco import recorded_board
@@ -103,6 +103,13 @@ class ScanRecord:
         return d
 
 
+def final_camera(record: ScanRecord) -> np.ndarray:
+    """Where the scan's camera was (marker frame): its final pose, else its placed one."""
+    T = record.final_marker_T_camera if record.final_marker_T_camera is not None \
+        else record.placed_pose.marker_T_camera
+    return np.asarray(T, dtype=float)[:3, 3].copy()
+
+
 def _set_gauges(used: list[ScanRecord]) -> None:
     ref = used[0]
     if ref.true_marker_T_camera is None or ref.final_marker_T_camera is None:
@@ -124,12 +131,17 @@ class RegisterResult:
     scans: list[ScanRecord]
     multiway: MultiwayResult | None
     timings: dict[str, float]
-    clouds: list = field(default_factory=list)  # registered per-scan clouds (marker frame, normals)
+    clouds: list = field(default_factory=list)  # registered per-scan clouds (marker frame, no normals)
     out_T_marker: np.ndarray = field(default_factory=lambda: np.eye(4))  # marker -> output frame
 
     @property
     def used(self) -> list[ScanRecord]:
         return [s for s in self.scans if not s.skipped]
+
+    @property
+    def cameras(self) -> list[np.ndarray]:
+        """The camera position of each of :attr:`clouds` (marker frame, final poses)."""
+        return [final_camera(r) for r in self.used]
 
     @property
     def pose_sources(self) -> dict[str, int]:
@@ -174,12 +186,12 @@ def _crop_box(options: RegisterOptions, session: SessionInfo, world_T_marker: np
 class CloudMemo:
     """What a run has made of its scans already, kept for :func:`run_register`: each scan's
     global pose (reused when asked for with the same board, marker pose and options) and its
-    cloud (cropped, normals toward the camera; reused when made with the very same pose, crop
-    box and surface options). Anything else is made anew. The scans must hold the depth as
-    stored (what :func:`read_scan` gives)."""
+    cloud (:func:`scan_points`; reused when made with the very same pose and crop box).
+    Anything else is made anew. The scans must hold the depth as stored (what
+    :func:`read_scan` gives)."""
 
     def __init__(self) -> None:
-        self._clouds: dict[str, tuple[np.ndarray, CropBox | None, SurfaceOptions, Any]] = {}
+        self._clouds: dict[str, tuple[np.ndarray, CropBox | None, Any]] = {}
         self._poses: dict[str, tuple[tuple, GlobalPose | None]] = {}
         self.hits = 0  # poses and clouds reused
 
@@ -205,22 +217,35 @@ class CloudMemo:
         cloud = self._clouds.get(folder)
         return cloud is not None and np.array_equal(cloud[0], known[1].marker_T_camera)
 
-    def put(self, folder: str, marker_T_camera: np.ndarray, box: CropBox | None, surface: SurfaceOptions,
-            cloud) -> None:
+    def keep(self, scan, options: RegisterOptions, session: SessionInfo) -> None:
+        """Make a scan just stored now (its images in memory, the depth as stored) what
+        :func:`run_register` of its store with ``options`` will ask for: its global pose and
+        its cropped cloud, so that the registration need not read its images."""
+        if scan.path is None:
+            return
+        try:
+            box = crop_box_marker(options, session)
+            pose = self.pose(scan.path.name, scan, options.board or recorded_board(session.board),
+                             session.world_T_marker, options)
+        except ReconError:
+            return  # the registration meets it again, and reports it where it belongs
+        if pose is not None:
+            self.put(scan.path.name, pose.marker_T_camera, box, scan_points(scan, pose, box))
+
+    def put(self, folder: str, marker_T_camera: np.ndarray, box: CropBox | None, cloud) -> None:
         import open3d as o3d
 
-        self._clouds[folder] = (np.array(marker_T_camera, dtype=float), box, surface, o3d.geometry.PointCloud(cloud))
+        self._clouds[folder] = (np.array(marker_T_camera, dtype=float), box, o3d.geometry.PointCloud(cloud))
 
-    def get(self, folder: str, marker_T_camera: np.ndarray, box: CropBox | None, surface: SurfaceOptions):
+    def get(self, folder: str, marker_T_camera: np.ndarray, box: CropBox | None):
         """A copy of the scan's cloud made with these inputs, or None."""
         import open3d as o3d
 
         known = self._clouds.get(folder)
-        if known is None or known[2] != surface or not np.array_equal(known[0], marker_T_camera) \
-                or not _same_box(known[1], box):
+        if known is None or not np.array_equal(known[0], marker_T_camera) or not _same_box(known[1], box):
             return None
         self.hits += 1
-        return o3d.geometry.PointCloud(known[3])
+        return o3d.geometry.PointCloud(known[2])
 
 
 def _pose_key(board, world_T_marker: np.ndarray | None, options: RegisterOptions) -> tuple:
@@ -236,15 +261,22 @@ def _same_box(a: CropBox | None, b: CropBox | None) -> bool:
         and a.support_margin == b.support_margin
 
 
-def scan_cloud(scan, pose: GlobalPose, box: CropBox | None, surface: SurfaceOptions):
-    """A scan's points in the marker frame (placed by its global pose), cropped to the box
-    (when given), with normals turned toward its camera."""
+def scan_points(scan, pose: GlobalPose, box: CropBox | None):
+    """A scan's points (and colours) in the marker frame, placed by its global pose and
+    cropped to the box (when given). No normals: :func:`fuse` estimates those on the fused
+    cloud, from the scans' camera positions."""
     if box is not None:
         scan = in_box_pixels(scan, box, pose.marker_T_camera)
     cloud = scan.to_open3d_cloud(pose.marker_T_camera)
     if box is not None:
         cloud = crop_cloud(cloud, box)
-    return oriented_cloud(cloud, pose.marker_T_camera[:3, 3], surface)
+    return cloud
+
+
+def scan_cloud(scan, pose: GlobalPose, box: CropBox | None, surface: SurfaceOptions):
+    """:func:`scan_points` with the scan's own normals, turned toward its camera (a cloud
+    that stands alone: a script's fragment)."""
+    return oriented_cloud(scan_points(scan, pose, box), pose.marker_T_camera[:3, 3], surface)
 
 
 def in_box_pixels(scan, box: CropBox, marker_T_camera: np.ndarray):
@@ -293,15 +325,15 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
     board = options.board or recorded_board(session.board)
     rng = np.random.default_rng(seed)
 
-    # 1. global registration, cropping, oriented normals (per scan)
+    # 1. global registration and cropping (per scan)
     records: list[ScanRecord] = []
-    cloud_of: dict[int, Any] = {}  # record position -> its cropped, oriented cloud
+    cloud_of: dict[int, Any] = {}  # record position -> its cropped cloud
 
     def add_cloud(pos: int, rec: ScanRecord, scan) -> None:
-        known = None if memo is None else memo.get(rec.folder, rec.placed_pose.marker_T_camera, box, options.surface)
+        known = None if memo is None else memo.get(rec.folder, rec.placed_pose.marker_T_camera, box)
         if known is None and scan.depth.size == 0:  # read without its images: the memo's cloud was for other inputs
             scan = read_scan(folder / rec.folder)
-        cloud = known if known is not None else scan_cloud(scan, rec.placed_pose, box, options.surface)
+        cloud = known if known is not None else scan_points(scan, rec.placed_pose, box)
         rec.points = len(cloud.points)
         if rec.points < 100:
             rec.skipped = f"{rec.points} points inside the crop box"
@@ -370,13 +402,16 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
     frame = "world" if world_T_marker is not None else "marker"
     to_out = world_T_marker if world_T_marker is not None else np.eye(4)
 
-    cloud_global = write_cloud(out / "cloud_global.ply", fuse(clouds, options.surface), to_out)
+    cloud_global = write_cloud(out / "cloud_global.ply",
+                               fuse(clouds, options.surface, [final_camera(r) for r in used]), to_out)
     step("fuse (global)", 1, 1)
 
     # 2. local registration
     multiway = None
     if options.local and len(clouds) >= 2:
-        multiway = register_multiway(clouds, options.multiway, progress)
+        if options.multiway.own_normals:  # the pose graph asks for the scans' own normals
+            clouds = [oriented_cloud(c, final_camera(r), options.surface) for c, r in zip(clouds, used, strict=True)]
+        multiway = register_multiway(clouds, options.multiway, progress, [final_camera(r) for r in used])
         for c, T in zip(clouds, multiway.poses, strict=True):
             c.transform(T)
         for rec, T in zip(used, multiway.poses, strict=True):
@@ -388,7 +423,7 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
     t_local = time.perf_counter()
 
     # 3. surface
-    fused = fuse(clouds, options.surface)
+    fused = fuse(clouds, options.surface, [final_camera(r) for r in used])
     cloud_path = write_cloud(out / "cloud.ply", fused, to_out)
     mesh_path = None
     if options.mesh:

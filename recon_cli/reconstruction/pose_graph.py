@@ -30,12 +30,13 @@ correction pose per cloud.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from recon_cli.geometry.transforms import pose
 from recon_cli.reconstruction.options import MultiwayOptions  # noqa: F401 (re-exported)
@@ -69,16 +70,21 @@ class MultiwayResult:
     pruned: int  # loop closures the optimization dropped
 
 
-def prepare(cloud, voxel: float, normal_radius: float = 2.5, own_normals: bool = False):
+def prepare(cloud, voxel: float, normal_radius: float = 2.5, own_normals: bool = False,
+            camera: npt.ArrayLike | None = None):
     """Down-sampled copy with normals for point-to-plane ICP: with ``own_normals`` those of
     the cloud averaged per voxel (when it has normals), else estimated within
-    ``normal_radius`` voxels (small: normals near an object's edges stay those of their face)."""
+    ``normal_radius`` voxels (small: normals near an object's edges stay those of their face),
+    each turned toward the cloud's own normal there or, for a cloud without normals, toward
+    ``camera`` (the position of the camera that took it, in the cloud's frame)."""
     import open3d as o3d
 
     down = cloud.voxel_down_sample(voxel)
     if own_normals and cloud.has_normals():
         return down.normalize_normals()
     down.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=voxel * normal_radius, max_nn=30))
+    if camera is not None and not cloud.has_normals():
+        down.orient_normals_towards_camera_location(np.asarray(camera, dtype=float))
     return down
 
 
@@ -226,11 +232,17 @@ def maximum_spanning_tree(weights: np.ndarray) -> list[tuple[int, int]]:
 
 
 def register_multiway(clouds: list, options: MultiwayOptions = MultiwayOptions(),  # noqa: B008
-                      progress: Callable[[str, int, int], None] | None = None) -> MultiwayResult:
+                      progress: Callable[[str, int, int], None] | None = None,
+                      cameras: Sequence[npt.ArrayLike] | None = None) -> MultiwayResult:
     """Pose-graph registration of globally registered clouds (Open3D point clouds). With
     ``rounds`` > 1 the graph is built again from the optimized poses (every pairwise ICP then
-    starts closer to its answer, and pruned loop closures get a second chance)."""
-    down = [prepare(c, options.voxel, options.normal_radius, options.own_normals) for c in clouds]
+    starts closer to its answer, and pruned loop closures get a second chance). ``cameras``:
+    each cloud's camera position (its frame), which turns the normals of clouds without
+    normals of their own (see :func:`prepare`)."""
+    if cameras is not None and len(cameras) != len(clouds):
+        raise ValueError(f"{len(clouds)} clouds but {len(cameras)} camera positions")
+    down = [prepare(c, options.voxel, options.normal_radius, options.own_normals,
+                    None if cameras is None else cameras[k]) for k, c in enumerate(clouds)]
     poses = [np.eye(4) for _ in clouds]
     result = None
     for r in range(options.rounds):

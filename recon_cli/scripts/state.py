@@ -35,6 +35,7 @@ from recon_cli.geometry.view import Frame
 from recon_cli.objects import SceneObject
 from recon_cli.outputs import inside
 from recon_cli.realism import RealismProfile
+from recon_cli.reconstruction.pipeline import CloudMemo
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.collision import ObjectBox
 from recon_cli.scripts import commands as C
@@ -150,6 +151,7 @@ class RunState:
     last_view: tuple[C.Command, np.ndarray] | None = None  # the move the next scan belongs to, its goal pose
     move_failed: bool = False
     registered: Any = None  # reconstruction.pipeline.RegisterResult of the current scans
+    memo: CloudMemo = field(default_factory=CloudMemo)  # the current store's scans, made at scan time
     reconstruction: dict[str, Path] = field(default_factory=dict)
     fragments: dict[str, Any] = field(default_factory=dict)  # thesis dialect: name -> Open3D cloud
     fragment_box: Any = None  # crop box of fragments (marker frame)
@@ -216,6 +218,7 @@ class RunState:
         self.turned = turned
         self.session = None
         self.registered = None
+        self.memo = CloudMemo()  # side 2's store names its scans anew
         self.reconstruction = {}
         self.last_view = None
         self.move_failed = False

@@ -35,7 +35,7 @@ from recon_cli.planning.planner import MotionPlanner
 from recon_cli.reconstruction.crop import CropBox
 from recon_cli.reconstruction.evaluation import histogram_png, signed_distances, within_shares
 from recon_cli.reconstruction.options import COVERAGE_TOLERANCE
-from recon_cli.reconstruction.pipeline import CloudMemo, run_register, scan_cloud
+from recon_cli.reconstruction.pipeline import CloudMemo, run_register, scan_points
 from recon_cli.reconstruction.sides import register_sides
 from recon_cli.recording import open_recorder
 from recon_cli.recording.results import record_registration
@@ -180,9 +180,8 @@ class Autoscan:
         pose = self.memo.pose(scan.path.name, scan, registration.board or self.board, self.cell.world_T_marker,
                               registration)
         assert pose is not None  # the kinematics place every scan (world_T_marker is known)
-        surface = registration.surface
-        cloud = scan_cloud(scan, pose, self.crop_marker, surface)
-        self.memo.put(scan.path.name, pose.marker_T_camera, self.crop_marker, surface, cloud)
+        cloud = scan_points(scan, pose, self.crop_marker)
+        self.memo.put(scan.path.name, pose.marker_T_camera, self.crop_marker, cloud)
         cloud.transform(self.cell.world_T_marker)
         pts = np.asarray(cloud.voxel_down_sample(self.vp.partial_voxel).points)
         if len(pts):

@@ -84,7 +84,7 @@ def test_an_import_inside_an_import_is_counted_once():
     """scan_cloud (3 s) imports a library (2 s), whose module imports another (0.5 s): the
     imports are 2 s (cProfile's cumulative time counts the outermost call), taken from the
     scan clouds."""
-    cloud, load = _key("scan clouds and normals"), _key("imports (libraries loaded on first use)")
+    cloud, load = _key("scan clouds"), _key("imports (libraries loaded on first use)")
     run, body = ("w.py", 1, "run"), ("lib/__init__.py", 1, "<module>")
     raw = {
         run: (1, 1, 0.0, 3.0, {}),
@@ -94,7 +94,7 @@ def test_an_import_inside_an_import_is_counted_once():
     }
     rows = {r.stage: r.seconds for r in stage_rows(raw, 0.0, 3.0)}
     assert rows["imports (libraries loaded on first use)"] == pytest.approx(2.0)
-    assert rows["scan clouds and normals"] == pytest.approx(1.0) and rows[OTHER] == pytest.approx(0.0)
+    assert rows["scan clouds"] == pytest.approx(1.0) and rows[OTHER] == pytest.approx(0.0)
 
 
 @pytest.mark.slow
@@ -110,7 +110,7 @@ def test_bench_profile_quick(capsys, tmp_path):
     assert list(stages) == [START_UP, *stage_names(), OTHER]
     total = data["total_s"]
     assert total > 0 and abs(sum(s["seconds"] for s in stages.values()) - total) <= 0.01 * total
-    for name in ("session set-up", "rendering", "sensor model", "scan storage", "scan clouds and normals",
+    for name in ("session set-up", "rendering", "sensor model", "scan storage", "scan clouds",
                  "ellipsoid fits", "view selection and motion planning", "robot execution", "registration",
                  "report page", "pictures (hand-over, final wait)"):
         assert stages[name]["seconds"] > 0, (name, {k: v["seconds"] for k, v in stages.items()})

@@ -398,10 +398,10 @@ def test_fuse_refuses_points_too_far_apart_for_its_voxel_grid():
 
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.array([[0.0, 0, 0], [1e7, 0, 0]])))
     with pytest.raises(InputError, match=r"the scans' points span 1e\+07 m, too far for a voxel grid of 0.001 m"):
-        fuse([cloud], SurfaceOptions(voxel=0.001))
+        fuse([cloud], SurfaceOptions(voxel=0.001), [np.zeros(3)])
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.array([[0.0, 0, 0], [np.nan, 0, 0]])))
     with pytest.raises(InputError, match="NaN or infinite coordinates"):
-        fuse([cloud], SurfaceOptions(voxel=0.001))
+        fuse([cloud], SurfaceOptions(voxel=0.001), [np.zeros(3)])
 
 
 # ----------------------------------------------------------------------------- schemas and docs

@@ -156,7 +156,7 @@ def test_a_memo_of_the_poses_and_clouds_gives_the_same_cloud_without_reading_the
     the images of no scan but the one whose pose waits for the board's correction."""
     from recon_cli.perception.charuco import recorded_board
     from recon_cli.reconstruction import scan_store
-    from recon_cli.reconstruction.pipeline import CloudMemo, crop_box_marker, scan_cloud
+    from recon_cli.reconstruction.pipeline import CloudMemo, crop_box_marker, scan_points
 
     folder, _ = session
     options = RegisterOptions()
@@ -167,8 +167,7 @@ def test_a_memo_of_the_poses_and_clouds_gives_the_same_cloud_without_reading_the
     for _, scan_folder in store.scan_folders():
         scan = scan_store.read_scan(scan_folder)
         pose = memo.pose(scan_folder.name, scan, board, info.world_T_marker, options)
-        memo.put(scan_folder.name, pose.marker_T_camera, box, options.surface, scan_cloud(scan, pose, box,
-                                                                                           options.surface))
+        memo.put(scan_folder.name, pose.marker_T_camera, box, scan_points(scan, pose, box))
     read = scan_store._read_image
     images: list[str] = []
 

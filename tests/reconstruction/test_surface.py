@@ -25,9 +25,31 @@ def _box_scans(rng: np.random.Generator) -> list:
     return clouds
 
 
+#: where the two 'scans' were taken from: in front of the side face (y = 0) and above the top
+CAMERAS = [np.array([0.03, -0.3, 0.3]), np.array([0.03, -0.2, 0.4])]
+
+
+def test_fused_normals_face_the_cameras_that_saw_them():
+    """The normals are estimated on the fused cloud and turned toward the cameras of the
+    points in each voxel: the top's up, the side's toward -y, also where the surface is seen
+    at a slant."""
+    fused = fuse(_box_scans(np.random.default_rng(0)), SurfaceOptions(), CAMERAS)
+    p, n = np.asarray(fused.points), np.asarray(fused.normals)
+    assert np.allclose(np.linalg.norm(n, axis=1), 1.0)
+    inner = (p[:, 0] > 0.005) & (p[:, 0] < 0.055)  # away from the box's edges
+    top = inner & (np.abs(p[:, 2] - 0.030) < 0.0006) & (p[:, 1] > 0.005) & (p[:, 1] < 0.035)
+    side = inner & (np.abs(p[:, 1]) < 0.0006) & (p[:, 2] > 0.005) & (p[:, 2] < 0.025)
+    assert top.sum() > 1000 and side.sum() > 1000
+    assert np.all(n[top] @ np.array([0.0, 0.0, 1.0]) > 0.95)
+    assert np.all(n[side] @ np.array([0.0, -1.0, 0.0]) > 0.95)
+    with pytest.raises(ValueError, match="2 clouds but 1 camera positions"):
+        fuse(_box_scans(np.random.default_rng(0)), SurfaceOptions(), CAMERAS[:1])
+
+
 def test_radius_filter_drops_flying_points_and_keeps_the_faces():
     def counts(kind):
-        p = np.asarray(fuse(_box_scans(np.random.default_rng(0)), SurfaceOptions(outlier_filter=kind)).points)
+        p = np.asarray(fuse(_box_scans(np.random.default_rng(0)), SurfaceOptions(outlier_filter=kind),
+                            CAMERAS).points)
         return np.sum(np.abs(p[:, 2] - 0.030) < 0.0006), np.sum(p[:, 2] > 0.035)
 
     top_none, flying_none = counts("none")

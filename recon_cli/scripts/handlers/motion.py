@@ -115,6 +115,8 @@ def scan(state: RunState, cmd: C.Scan, report: CommandReport) -> None:
     s = state.acquisition.scan(view_record(view, T), name=cmd.name)
     report.details.update(scan=s.index, points=int(np.count_nonzero(s.depth > 0)))
     state.registered = None  # a new scan invalidates earlier registration results
+    # its pose and cloud now, while its images are in memory: the registration reuses them
+    state.memo.keep(s, state.config.registration, state.store.session())
     if isinstance(cmd, C.FragmentScan):
 
         make_fragment(state, cmd.name or f"scan_{s.index:04d}", s, report)

@@ -36,7 +36,8 @@ def register_scans(state: RunState, local=True, board=True, loop_closures="icp",
     opts = replace(opts, multiway=replace(opts.multiway, loop_closure_init=loop_closures))
     if surface is not None:
         opts = replace(opts, surface=surface)
-    state.registered = run_register(state.store.root, state.side_out / "reconstruction", opts, seed=state.config.seed)
+    state.registered = run_register(state.store.root, state.side_out / "reconstruction", opts, seed=state.config.seed,
+                                    memo=state.memo)
     if state.recorder is not None:
 
         record_registration(state.recorder, state.registered, state.store.root)
@@ -65,7 +66,7 @@ def reconstruct(state: RunState, cmd: C.Reconstruct, report: CommandReport) -> N
     surface = replace(state.config.registration.surface or SurfaceOptions(), voxel=cmd.voxel,
                       poisson_depth=cmd.depth, density_quantile=cmd.trim)
     r = state.registered or register_scans(state, surface=surface)
-    fused = fuse(r.clouds, surface)
+    fused = fuse(r.clouds, surface, r.cameras)
     folder = state.side_out / "reconstruction"
     cloud = write_cloud(folder / "cloud.ply", fused, r.out_T_marker)
     mesh, _ = poisson_mesh(fused, surface)

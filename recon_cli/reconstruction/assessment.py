@@ -78,7 +78,8 @@ def camera_views(folder: Path) -> list[CameraView]:
         z_min, z_max, incidence = sensor.z_min, sensor.z_max, sensor.max_incidence
     else:
         z_min, z_max, incidence = recorded[0], recorded[1], math.radians(recorded[2])
-    return [CameraView(s.world_T_camera_fk, s.intrinsics, z_min, z_max, incidence) for s in store]
+    records = (store.read(i, images=False) for i in store.indices())  # the poses: no image decoded
+    return [CameraView(s.world_T_camera_fk, s.intrinsics, z_min, z_max, incidence) for s in records]
 
 
 def align_icp(points: np.ndarray, reference, distance: float = 0.005, seed: int = 0,

@@ -251,10 +251,11 @@ class ScanStore:
     def next_index(self) -> int:
         return max((i for i, _ in self.scan_folders()), default=-1) + 1
 
-    def read(self, index: int) -> Scan:
+    def read(self, index: int, images: bool = True) -> Scan:
         """One scan; a scan folder (or a file in it) that is a link leading out of the store
-        is refused like a broken scan (MetadataError)."""
-        return read_scan(self.root / f"scan_{index:04d}")
+        is refused like a broken scan (MetadataError). ``images=False``: its records alone
+        (see :func:`read_scan`)."""
+        return read_scan(self.root / f"scan_{index:04d}", images=images)
 
     def __iter__(self):
         for i in self.indices():

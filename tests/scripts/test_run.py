@@ -37,6 +37,27 @@ def test_smoke_script_end_to_end(tmp_path, capsys):
     assert abs(ev["mean_mm"]) < 1.0
 
 
+def test_a_scripts_registration_reuses_what_each_scan_made_and_reads_no_depth_image(tmp_path, monkeypatch):
+    """Each scan's board pose and cropped cloud are made while its images are in memory
+    (CloudMemo.keep); the <register/> at the end reuses them and decodes no depth image."""
+    from recon_cli.reconstruction import scan_store
+
+    read = scan_store._read_image
+    depth_reads: list[str] = []
+
+    def counted(path, *args, **kwargs):
+        if path.name == "depth.png":
+            depth_reads.append(path.parent.name)
+        return read(path, *args, **kwargs)
+
+    monkeypatch.setattr(scan_store, "_read_image", counted)
+    out = tmp_path / "run"
+    assert main(["run", str(SCRIPTS_DIR / "smoke.xml"), "--out", str(out)]) == 0
+    report = json.loads((out / "run_report.json").read_text())
+    assert report["scans"] == 3 and [c["status"] for c in report["commands"]] == ["done"] * len(report["commands"])
+    assert depth_reads == []
+
+
 def test_dry_run_plans_but_does_not_move(tmp_path):
     out = tmp_path / "dry"
     p = _script(tmp_path, GOOD.format(phi=0) + GOOD.format(phi=120) + "<register/>\n")

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -71,6 +73,8 @@ class Acquisition:
         self.depth_scale = depth_scale
         self.ground_truth = ground_truth
         self.on_scan = on_scan  # told of every scan once it is written (recordings)
+        self._writer: ThreadPoolExecutor | None = None  # writes a scan while its caller goes on
+        self._writing: Future[Path] | None = None  # the scan being written
 
     def move_to_pose(self, world_T_camera: np.ndarray, what: str = "view") -> MoveReport:
         q0 = self.robot.measured_joints()
@@ -108,9 +112,16 @@ class Acquisition:
                           kind="settle", joint=names[int(worst[0])], value=float(err[worst[0]]), stopped=stopped,
                           hint="check the drives and the settling tolerance; completed scans are kept")
 
-    def scan(self, planned: dict, move: MoveReport | None = None, name: str | None = None) -> Scan:
+    def scan(self, planned: dict, move: MoveReport | None = None, name: str | None = None, *,
+             written: bool = True) -> Scan:
         """Capture a frame at the settled robot and write it as the next scan (``name``, when
-        given, is stored in scan.json); the scan returned holds the depth as stored."""
+        given, is stored in scan.json); the scan returned holds the depth as stored.
+
+        ``written=False``: the scan is written beside the caller (PNG encoding lets go of the
+        interpreter lock), which must call :meth:`settle` before it reads the store and
+        before its command ends; a failed write is raised there. The scan's ``path`` is its
+        folder-to-be."""
+        self.settle()
         t0 = time.time()
         frame = self.camera.capture()
         t1 = time.time()
@@ -132,9 +143,19 @@ class Acquisition:
             ground_truth=self.ground_truth() if self.ground_truth else None,
             distortion=frame.distortion,
         )
-        folder = self.store.write(scan, self.depth_scale)
+        if self._writer is None:
+            self._writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scan-writer")
+        self._writing = self._writer.submit(self.store.write, scan, self.depth_scale)
         # from here on the scan is what its readers get: the depth as stored
-        scan = replace(scan, depth=stored_depth(scan.depth, self.depth_scale), path=folder)
+        scan = replace(scan, depth=stored_depth(scan.depth, self.depth_scale), path=self.store.folder(scan.index))
+        if written or self.on_scan is not None:
+            self.settle()
         if self.on_scan is not None:
             self.on_scan(scan)
         return scan
+
+    def settle(self) -> None:
+        """Wait until the scan being written is in the store (its FileError raised here)."""
+        writing, self._writing = self._writing, None
+        if writing is not None:
+            writing.result()

@@ -12,7 +12,8 @@ be measured. Outputs are in the world frame when the session knows the marker's 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -294,6 +295,20 @@ def in_box_pixels(scan, box: CropBox, marker_T_camera: np.ndarray):
                    distortion=None)
 
 
+def read_ahead(read: Callable[[Path], Any], folders: list[Path]) -> Iterator[Callable[[], Any]]:
+    """``read`` of each folder in turn, the next one read beside the caller (a PNG decodes
+    without the interpreter lock) while it works on this one: yields, in order, what gives
+    each result (or raises its error)."""
+    if not folders:
+        return
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="scan-reader") as pool:
+        ahead = pool.submit(read, folders[0])
+        for folder in folders[1:]:
+            current, ahead = ahead, pool.submit(read, folder)
+            yield current.result
+        yield ahead.result
+
+
 def crop_box_marker(options: RegisterOptions, session: SessionInfo) -> CropBox:
     """The crop box of a session (or of the options) in the marker frame."""
     return _crop_box(options, session, session.world_T_marker)
@@ -345,12 +360,16 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
         and world_T_marker is not None
     fk: dict[int, np.ndarray] = {}  # record position -> forward-kinematics pose (marker frame)
     deferred: list[tuple[int, Path]] = []
+    def read(scan_folder: Path):
+        store.check_inside(scan_folder)
+        # the images only when the memo does not know the scan's pose and cloud already
+        return read_scan(scan_folder, images=memo is None or options.perturb is not None
+                         or not memo.has(scan_folder.name, board, world_T_marker, options))
+
+    reads = read_ahead(read, [f for _, f in scan_folders])
     for k, (index, scan_folder) in enumerate(scan_folders):
         try:
-            store.check_inside(scan_folder)
-            # the images only when the memo does not know the scan's pose and cloud already
-            scan = read_scan(scan_folder, images=memo is None or options.perturb is not None
-                             or not memo.has(scan_folder.name, board, world_T_marker, options))
+            scan = next(reads)()
         except MetadataError as exc:  # a bad scan is skipped with its reason, the others go on
             records.append(ScanRecord(index, None, skipped=exc.one_line(), folder=scan_folder.name))
             step("global registration", k + 1, len(scan_folders))
@@ -382,8 +401,9 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
         pairs = [(records[i].placed_pose.source_pose, fk[i]) for i in fk
                  if records[i].placed_pose.source is PoseSource.CHARUCO and not records[i].skipped]
         correction = kinematic_correction([b for b, _ in pairs], [f for _, f in pairs])
-        for i, scan_folder in deferred:
-            rec, scan = records[i], read_scan(scan_folder)
+        again = read_ahead(read_scan, [f for _, f in deferred])
+        for i, _ in deferred:
+            rec, scan = records[i], next(again)()
             if correction is not None:
                 rec.pose = corrected_pose(scan, rec.placed_pose, correction.apply(fk[i]), board, options.board_plane)
             add_cloud(i, rec, scan)

@@ -167,9 +167,13 @@ class ScanStore:
                             hint="choose a writable output folder") from None
         return store
 
+    def folder(self, index: int) -> Path:
+        """The folder of scan ``index`` (whether it is written or not)."""
+        return self.root / f"scan_{index:04d}"
+
     def write(self, scan: Scan, depth_scale: float) -> Path:
         """Write a scan atomically (temporary folder, then rename). Returns its folder."""
-        final = self.root / f"scan_{scan.index:04d}"
+        final = self.folder(scan.index)
         tmp = self.root / f".scan_{scan.index:04d}.tmp-{os.getpid()}"
         if final.exists() or final.is_symlink():
             raise FileError(f"scan {final} already exists", hint="use a new session folder")
@@ -255,7 +259,7 @@ class ScanStore:
         """One scan; a scan folder (or a file in it) that is a link leading out of the store
         is refused like a broken scan (MetadataError). ``images=False``: its records alone
         (see :func:`read_scan`)."""
-        return read_scan(self.root / f"scan_{index:04d}", images=images)
+        return read_scan(self.folder(index), images=images)
 
     def __iter__(self):
         for i in self.indices():

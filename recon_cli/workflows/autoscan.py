@@ -174,18 +174,21 @@ class Autoscan:
     def _scan(self, view_T: np.ndarray) -> None:
         """Scan where the robot is; add the registered, cropped points to the partial object."""
 
-        scan = self.acq.scan(view_record(None, view_T))
+        scan = self.acq.scan(view_record(None, view_T), written=False)  # written while its cloud is made
         assert scan.path is not None  # a stored scan knows its folder
-        registration = self.opt.config.registration
-        pose = self.memo.pose(scan.path.name, scan, registration.board or self.board, self.cell.world_T_marker,
-                              registration)
-        assert pose is not None  # the kinematics place every scan (world_T_marker is known)
-        cloud = scan_points(scan, pose, self.crop_marker)
-        self.memo.put(scan.path.name, pose.marker_T_camera, self.crop_marker, cloud)
-        cloud.transform(self.cell.world_T_marker)
-        pts = np.asarray(cloud.voxel_down_sample(self.vp.partial_voxel).points)
-        if len(pts):
-            self.partial.append(pts)
+        try:
+            registration = self.opt.config.registration
+            pose = self.memo.pose(scan.path.name, scan, registration.board or self.board, self.cell.world_T_marker,
+                                  registration)
+            assert pose is not None  # the kinematics place every scan (world_T_marker is known)
+            cloud = scan_points(scan, pose, self.crop_marker)
+            self.memo.put(scan.path.name, pose.marker_T_camera, self.crop_marker, cloud)
+            cloud.transform(self.cell.world_T_marker)
+            pts = np.asarray(cloud.voxel_down_sample(self.vp.partial_voxel).points)
+            if len(pts):
+                self.partial.append(pts)
+        finally:
+            self.acq.settle()
         self._place_prior()
 
     def _place_prior(self) -> None:

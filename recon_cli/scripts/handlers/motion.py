@@ -112,11 +112,15 @@ def scan(state: RunState, cmd: C.Scan, report: CommandReport) -> None:
     last = state.last_view
     view = last[0].view if last and isinstance(last[0], C.MoveView) else None
     T = last[1] if last else state.cell.kin.world_T_camera(state.station.robot.measured_joints())
-    s = state.acquisition.scan(view_record(view, T), name=cmd.name)
+    s = state.acquisition.scan(view_record(view, T), name=cmd.name, written=False)
     report.details.update(scan=s.index, points=int(np.count_nonzero(s.depth > 0)))
     state.registered = None  # a new scan invalidates earlier registration results
-    # its pose and cloud now, while its images are in memory: the registration reuses them
-    state.memo.keep(s, state.config.registration, state.store.session())
+    # its pose and cloud now, while its images are in memory and it is being written: the
+    # registration reuses them
+    try:
+        state.memo.keep(s, state.config.registration, state.store.session())
+    finally:
+        state.acquisition.settle()
     if isinstance(cmd, C.FragmentScan):
 
         make_fragment(state, cmd.name or f"scan_{s.index:04d}", s, report)

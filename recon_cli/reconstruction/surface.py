@@ -36,10 +36,11 @@ def _check_extent(cloud, voxel: float) -> None:
     pts = np.asarray(cloud.points)
     if not len(pts):
         return
-    if not np.all(np.isfinite(pts)):
+    lo, hi = pts.min(axis=0), pts.max(axis=0)  # NaN and infinities reach the bounds
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         raise InputError("the scans' points hold NaN or infinite coordinates",
                          hint="check the scans' poses and intrinsics")
-    span = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+    span = float(np.max(hi - lo))
     if span > voxel * MAX_GRID_VOXELS / 2:
         raise InputError(f"the scans' points span {span:.3g} m, too far for a voxel grid of {voxel:g} m",
                          hint="check the scans' poses (a pose far off places its scan far away)")

@@ -87,6 +87,20 @@ def test_incidence_in_two_bands_is_the_whole_image_bit_for_bit():
     assert edge[0].all() and edge[-1].all() and not edge[h // 2, 60]
 
 
+def test_colour_noise_is_the_colour_plus_noise_rounded_and_clipped():
+    """The colour model draws one standard normal per channel (float32) and keeps the
+    colour + noise x std, rounded and clipped to 0..255, bit for bit, including saturation."""
+    sensor = motioncam_3d_m()
+    color = np.random.default_rng(4).integers(0, 256, (60, 80, 3), dtype=np.uint8)
+    color[:5], color[-5:] = 0, 255
+    noisy = sensor.apply_color(color, np.random.default_rng(9))
+    draws = np.random.default_rng(9).standard_normal(color.shape, dtype=np.float32)
+    expected = np.clip(np.rint(color.astype(np.float32) + draws * sensor.color_noise_std), 0, 255).astype(np.uint8)
+    assert sensor.color_noise_std > 0 and noisy.dtype == np.uint8
+    assert np.array_equal(noisy, expected) and not np.array_equal(noisy, color)
+    assert sensor.apply_color(color, None) is color
+
+
 def _probe_scene(geom_type, size, pos, quat, width=320, height=240, fovy=40.0):
     spec = mujoco.MjSpec()
     spec.visual.global_.offwidth, spec.visual.global_.offheight = width, height

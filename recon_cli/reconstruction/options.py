@@ -6,7 +6,7 @@ defaults from it without loading Open3D or OpenCV.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 from recon_cli.errors import InputError
@@ -53,6 +53,11 @@ class SurfaceOptions:
     outlier_std_ratio: float = 3.0
     poisson_depth: int = 9  # octree depth (thesis: 8)
     density_quantile: float = 0.02  # drop mesh vertices below this quantile of Poisson density
+
+    def fuses_like(self, other: SurfaceOptions) -> bool:
+        """Whether fusion with these options gives what it gives with ``other`` (they differ
+        at most in the Poisson surface)."""
+        return replace(self, poisson_depth=other.poisson_depth, density_quantile=other.density_quantile) == other
 
     def __post_init__(self) -> None:
         _positive("surface voxel", self.voxel)

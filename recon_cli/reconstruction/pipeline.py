@@ -134,6 +134,17 @@ class RegisterResult:
     timings: dict[str, float]
     clouds: list = field(default_factory=list)  # registered per-scan clouds (marker frame, no normals)
     out_T_marker: np.ndarray = field(default_factory=lambda: np.eye(4))  # marker -> output frame
+    fused: Any = None  # the fused cloud of cloud.ply (marker frame)
+    surface: SurfaceOptions = field(default_factory=SurfaceOptions)  # what fused it
+
+    def fused_with(self, surface: SurfaceOptions):
+        """The scans fused with ``surface``: the fused cloud at hand when those options fuse
+        like the registration's own (a copy), else fused anew."""
+        import open3d as o3d
+
+        if self.fused is not None and surface.fuses_like(self.surface):
+            return o3d.geometry.PointCloud(self.fused)
+        return fuse(self.clouds, surface, self.cameras)
 
     @property
     def used(self) -> list[ScanRecord]:
@@ -486,4 +497,4 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
         outputs=reg_file.RegisterOutputs(cloud_path.name, cloud_global.name,
                                          None if mesh_path is None else mesh_path.name)))
     return RegisterResult(out, cloud_path, cloud_global, mesh_path, report, frame, records, multiway, timings,
-                          clouds, to_out)
+                          clouds, to_out, fused, options.surface)

@@ -179,3 +179,21 @@ def test_a_memo_of_the_poses_and_clouds_gives_the_same_cloud_without_reading_the
     again = run_register(folder, tmp_path / "memo", options, memo=memo)
     assert again.cloud.read_bytes() == registered.cloud.read_bytes()
     assert set(images) == {f"scan_{COVERED - 1:04d}"}, images
+
+
+def test_the_fused_cloud_is_reused_for_a_surface_that_fuses_alike(registered):
+    """A <reconstruct/> with the registration's fusion options (its Poisson options aside)
+    takes the fused cloud at hand, the very points of cloud.ply; other fusion options fuse
+    the scans anew."""
+    from dataclasses import replace
+
+    from recon_cli.reconstruction.surface import fuse
+
+    surface = registered.surface
+    again = fuse(registered.clouds, surface, registered.cameras)
+    kept = registered.fused_with(replace(surface, poisson_depth=7, density_quantile=0.05))
+    assert kept is not registered.fused
+    assert np.array_equal(np.asarray(kept.points), np.asarray(again.points))
+    assert np.array_equal(np.asarray(kept.normals), np.asarray(again.normals))
+    coarse = registered.fused_with(replace(surface, voxel=0.002))
+    assert len(coarse.points) < 0.5 * len(again.points)

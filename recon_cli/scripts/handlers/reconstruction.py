@@ -13,7 +13,7 @@ from recon_cli.inputs.meshes import read_mesh
 from recon_cli.outputs import atomic_write
 from recon_cli.reconstruction.assessment import run_evaluate
 from recon_cli.reconstruction.pipeline import run_register
-from recon_cli.reconstruction.surface import SurfaceOptions, fuse, poisson_mesh, write_cloud, write_mesh
+from recon_cli.reconstruction.surface import SurfaceOptions, poisson_mesh, write_cloud, write_mesh
 from recon_cli.recording.results import record_registration
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.checks import readable_file
@@ -66,7 +66,7 @@ def reconstruct(state: RunState, cmd: C.Reconstruct, report: CommandReport) -> N
     surface = replace(state.config.registration.surface or SurfaceOptions(), voxel=cmd.voxel,
                       poisson_depth=cmd.depth, density_quantile=cmd.trim)
     r = state.registered or register_scans(state, surface=surface)
-    fused = fuse(r.clouds, surface, r.cameras)
+    fused = r.fused_with(surface)
     folder = state.side_out / "reconstruction"
     cloud = write_cloud(folder / "cloud.ply", fused, r.out_T_marker)
     mesh, _ = poisson_mesh(fused, surface)

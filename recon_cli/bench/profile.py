@@ -55,7 +55,7 @@ STAGES: tuple[tuple[str, str, str], ...] = (
     ("sensor model", "recon_cli.perception.sensor", "SensorModel.apply"),
     ("sensor model", "recon_cli.perception.sensor", "SensorModel.apply_color"),
     ("sensor model", "recon_cli.backends.sim.camera", "SimCamera._realism_effects"),
-    ("scan storage", "recon_cli.reconstruction.scan_store", "ScanStore.write"),
+    ("scan storage", "recon_cli.acquisition", "Acquisition.settle"),  # the wait for the writer thread
     ("board poses", "recon_cli.reconstruction.global_registration", "global_pose"),
     ("scan clouds", "recon_cli.reconstruction.pipeline", "scan_points"),
     ("ellipsoid fits", "recon_cli.viewplan.ellipsoid", "Ellipsoid.from_cloud"),

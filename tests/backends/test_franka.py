@@ -289,6 +289,26 @@ def test_a_loop_that_stalls_for_milliseconds_resumes_within_the_limits(fr3, stan
     robot.close()
 
 
+def test_the_first_resumption_of_a_process_answers_in_time(fr3, standin):
+    """The resumption's blend tables are made before the 1 kHz loop starts: made at the
+    first resumption (about 5 ms) they made its answer late, and the controller then saw a
+    jerk above its limit (6 of 8 fresh processes with these two stalls early in their
+    first motion)."""
+    from recon_cli.backends.hardware import resume
+
+    resume._blends.cache_clear()
+    robot = FrankaRobot(CONFIG, fr3.joint_names, fr3.kin.limits)
+    robot.robot = _StallingRobot(robot.robot, [{7: ("write", 0.0025), 11: ("read", 0.0073)}])
+    lim = fr3.kin.limits
+    far = HOME + np.radians([25.0, 8.0, -15.0, 12.0, 30.0, -15.0, 45.0])
+    traj = parameterize(np.array([robot.measured_joints(), far]), lim.velocity, lim.acceleration, 0.6, 0.6)
+    report = robot.execute(traj)
+    assert report.settled and report.lost_cycles >= 2
+    assert robot.errors() == []
+    assert "motion limit violated" not in standin.log_path.read_text()
+    robot.close()
+
+
 class _Garbling(_Stalling):
     """As :class:`_Stalling`, and from the stalled read on, every state reports ``dq_d`` of
     the third joint as NaN (a controller's reference gone wrong)."""

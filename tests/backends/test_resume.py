@@ -173,3 +173,11 @@ def test_a_reference_names_what_makes_it_unusable():
     bad_ddq[0] = np.nan
     assert Reference(np.zeros(7), np.zeros(7), bad_ddq).problem() == "its reference ddq_d of joint 1 is nan"
     assert Reference(np.zeros(7), np.zeros(6), np.zeros(7)).problem() == "its reference dq_d has 6 values, not 7"
+
+
+def test_the_blend_tables_are_made_with_the_resumption_not_in_the_loop(fr3, stream):
+    from recon_cli.backends.hardware import resume
+
+    resume._blends.cache_clear()
+    Resumption(stream, fr3.kin.limits)
+    assert resume._blends.cache_info().currsize == 1

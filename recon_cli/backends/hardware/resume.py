@@ -146,6 +146,7 @@ class Resumption:
     def __init__(self, stream: SetpointStream, limits: JointLimits) -> None:
         self.q = stream.q
         self.dt = stream.dt
+        _blends()  # made now, not in the 1 kHz loop (its first making takes milliseconds)
         jerk = limits.jerk if limits.jerk is not None else np.full(limits.n, np.inf)
         floor = 1.0 - LIMIT_SHARE
         # what the stream leaves of each limit (at least a tenth of it), per finite difference order

@@ -81,6 +81,7 @@ def defer_open3d_viewer() -> None:
 
     for name in OPEN3D_VIEWER_NAMES:
         setattr(stand_in, name, forward(name))
+
     def attribute(name: str):
         if name.startswith("__"):  # the import system's questions (__path__: not a package)
             raise AttributeError(name)

@@ -433,16 +433,16 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
     frame = "world" if world_T_marker is not None else "marker"
     to_out = world_T_marker if world_T_marker is not None else np.eye(4)
 
-    cloud_global = write_cloud(out / "cloud_global.ply",
-                               fuse(clouds, options.surface, [final_camera(r) for r in used]), to_out)
+    placed = [final_camera(r) for r in used]  # the cameras where the global poses put them
+    cloud_global = write_cloud(out / "cloud_global.ply", fuse(clouds, options.surface, placed), to_out)
     step("fuse (global)", 1, 1)
 
     # 2. local registration
     multiway = None
     if options.local and len(clouds) >= 2:
         if options.multiway.own_normals:  # the pose graph asks for the scans' own normals
-            clouds = [oriented_cloud(c, final_camera(r), options.surface) for c, r in zip(clouds, used, strict=True)]
-        multiway = register_multiway(clouds, options.multiway, progress, [final_camera(r) for r in used])
+            clouds = [oriented_cloud(c, p, options.surface) for c, p in zip(clouds, placed, strict=True)]
+        multiway = register_multiway(clouds, options.multiway, progress, placed)
         for c, T in zip(clouds, multiway.poses, strict=True):
             c.transform(T)
         for rec, T in zip(used, multiway.poses, strict=True):
@@ -454,7 +454,7 @@ def run_register(folder: Path, out: Path | OutputFolder, options: RegisterOption
     t_local = time.perf_counter()
 
     # 3. surface
-    fused = fuse(clouds, options.surface, [final_camera(r) for r in used])
+    fused = fuse(clouds, options.surface, [final_camera(r) for r in used])  # the final poses
     cloud_path = write_cloud(out / "cloud.ply", fused, to_out)
     mesh_path = None
     if options.mesh:

@@ -309,6 +309,33 @@ def test_the_first_resumption_of_a_process_answers_in_time(fr3, standin):
     robot.close()
 
 
+@pytest.mark.parametrize("stalls", [
+    {4: ("write", 0.0040), 7: ("write", 0.0009)},
+    {3: ("write", 0.0045), 4: ("write", 0.0020), 7: ("read", 0.0012)}], ids=["late-twice", "late-then-read"])
+def test_late_answers_in_the_first_cycles_of_a_slow_motion(fr3, standin, stalls):
+    """Answers a few milliseconds late in a slow motion's first cycles, where the arm is
+    nearly at rest (joint 1 by 40 degrees at 0.15 of the limits): every motion completes and
+    franka-sim flags nothing. Two ways this was a jerk reflex: a late answer reached
+    franka-sim after it had published the next state, and it applied that answer after the
+    loop had answered the state from a reference that did not contain it (the loop now waits
+    for a state that continues its last command); and walking a reference back near rest,
+    the chain turned around and passed within the match tolerance of the late answer a
+    second time, three cycles too old (a match now needs the answer's predecessors on the
+    chain too, within a 32-bit float's precision)."""
+    robot = FrankaRobot(CONFIG, fr3.joint_names, fr3.kin.limits)
+    robot.robot = _StallingRobot(robot.robot, [stalls] * 4)
+    lim = fr3.kin.limits
+    far = HOME + np.radians([40.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    for k in range(4):
+        goal = far if k % 2 == 0 else HOME
+        traj = parameterize(np.array([robot.measured_joints(), goal]), lim.velocity, lim.acceleration, 0.15, 0.15)
+        report = robot.execute(traj)
+        assert report.settled and report.lost_cycles >= 2
+    assert robot.errors() == []
+    assert "motion limit violated" not in standin.log_path.read_text()
+    robot.close()
+
+
 class _Garbling(_Stalling):
     """As :class:`_Stalling`, and from the stalled read on, every state reports ``dq_d`` of
     the third joint as NaN (a controller's reference gone wrong)."""

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recon_cli.backends.hardware.resume import Reference, Resumption, history_age
+from recon_cli.backends.hardware.resume import HistoryMatch, Reference, Resumption, continues, match_history
 from recon_cli.backends.hardware.setpoint_stream import jerk_share_for, setpoint_stream
 from recon_cli.planning.trajectory import parameterize
 from recon_cli.robot.cell import Cell
@@ -89,7 +89,7 @@ def _run(stream, lim, gap_at: int, gap: int, resume: bool, late: int = 0) -> Con
             index = min(k, len(q) - 1)
             if resume:
                 ref = ctl.reported()
-                age = history_age(ref, sent, cycles, k, DT)
+                age = match_history(ref, sent, cycles, k, DT).age
                 command, blend = resumption.resume(ref, age, index)
                 blend_at = k
             else:
@@ -144,23 +144,67 @@ def test_a_late_answer_in_the_first_cycles_of_a_motion(fr3, at):
         assert _within(_run(stream, lim, at, late + 1, resume=True, late=late).peaks, lim, 0.95)
 
 
-def test_history_age_of_a_reference_and_its_extrapolations():
+def test_history_match_of_a_reference_and_its_extrapolations():
     rng = np.random.default_rng(1)
     sent = np.cumsum(rng.normal(0.0, 1e-4, (12, 7)), axis=0) + 1.0
     cycles = np.arange(100, 112)
     ctl = Controller(sent[-3])
     ctl.apply(sent[-2])
     ctl.apply(sent[-1])
-    assert history_age(ctl.reported(), sent, cycles, 112, DT) == 1  # answered on time
+    assert match_history(ctl.reported(), sent, cycles, 112, DT) == HistoryMatch(1, 111)  # answered on time
     for _ in range(4):
         ctl.extrapolate()
-    assert history_age(ctl.reported(), sent, cycles, 116, DT) == 1  # 4 extrapolated, then the next cycle
-    assert history_age(ctl.reported(), sent, cycles, 120, DT) == 5  # a history 4 cycles behind the answer
+    assert match_history(ctl.reported(), sent, cycles, 116, DT) == HistoryMatch(1, 111)  # 4 extrapolated
+    assert match_history(ctl.reported(), sent, cycles, 120, DT) == HistoryMatch(5, 111)  # 4 cycles behind
     # a reference that is no command sent (the motion's start, a hold): the ordinary single cycle
-    assert history_age(Reference(np.zeros(7), np.zeros(7), np.zeros(7)), sent, cycles, 112, DT) == 1
-    # at rest every hypothesis matches: the youngest is taken
+    nowhere = Reference(np.zeros(7), np.zeros(7), np.zeros(7))
+    assert match_history(nowhere, sent, cycles, 112, DT) == HistoryMatch(1, None)
+    # at rest every hypothesis matches: the newest command, the youngest age
     rest = np.ones((12, 7))
-    assert history_age(Reference(np.ones(7), np.zeros(7), np.zeros(7)), rest, cycles, 130, DT) == 1
+    still = Reference(np.ones(7), np.zeros(7), np.zeros(7))
+    assert match_history(still, rest, cycles, 130, DT) == HistoryMatch(1, 111)
+
+
+def test_a_chain_that_turns_around_near_rest_is_matched_where_its_predecessors_are():
+    """A motion's first cycles, as franka-sim reported them: the answer to cycle 2 arrived
+    after four cycles were extrapolated, was applied in their place and extrapolated once,
+    and the state of cycle 7 reports that. Walked back at its constant acceleration the
+    chain passes through the answer one cycle back (and through the two commands before it,
+    a cycle further each), turns around and passes 3.2e-7 rad from it again four cycles
+    back: matched there, the resumed command was a jerk reflex (5141 rad/s^3)."""
+    start = np.radians([0.0, -10.0, 0.0, -130.0, 0.0, 110.0, 0.0])
+    sent = np.tile(start, (3, 1))
+    sent[:, 0] = [0.6983225345, 0.6983224295, 0.6983220095]  # joint 1 starting to move
+    reported = Reference(np.r_[0.6983212828636169, start[1:]].astype(np.float32).astype(float),
+                         np.r_[-0.0007349993684329093, np.zeros(6)], np.r_[-0.3149997293949127, np.zeros(6)])
+    assert match_history(reported, sent, np.arange(3), 7, DT) == HistoryMatch(4, 2)
+
+
+def test_a_state_continues_the_command_answered_before_it_only_when_it_applied_it_in_time():
+    """The reference of the state after a command is that command, with the velocity of its
+    backward difference, when the controller applied it in time (within 32-bit rounding);
+    not when it extrapolated instead, nor when it applied it late over the gap since the
+    command before (franka-sim's rewind), though the value is then the same."""
+    q0 = HOME + 0.3
+    ctl = Controller(q0)
+    velocity = np.linspace(-0.8, 0.8, 7)
+    for k in range(1, 4):
+        ctl.apply(q0 + velocity * k * DT * k / 3)
+    before = ctl.x.copy()
+    applied = Controller(q0)
+    applied.x, applied.v, applied.a = ctl.x.copy(), ctl.v.copy(), ctl.a.copy()
+    command = before + (ctl.v + ctl.a * DT) * DT + 1e-6  # not quite the extrapolation
+    applied.apply(command)
+    assert continues(applied.reported(), command, (command - before) / DT, DT)
+    missed = Controller(q0)
+    missed.x, missed.v, missed.a = ctl.x.copy(), ctl.v.copy(), ctl.a.copy()
+    missed.extrapolate()
+    assert not continues(missed.reported(), command, (command - before) / DT, DT)
+    late = Controller(q0)
+    late.x, late.v, late.a = ctl.x.copy(), ctl.v.copy(), ctl.a.copy()
+    late.apply(command, cycles=6)  # the same value, differenced over six cycles
+    assert np.array_equal(late.reported().q, applied.reported().q)
+    assert not continues(late.reported(), command, (command - before) / DT, DT)
 
 
 def test_a_reference_names_what_makes_it_unusable():

@@ -33,7 +33,7 @@ import numpy as np
 from recon_cli import install_hint
 from recon_cli.backends.base import ExecutionReport
 from recon_cli.backends.hardware.franka_config import REST_SPREAD, SETTLE_STATES, FrankaConfig
-from recon_cli.backends.hardware.resume import RECENT, Reference, Resumption, history_age
+from recon_cli.backends.hardware.resume import RECENT, Reference, Resumption, continues, match_history
 from recon_cli.backends.hardware.setpoint_stream import SetpointStream, jerk_share_for, setpoint_stream
 from recon_cli.errors import HardwareUnavailable, InputError, RobotFault
 from recon_cli.planning.trajectory import Trajectory
@@ -51,6 +51,11 @@ LATE_ANSWER = 0.0008
 WAITED = 0.0001
 #: consecutive states after a gap left unanswered so that the next is answered at the start of its cycle
 MAX_SKIPS = 3
+#: a state read this much later after its controller time than the quickest of the last
+#: STAMP_WINDOW reads (since the last gap) was waiting: its read was delayed (the thread
+#: descheduled, or another thread holding the interpreter lock when the state arrived) [s]
+STALE = 0.0004
+STAMP_WINDOW = 32
 #: how long a stop may take to bring the joints to rest before it counts as unconfirmed
 STOP_BOUND = 2.0
 
@@ -237,10 +242,11 @@ class FrankaRobot:
         final error and the settle time.
 
         Lost cycles: a state read after a gap (or one the loop could not answer within
-        LATE_ANSWER of reading it) is not answered; the next one is, at the start of its
-        cycle, from the controller's own reference (``q_d``, ``dq_d``, ``ddq_d``) and blended
-        back onto the stream (:mod:`~recon_cli.backends.hardware.resume`), instead of a jump
-        back onto the stream that the controller would judge as a jerk."""
+        LATE_ANSWER of reading it, or whose reference is not the command answered before it)
+        is not answered; the next one is, at the start of its cycle, from the controller's
+        own reference (``q_d``, ``dq_d``, ``ddq_d``) and blended back onto the stream
+        (:mod:`~recon_cli.backends.hardware.resume`), instead of a jump back onto the stream
+        that the controller would judge as a jerk."""
         p, cfg = self._p, self.config
         q = stream.q
         last = len(q) - 1
@@ -264,11 +270,14 @@ class FrankaRobot:
         skipped = 0
         blend: np.ndarray | None = None  # offsets to the setpoints of the cycles after blend_at
         blend_at = 0
+        applied_dq: np.ndarray | None = None  # the last command's velocity as the controller differences it
+        delays: collections.deque[float] = collections.deque(maxlen=STAMP_WINDOW)  # read time - state time
         try:
             while True:
                 asked_at = time.perf_counter()
                 state, period = control.readOnce()
                 read_at = time.perf_counter()
+                delay = read_at - state.time.to_sec()
                 measured = np.asarray(state.q, dtype=float)
                 err = np.abs(measured - sent)
                 max_err = np.maximum(max_err, err)
@@ -285,30 +294,43 @@ class FrankaRobot:
                 if index < last <= index + step:
                     arrived = now
                 index = min(index + step, last)
-                resync = resync or step > 1
-                # after a gap, answer a state the read waited for: one published after the
-                # last command went out (so it reports that command, however late it came)
-                # and answered at the start of its cycle
-                if resync and skipped < MAX_SKIPS and (step > 1 or read_at - asked_at < WAITED):
-                    skipped += 1
-                    self._unanswered()
-                    continue
+                if step > 1:  # a gap: the states after it are waited for anew
+                    resync, skipped = True, 0
+                    delays.clear()  # and the controller's schedule may have moved with it
+                delays.append(delay)
+                ref = Reference(np.asarray(state.q_d, dtype=float), np.asarray(state.dq_d, dtype=float),
+                                np.asarray(state.ddq_d, dtype=float))
+                # a state that does not report the last command as sent came from a controller
+                # that did not apply it in time (or applied it late, over another interval)
+                resync = resync or (applied_dq is not None and not continues(ref, sent, applied_dq, PERIOD))
                 if resync:
-                    ref = Reference(np.asarray(state.q_d, dtype=float), np.asarray(state.dq_d, dtype=float),
-                                    np.asarray(state.ddq_d, dtype=float))
                     problem = ref.problem()
                     if problem is not None:
                         control = None
                         raise self._reference_fault(problem, f"at setpoint {index} of {last + 1}")
-                    age = history_age(ref, history, history_cycles, cycle, PERIOD)
-                    command, blend = resumption.resume(ref, age, index)
+                    match = match_history(ref, history, history_cycles, cycle, PERIOD)
+                    # after a gap, answer a state the read waited for (published after the last
+                    # command went out, answered at the start of its cycle: not one that waited
+                    # for the read) whose reference continues the last command sent: a late
+                    # command can reach the controller after it published the next state, and a
+                    # simulator applies it then
+                    reflects = count > 0 and match.command_cycle == history_cycles[(count - 1) % RECENT]
+                    waiting = read_at - asked_at < WAITED or delays[-1] - min(delays) > STALE
+                    if skipped < MAX_SKIPS and (step > 1 or waiting or not reflects):
+                        skipped += 1
+                        self._unanswered()
+                        continue
+                    command, blend = resumption.resume(ref, match.age, index)
                     blend_at = cycle
                     resync = False
+                    velocity = (command - ref.q) / (match.age * PERIOD)
                 elif blend is not None and cycle - blend_at <= len(blend):
                     command = q[index] + blend[cycle - blend_at - 1]
+                    velocity = (command - sent) / PERIOD
                 else:
                     blend = None
                     command = q[index]
+                    velocity = (command - sent) / PERIOD
                 finished = False
                 if index == last:
                     final = np.abs(measured - goal)
@@ -326,7 +348,7 @@ class FrankaRobot:
                     self._unanswered()
                     continue
                 skipped = 0
-                sent = command
+                sent, applied_dq = command, velocity
                 out = p.JointPositions(command.tolist())
                 out.motion_finished = finished
                 control.writeOnce(out)

@@ -10,12 +10,14 @@ limit after a few milliseconds of silence.
 
 So a client resumes from the controller's reference instead:
 
-* :func:`history_age` finds how many cycles lie between the controller's last applied
-  command and the cycle about to be answered: normally one, more when a controller (or a
-  simulator of one) threw its extrapolation away for a command that arrived late. It walks
-  the reported reference back along its constant-acceleration chain and matches it against
-  the commands the client sent: the newest command it matches (an older one can match too
-  where the arm was nearly at rest, in a motion's first cycles).
+* :func:`match_history` finds the command the reported reference continues and how many
+  cycles lie between the controller's last applied command and the cycle about to be
+  answered: normally one, more when a controller (or a simulator of one) threw its
+  extrapolation away for a command that arrived late. It walks the reported reference back
+  along its constant-acceleration chain and matches it against the commands the client sent:
+  the newest command it matches (an older one can match too where the arm was nearly at
+  rest, in a motion's first cycles), at the step where the commands before it lie on the
+  chain too (near rest the chain turns around and passes near the same command again).
 * :class:`Resumption` makes the first command continue that reference with a zero third
   difference over those cycles, then blends from the extrapolated motion back onto the
   planned stream with a quintic (value, velocity and acceleration of the offset matched at
@@ -46,9 +48,15 @@ LIMIT_SHARE = 0.9
 RECENT = 8
 #: the oldest reference a match is looked for [cycles] (the controller stops a motion after 20 lost)
 MAX_AGE = 32
-#: a reported reference matches a sent command within this [rad]: Franka's state carries
-#: ``q_d`` as 32-bit floats (half a unit in the last place of 4 rad is 2.4e-7)
-MATCH_TOLERANCE = 4e-7
+#: a reported reference matches a sent command within one unit in the last place of a 32-bit
+#: float at the joint's value (Franka's state may carry ``q_d`` as 32-bit floats: half a unit
+#: of rounding) plus this, for the chain's own arithmetic on rounded ``dq_d``/``ddq_d`` [rad]
+MATCH_FLOOR = 1e-8
+#: the commands before a matched one that are checked against the chain too: a chain that
+#: passes through a command and its predecessors, a cycle apart each, is the controller's
+#: history; one that only passes near a command (a constant-acceleration chain turns around
+#: near rest and comes back) is not
+PREDECESSORS = 2
 
 
 @dataclass(frozen=True)
@@ -72,34 +80,72 @@ class Reference:
         return None
 
 
-def history_age(ref: Reference, sent: npt.NDArray[np.float64], sent_cycles: npt.NDArray[np.int64], cycle: int,
-                dt: float, tolerance: float = MATCH_TOLERANCE) -> int:
-    """Cycles between the controller's last applied command and ``cycle`` (the cycle of the
-    state that reported ``ref``, which the next command answers): 1 when the reference is a
-    command the client sent, or its extrapolation, as old as the gap since. ``sent``
-    (R, n) and ``sent_cycles`` (R,): the commands sent and the cycles they answered. 1 when
-    the reference matches no sent command (the motion's start, a controller's own hold)."""
+@dataclass(frozen=True)
+class HistoryMatch:
+    """Which command the controller's reported reference continues: ``age``, the cycles
+    between the controller's last applied command and the cycle about to be answered, and
+    ``command_cycle``, the cycle the matched command answered (None: it matches no command
+    sent, and ``age`` is 1)."""
+
+    age: int
+    command_cycle: int | None
+
+
+def match_tolerance(q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """Per joint: how close a reference's chain must come to a sent command to match it [rad]."""
+    spacing: npt.NDArray[np.float64] = np.spacing(np.abs(q).astype(np.float32)).astype(float) + MATCH_FLOOR
+    return spacing
+
+
+def match_history(ref: Reference, sent: npt.NDArray[np.float64], sent_cycles: npt.NDArray[np.int64], cycle: int,
+                  dt: float) -> HistoryMatch:
+    """The command the controller's reference ``ref`` continues and how old its history is at
+    ``cycle`` (the cycle of the state that reported ``ref``, which the next command answers):
+    age 1 when the reference is a command the client sent, or its extrapolation, as old as the
+    gap since. ``sent`` (R, n) and ``sent_cycles`` (R,): the commands sent and the cycles they
+    answered."""
     if len(sent) == 0:
-        return 1
+        return HistoryMatch(1, None)
     recent = np.argsort(sent_cycles)[-RECENT:]
     sent, sent_cycles = sent[recent], sent_cycles[recent]
     back = int(min(max(cycle - int(sent_cycles.min()), 0), MAX_AGE + RECENT))
     # the reference walked back along its constant-acceleration chain: chain[j] is the value
     # j cycles before (semi-implicit Euler backwards: x_j-1 = x_j - v_j dt, v_j-1 = v_j - a dt)
-    j = np.arange(back + 1)[:, None]
+    j = np.arange(back + PREDECESSORS + 1)[:, None]
     velocities = ref.dq[None, :] - j * ref.ddq[None, :] * dt
     chain = ref.q[None, :] - np.vstack([np.zeros((1, ref.q.size)), np.cumsum(velocities[:-1], axis=0)]) * dt
-    err = np.max(np.abs(chain[:, None, :] - sent[None, :, :]), axis=2)  # (back + 1, R)
+    close = np.all(np.abs(chain[:, None, :] - sent[None, :, :]) <= match_tolerance(ref.q), axis=2)  # (J, R)
     # a match at chain step j with command r: the controller applied r, then extrapolated j cycles
-    applied = sent_cycles[None, :] + np.arange(back + 1)[:, None]
-    valid = (err <= tolerance) & (applied < cycle)
+    applied = sent_cycles[None, :] + np.arange(len(chain))[:, None]
+    valid = close & (applied < cycle)
+    valid[back + 1:] = False
     if not np.any(valid):
-        return 1
+        return HistoryMatch(1, None)
     # the newest command matched is the last one applied: an older one can match too where the
-    # arm was nearly at rest (the motion's first cycles), at a place the chain only passes near;
-    # of its matches the youngest: at rest every one matches, and a longer age would invent a step
-    newest = int(sent_cycles[np.any(valid, axis=0)].max())
-    return max(1, int(cycle - applied[valid & (sent_cycles[None, :] == newest)].max()))
+    # arm was nearly at rest (the motion's first cycles), at a place the chain only passes near
+    r = int(np.argmax(np.where(np.any(valid, axis=0), sent_cycles, np.iinfo(np.int64).min)))
+    steps = np.flatnonzero(valid[:, r])
+    # of its matches, those whose predecessors lie on the chain too, a cycle further back each;
+    # of those the youngest: at rest every step matches, and a longer age would invent a step
+    support = np.zeros(len(steps), dtype=int)
+    for k in range(1, PREDECESSORS + 1):
+        before = np.flatnonzero(sent_cycles == sent_cycles[r] - k)
+        if before.size:
+            support += close[steps + k, before[0]]
+    step = int(steps[support == support.max()].max())
+    return HistoryMatch(max(1, int(cycle - sent_cycles[r] - step)), int(sent_cycles[r]))
+
+
+def continues(ref: Reference, q: npt.NDArray[np.float64], dq: npt.NDArray[np.float64], dt: float) -> bool:
+    """Whether the controller's reported reference is the command ``q`` applied on time, with
+    the velocity ``dq`` its backward difference gives (within the 32-bit rounding of the
+    reported values and of the position the difference was taken from). It is not when the
+    command came too late for the state (the controller extrapolated instead) or when the
+    controller applied a late command over another interval (franka-sim does): the next
+    command then answers from the reference, not from the stream."""
+    tolerance = match_tolerance(q)
+    return bool(np.all(np.abs(ref.q - q) <= tolerance)
+                and np.all(np.abs(ref.dq - dq) <= np.spacing(np.abs(dq).astype(np.float32)) + tolerance / dt))
 
 
 def _quintic(cycles: int) -> npt.NDArray[np.float64]:

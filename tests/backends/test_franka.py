@@ -227,6 +227,14 @@ def test_unreachable_controller_and_config_mistakes_are_one_line(fr3):
         FrankaConfig.from_mapping({"ip": "127.0.0.1", "lost_cycles": 9})  # the check stays at the limit
 
 
+def _nothing_flagged(robot: FrankaRobot, standin: FrankaStandin) -> None:
+    """The controller reports no error and franka-sim logged no limit violation; the robot
+    is closed."""
+    assert robot.errors() == []
+    assert "motion limit violated" not in standin.log_path.read_text()
+    robot.close()
+
+
 class _Stalling:
     """pylibfranka's own ActiveControl, with the calling thread put to sleep before chosen
     reads and writes: a loop descheduled for milliseconds, as on a loaded machine without a
@@ -284,9 +292,7 @@ def test_a_loop_that_stalls_for_milliseconds_resumes_within_the_limits(fr3, stan
         assert report.settled and np.all(report.final_error <= CONFIG.settle_tolerance)
         assert np.abs(robot.measured_joints() - goal).max() <= CONFIG.settle_tolerance
         assert report.lost_cycles >= 3
-    assert robot.errors() == []
-    assert "motion limit violated" not in standin.log_path.read_text()
-    robot.close()
+    _nothing_flagged(robot, standin)
 
 
 def test_the_first_resumption_of_a_process_answers_in_time(fr3, standin):
@@ -304,9 +310,7 @@ def test_the_first_resumption_of_a_process_answers_in_time(fr3, standin):
     traj = parameterize(np.array([robot.measured_joints(), far]), lim.velocity, lim.acceleration, 0.6, 0.6)
     report = robot.execute(traj)
     assert report.settled and report.lost_cycles >= 2
-    assert robot.errors() == []
-    assert "motion limit violated" not in standin.log_path.read_text()
-    robot.close()
+    _nothing_flagged(robot, standin)
 
 
 @pytest.mark.parametrize("stalls", [
@@ -331,9 +335,7 @@ def test_late_answers_in_the_first_cycles_of_a_slow_motion(fr3, standin, stalls)
         traj = parameterize(np.array([robot.measured_joints(), goal]), lim.velocity, lim.acceleration, 0.15, 0.15)
         report = robot.execute(traj)
         assert report.settled and report.lost_cycles >= 2
-    assert robot.errors() == []
-    assert "motion limit violated" not in standin.log_path.read_text()
-    robot.close()
+    _nothing_flagged(robot, standin)
 
 
 class _Garbling(_Stalling):

@@ -323,14 +323,14 @@ class FrankaRobot:
                     command, blend = resumption.resume(ref, match.age, index)
                     blend_at = cycle
                     resync = False
-                    velocity = (command - ref.q) / (match.age * PERIOD)
+                    since, interval = ref.q, match.age  # what the controller differences it against
                 elif blend is not None and cycle - blend_at <= len(blend):
                     command = q[index] + blend[cycle - blend_at - 1]
-                    velocity = (command - sent) / PERIOD
+                    since, interval = sent, 1
                 else:
                     blend = None
                     command = q[index]
-                    velocity = (command - sent) / PERIOD
+                    since, interval = sent, 1
                 finished = False
                 if index == last:
                     final = np.abs(measured - goal)
@@ -348,7 +348,7 @@ class FrankaRobot:
                     self._unanswered()
                     continue
                 skipped = 0
-                sent, applied_dq = command, velocity
+                sent, applied_dq = command, (command - since) / (interval * PERIOD)
                 out = p.JointPositions(command.tolist())
                 out.motion_finished = finished
                 control.writeOnce(out)

@@ -243,7 +243,7 @@ def test_no_development_history(doc: Path):
 
 
 def test_readme_states_the_script_limits_of_the_code():
-    from recon_cli.scripts.expressions import LIMITS
+    from recon_cli.expansion.expressions import LIMITS
 
     text = _text(README)
     expected = {
@@ -256,4 +256,4 @@ def test_readme_states_the_script_limits_of_the_code():
         "max_commands": f"{LIMITS.max_commands:,}; a `<ring>` at most {LIMITS.max_ring_count} views",
     }
     missing = [f"{k}: {v!r}" for k, v in expected.items() if v not in text]
-    assert not missing, "README.md's limits differ from recon_cli.scripts.expressions.LIMITS: " + ", ".join(missing)
+    assert not missing, "README.md's limits differ from recon_cli.expansion.expressions.LIMITS: " + ", ".join(missing)

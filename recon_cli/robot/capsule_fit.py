@@ -23,6 +23,9 @@ for:
 - ``file:///abs/path`` and an absolute path: as written; ``file://rel/path`` and a
   relative path: relative to the description file's folder.
 
+A cell's meshes must lie inside the cell file's folder or recon's robot/ folder (links
+resolved; absolute paths refused), checked before any mesh is read.
+
 A mesh's ``scale`` (one or three factors) and the ``<collision>``'s origin (xyz, rpy) place
 its vertices in the link frame.
 
@@ -70,7 +73,8 @@ import numpy as np
 import numpy.typing as npt
 from lxml import etree
 
-from recon_cli.errors import FileError, InputError
+from recon_cli.errors import FileError, InputError, ScriptError
+from recon_cli.expansion.readable import ReadRule, readable
 from recon_cli.geometry.transforms import pose_from_xyz_rpy, transform_points
 from recon_cli.inputs.meshes import MESH_SUFFIXES, read_mesh
 
@@ -308,18 +312,23 @@ def _floats(text: str | None, default: str, count: Sequence[int], what: str) -> 
     return values
 
 
-def resolve_mesh(uri: str, description: Path, where: str = "") -> Path:
+def resolve_mesh(uri: str, description: Path, where: str = "", rule: ReadRule | None = None) -> Path:
     """The file of a mesh ``filename`` (rules in the module docstring); an InputError
-    (message prefixed by ``where``) when no package:// folder is found."""
+    (message prefixed by ``where``) when no package:// folder is found. With a read ``rule``
+    (a cell file's), the file must lie inside its folders (links resolved), an absolute path
+    is refused and package:// is searched only inside them, before anything is read."""
     folder = description.parent
     if uri.startswith("package://"):
         package, _, rest = uri[len("package://"):].partition("/")
         for above in (folder, *folder.parents):
+            if rule is not None and not any(above.resolve().is_relative_to(r) for r in rule.roots):
+                break
             if above.name == package:
-                return above / unquote(rest)
+                return _inside(above / unquote(rest), uri, where, rule)
             if (above / package).is_dir():
-                return above / package / unquote(rest)
-        raise InputError(f"{where}no folder named '{package}' at or above {folder} for the mesh {uri}",
+                return _inside(above / package / unquote(rest), uri, where, rule)
+        inside = f" inside {rule.places}" if rule is not None else ""
+        raise InputError(f"{where}no folder named '{package}' at or above {folder}{inside} for the mesh {uri}",
                          hint=f"put the robot's package folder '{package}' beside or above the description file, "
                               "or write the mesh paths relative to it")
     if uri.startswith("file://"):
@@ -327,11 +336,30 @@ def resolve_mesh(uri: str, description: Path, where: str = "") -> Path:
     elif "://" in uri:
         raise InputError(f"{where}the mesh {uri} is neither a package://, a file:// nor a file path",
                          hint="give a path relative to the description file")
+    if rule is not None:
+        try:
+            return readable(uri, rule, None, f"the mesh {uri}", beside=folder)
+        except ScriptError as exc:
+            if "does not exist" in exc.message:
+                return folder / uri  # named as missing by the caller
+            raise InputError(f"{where}{exc.message}", hint=exc.hint) from None
     path = Path(uri).expanduser()
     return path if path.is_absolute() else folder / path
 
 
-def _mesh_refs(root: etree._Element, description: Path) -> list[_MeshRef]:
+def _inside(path: Path, uri: str, where: str, rule: ReadRule | None) -> Path:
+    if rule is None:
+        return path
+    try:
+        real = path.resolve()
+    except (OSError, RuntimeError, ValueError):
+        real = path
+    if not any(real.is_relative_to(r) for r in rule.roots):
+        raise InputError(f"{where}the mesh {uri} leads outside {rule.places}", hint=rule.hint)
+    return real
+
+
+def _mesh_refs(root: etree._Element, description: Path, rule: ReadRule | None = None) -> list[_MeshRef]:
     """Every mesh ``<collision>`` of the URDF, its file resolved and checked to exist."""
     refs = []
     where = str(description)
@@ -350,7 +378,7 @@ def _mesh_refs(root: etree._Element, description: Path) -> list[_MeshRef]:
                 kind = {".dae": "a Collada (.dae) file", "": "a file without a type"}.get(suffix, f"a {suffix} file")
                 raise InputError(f"{where}: link '{name}': collision mesh {uri} is {kind}, which recon does not "
                                  "read (it reads STL, OBJ, PLY)", hint=_DAE_HINT)
-            path = resolve_mesh(uri, description, f"{where}: link '{name}': ")
+            path = resolve_mesh(uri, description, f"{where}: link '{name}': ", rule)
             if not path.is_file():
                 raise InputError(f"{where}: link '{name}': collision mesh {uri} does not exist ({path})",
                                  hint="put the mesh file there (package:// is searched from the description's "
@@ -464,14 +492,16 @@ def has_meshes(urdf: str) -> bool:
     return any(True for _ in root.iterfind("link/*/geometry/mesh"))
 
 
-def fit_mesh_collisions(urdf: str, description: Path | str, safety_distance: float) -> MeshFit:
+def fit_mesh_collisions(urdf: str, description: Path | str, safety_distance: float,
+                        rule: ReadRule | None = None) -> MeshFit:
     """The URDF with every link's collision meshes replaced by one fitted capsule inflated by
     ``safety_distance`` [m], and its mesh visuals by the capsule at real size (module
     docstring); unchanged when it has no meshes. ``description``: the URDF or xacro file the
-    text came from (mesh paths are relative to its folder). Refusals are one line naming the
-    link and the file."""
+    text came from (mesh paths are relative to its folder); ``rule``: the folders the meshes
+    must lie in (a cell file's, :func:`~recon_cli.expansion.readable.cell_rule`). Refusals are
+    one line naming the link and the file."""
     if not has_meshes(urdf):
         return MeshFit(urdf, ())
     path = Path(description).resolve()
-    refs = _mesh_refs(etree.fromstring(urdf.encode()), path)
+    refs = _mesh_refs(etree.fromstring(urdf.encode()), path, rule)
     return _rewrite(urdf, str(path), float(safety_distance), _digest(refs))

@@ -26,7 +26,8 @@ import numpy as np
 import numpy.typing as npt
 from lxml import etree
 
-from recon_cli.errors import InputError, UnknownNameError
+from recon_cli.errors import InputError, ScriptError, UnknownNameError
+from recon_cli.expansion.readable import cell_rule, readable
 from recon_cli.geometry.transforms import pose_from_xyz_rpy
 from recon_cli.inputs.files import version_stamp
 from recon_cli.inputs.schema import check
@@ -39,7 +40,8 @@ CELL_FORMAT = 1
 DEFAULT_CELL = "gantry"
 #: other names of shipped cells
 ALIASES = {"9dof": "gantry", "7dof": "ceiling"}
-_PATH_HINT = "paths in a cell file are relative to the cell file's folder"
+_PATH_HINT = ("paths in a cell file are relative to the cell file's folder (or to recon's robot/ folder) and stay "
+              "inside them")
 
 
 def shipped_cells() -> tuple[str, ...]:
@@ -190,13 +192,17 @@ class _Lines:
 
 
 def _file(lines: _Lines, container: Any, key: str, name: str, what: str) -> Path:
-    """A path of the cell file, relative to its folder, that must exist."""
+    """A file the cell file names: a relative path beside the cell file (or in recon's robot/
+    folder) that stays inside those folders (:func:`~recon_cli.expansion.readable.cell_rule`),
+    checked before anything is read."""
     where = lines.at(container, key, name)
-    given = Path(str(container[key])).expanduser()
-    path = given if given.is_absolute() else (lines.path.parent / given)
-    if not path.is_file():
-        raise InputError(f"{where}: {name}: the {what} {given} does not exist ({path})", hint=_PATH_HINT)
-    return path.resolve()
+    given = str(container[key])
+    try:
+        return readable(given, cell_rule(lines.path), None, f"the {what}")
+    except ScriptError as exc:
+        if "does not exist" in exc.message:
+            raise InputError(f"{where}: {name}: the {what} {given} does not exist", hint=_PATH_HINT) from None
+        raise InputError(f"{where}: {name}: {exc.message}", hint=exc.hint) from None
 
 
 def _numbers(values: Any) -> tuple[float, ...]:

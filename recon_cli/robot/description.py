@@ -4,18 +4,19 @@ shipped cell's name or a cell file) with recon's settings of it.
 The cell file (:mod:`recon_cli.robot.cell_file`) names the description (a URDF or xacro
 file), its xacro arguments and the arguments that take the settings (safety distance, table
 lift, base and camera poses). The one description feeds every consumer: pinocchio
-(kinematics, dynamics), the collision model and the MuJoCo scene. Expansion is cached per
-process, keyed by the arguments and the content of the description's files.
+(kinematics, dynamics), the collision model and the MuJoCo scene. A xacro description is
+expanded in the sandbox that expands scripts (:mod:`recon_cli.expansion`): a cell file is
+a user's file, and nothing in it or its description may run code or read beyond the cell
+file's folder and robot/. Expansion is cached per process, keyed by the arguments and the
+content of the description's files.
 """
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import hashlib
-import io
 import math
-import re
+import tempfile
 from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import StrEnum
@@ -24,7 +25,11 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
-from recon_cli.errors import InputError, UnknownNameError
+from recon_cli.errors import InputError, ScriptError, UnknownNameError
+from recon_cli.expansion.annotate import SRC_ATTR, Annotated, expansion_error, parser
+from recon_cli.expansion.expressions import Limits
+from recon_cli.expansion.readable import cell_rule
+from recon_cli.expansion.sandbox import PI_TARGET, sandboxed
 from recon_cli.geometry.transforms import invert
 from recon_cli.inputs.files import file_errors, read_limited
 from recon_cli.robot.capsule_fit import FittedCapsule, MeshFit, fit_mesh_collisions
@@ -208,19 +213,6 @@ def _rigid(values: Iterable[float], what: str) -> tuple[float, ...]:
     return tuple(m)
 
 
-def _digest(description: Path) -> str:
-    """Content of a URDF file, or of a xacro file and every file it includes or loads (the
-    files :func:`guard_xacro` reads)."""
-    h = hashlib.sha256()
-    if description.suffix.lower() == ".urdf":
-        h.update(_read_description(description).encode())
-        return h.hexdigest()
-    for path, text in sorted(guard_xacro(description).items()):
-        h.update(str(path).encode())
-        h.update(text.encode())
-    return h.hexdigest()
-
-
 def expand_urdf(config: CellConfig = CellConfig()) -> str:  # noqa: B008 (frozen)
     """URDF text of the cell for the given settings (its cell file checked against it); collision
     meshes replaced by fitted capsules inflated by the safety distance (:mod:`.capsule_fit`)."""
@@ -242,23 +234,51 @@ def _fitted(config: CellConfig) -> MeshFit:
     urdf = _expand_file(cell, tuple(sorted(config.xacro_args().items())))
     if not cell.settings.safety_distance:
         urdf = inflate_primitives(urdf, config.safety_distance)
-    return fit_mesh_collisions(urdf, cell.description, config.safety_distance)
+    return fit_mesh_collisions(urdf, cell.description, config.safety_distance, cell_rule(cell.path))
 
 
 def _expand_file(cell: CellFile, args: tuple[tuple[str, str], ...]) -> str:
-    return _expand(str(cell.description), args, _digest(cell.description))
+    """URDF text of the cell's description for the given xacro arguments: a URDF as written
+    (checked XML), a xacro expanded in the sandbox (:func:`expand_xacro`). Cached per process
+    by the arguments and the content of every file the description reads."""
+    if cell.description.suffix.lower() == ".urdf":
+        text = read_description(cell.description)
+        key = (str(cell.description), args, hashlib.sha256(text.encode()).hexdigest())
+        if key not in _EXPANDED:
+            _check_xml(text, str(cell.description))
+            _remember(key, text)
+        return _EXPANDED[key]
+    with tempfile.TemporaryDirectory(prefix="recon-cell-") as tmp:
+        files = _annotated(cell, Path(tmp))
+        h = hashlib.sha256()
+        for original, copy in sorted(files.copies.items()):
+            h.update(str(original).encode())
+            h.update(copy.read_bytes())
+        key = (str(cell.description), args, h.hexdigest())
+        if key not in _EXPANDED:
+            _remember(key, expand_xacro(cell, files, args))
+    return _EXPANDED[key]
 
 
-#: largest robot description file read (URDF or xacro) [bytes]
+_EXPANDED: dict[tuple[str, tuple[tuple[str, str], ...], str], str] = {}
+
+
+def _remember(key: tuple[str, tuple[tuple[str, str], ...], str], text: str) -> None:
+    if len(_EXPANDED) >= 16:
+        _EXPANDED.pop(next(iter(_EXPANDED)))
+    _EXPANDED[key] = text
+
+
+#: largest robot description file read (URDF or xacro, each file it includes) [bytes]
 MAX_DESCRIPTION_BYTES = 20_000_000
 #: xacro files a description may include, at most
 MAX_XACRO_FILES = 200
-_EXPRESSION = re.compile(r"\$\{([^}]*)\}|\$\(([^)]*)\)")
-_LOAD_YAML = re.compile(r"load_yaml\(\s*[\"']([^\"']+)[\"']")
-_INCLUDE = re.compile(r"<xacro:include\b[^>]*\bfilename\s*=\s*[\"']([^\"']+)[\"']")
+#: bounds of a description's xacro expansion (expressions checked as a script's are)
+DESCRIPTION_LIMITS = Limits(percent_format=True, max_text=100_000_000, max_elements=500_000, max_macro_depth=100, max_seconds=20.0,
+                            max_file_bytes=MAX_DESCRIPTION_BYTES, max_files=MAX_XACRO_FILES)
 
 
-def _read_description(path: Path) -> str:
+def read_description(path: Path) -> str:
     """A description file's text, through the size guard every user file passes."""
     refuse = file_errors(path, "robot description", "give the robot's URDF or xacro file",
                          lambda size: (f"{size:,} bytes, more than {MAX_DESCRIPTION_BYTES:,}",
@@ -271,61 +291,68 @@ def _read_description(path: Path) -> str:
                          hint="give the robot's URDF or xacro file") from None
 
 
-def guard_xacro(description: Path) -> dict[Path, str]:
-    """Refuse a xacro description whose expressions could leave xacro's expression language;
-    the text of every file it includes or loads (``xacro.load_yaml``), by path.
-
-    xacro evaluates ``${...}`` with Python's eval over a dictionary of harmless names; a
-    dunder attribute (``().__class__...``) walks out of it, and ``$(eval ...)`` is plain
-    Python. A description file (and every file it includes) may use neither: one line naming
-    the file, line and expression."""
-    seen: dict[Path, str] = {}
-    todo = [description.resolve()]
-    while todo:
-        path = todo.pop()
-        if path in seen:
-            continue
-        if len(seen) >= MAX_XACRO_FILES:
-            raise InputError(f"{description}: the description includes more than {MAX_XACRO_FILES} files",
-                             hint="give the robot's URDF instead")
-        text = seen[path] = _read_description(path)
-        if path.suffix.lower() in (".yaml", ".yml"):
-            continue
-        for m in _EXPRESSION.finditer(text):
-            expression = m.group(0)
-            if "__" in expression or (m.group(2) or "").strip().startswith("eval"):
-                line = text.count("\n", 0, m.start()) + 1
-                raise InputError(f"{path}:{line}: the xacro expression {expression[:60]!r} is refused (dunder names "
-                                 "and $(eval ...) run Python beyond xacro's expression language)",
-                                 hint="use plain arithmetic and xacro properties, or give the expanded URDF")
-        for m in (*_INCLUDE.finditer(text), *_LOAD_YAML.finditer(text)):
-            name = m.group(1)
-            if "$" in name:
-                continue  # a file named by an expression: xacro resolves it (and refuses what it cannot)
-            todo.append((path.parent / name).resolve())
-    return seen
+def _check_xml(text: str, where: str) -> None:
+    try:
+        root = etree.fromstring(text.encode(), parser())
+    except etree.XMLSyntaxError as exc:
+        raise InputError(f"{where}:{exc.lineno or 1}: the robot description is not XML ({exc.msg})",
+                         hint="give the robot's URDF file") from None
+    tree = root.getroottree()
+    if tree.docinfo.doctype or tree.docinfo.internalDTD is not None:
+        raise InputError(f"{where}:1: DOCTYPE declarations are not allowed in a robot description",
+                         hint="remove the <!DOCTYPE ...> (and any entities)")
 
 
-@functools.lru_cache(maxsize=16)
-def _expand(description: str, args: tuple[tuple[str, str], ...], digest: str) -> str:
-    if description.lower().endswith(".urdf"):
-        text = _read_description(Path(description))
-        try:
-            etree.fromstring(text.encode())
-        except etree.XMLSyntaxError as exc:
-            raise InputError(f"{description}:{exc.lineno or 1}: the robot description is not XML ({exc.msg})",
-                             hint="give the robot's URDF file") from None
-        return text
+def _annotated(cell: CellFile, tmp: Path) -> Annotated:
+    """The description and the files it includes, checked (read rule of the cell file, size,
+    safe XML) and copied with their sources tagged."""
+    files = Annotated(tmp, cell_rule(cell.path), "robot description", MAX_DESCRIPTION_BYTES,
+                      max_files=MAX_XACRO_FILES, full_names=True)
+    try:
+        files.add(cell.description)
+    except ScriptError as exc:
+        raise InputError(_reworded(exc.message), hint=exc.hint and _reworded(exc.hint)) from None
+    return files
+
+
+def expand_xacro(cell: CellFile, files: Annotated, args: tuple[tuple[str, str], ...]) -> str:
+    """URDF text of a checked xacro description (:func:`_annotated`), expanded by xacro in
+    the sandbox that expands scripts: expressions checked and bounded (no dunder names, no
+    attributes but namespaces', no ``vars``/``type``/..., ``$(eval ...)`` by the same
+    evaluator however it is spelled), ``xacro.load_yaml`` and ``xacro:include`` confined to
+    the cell file's folder and robot/, no environment, bounded work."""
     import xacro
 
-    # xacro reports harmless notes on stderr; keep library output quiet
+    main = files.copies[cell.description.resolve()]
+    frames = None
     try:
-        with contextlib.redirect_stderr(io.StringIO()):
-            doc = xacro.process_file(description, mappings=dict(args))
-    except Exception as exc:  # xacro's errors (XML, expressions, missing includes) are the file's mistakes
-        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        raise InputError(f"{description}: xacro cannot expand the robot description ({reason})",
-                         hint="check the xacro file (run xacro on it to see where), or give the expanded "
-                              "URDF") from None
-    text = doc.toprettyxml(indent="  ")
-    return str(text)
+        with sandboxed(files.rule, DESCRIPTION_LIMITS, includes=files.includes, originals=files.originals) as frames:
+            doc = xacro.process_file(str(main), mappings=dict(args))
+            _untag(doc.documentElement)
+            text = str(doc.toprettyxml(indent="  "))
+    except Exception as exc:  # the description's mistakes and refusals, as one line
+        error = expansion_error(str(cell.description), exc, frames, files)
+        raise InputError(_reworded(error.message), hint=error.hint and _reworded(error.hint)) from None
+    return text.replace(str(main), str(cell.description))
+
+
+def _untag(node) -> None:
+    """Take the source tags and instructions of :class:`Annotated` off an expanded DOM."""
+    if node.nodeType == node.ELEMENT_NODE and node.hasAttribute(SRC_ATTR):
+        node.removeAttribute(SRC_ATTR)
+    for child in list(node.childNodes):
+        if child.nodeType == child.PROCESSING_INSTRUCTION_NODE and child.target == PI_TARGET:
+            node.removeChild(child)
+        elif child.nodeType == child.ELEMENT_NODE:
+            if child.hasAttribute(SRC_ATTR):
+                child.removeAttribute(SRC_ATTR)
+            _untag(child)
+
+
+def _reworded(text: str) -> str:
+    """A message of the expression checks (worded for scripts) for a robot description."""
+    for old, new in (("script expressions", "robot description expressions"), ("scripts may", "descriptions may"),
+                     ("in scripts", "in robot descriptions"), ("the script", "the description"),
+                     ("Scripts", "Robot descriptions"), ("scripts", "robot descriptions")):
+        text = text.replace(old, new)
+    return text

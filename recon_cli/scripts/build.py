@@ -20,7 +20,7 @@ from recon_cli.geometry.view import Frame, View
 from recon_cli.planning.options import PLANNERS
 from recon_cli.robot.cell_file import load_cell, shipped_cells
 from recon_cli.scripts import commands as C
-from recon_cli.scripts.sandbox import LIMITS
+from recon_cli.expansion.sandbox import LIMITS
 
 
 def _cell_safety(kind: str) -> float | None:

@@ -10,7 +10,7 @@ Shared by ``recon validate`` and ``recon run`` (which checks before it opens the
 * fragments are defined (scanned, loaded or added) before they are used;
 * files a script reads (realism profiles, object meshes, reference meshes, loaded images
   and clouds) lie inside the script's folder or scripts_xml/ and exist (the rule of
-  :func:`recon_cli.scripts.readable.readable`, which the commands apply again when they run);
+  :func:`recon_cli.expansion.readable.readable`, which the commands apply again when they run);
   a realism profile file also parses.
 """
 
@@ -29,10 +29,10 @@ from recon_cli.objects import BUILTIN, available_objects, ycb_names
 from recon_cli.paths import CELLS_DIR, ROBOT_DIR
 from recon_cli.realism import BUILT_IN, load_profile
 from recon_cli.robot.cell_file import DEFAULT_CELL, load_cell
-from recon_cli.robot.description import CellConfig, CellName, expand_urdf, guard_xacro
+from recon_cli.robot.description import CellConfig, CellName, expand_urdf
 from recon_cli.robot.limits import limits_from_urdf
 from recon_cli.scripts import commands as C
-from recon_cli.scripts.readable import readable, readable_roots
+from recon_cli.expansion.readable import readable, readable_roots
 
 if TYPE_CHECKING:
     from recon_cli.robot.limits import JointLimits
@@ -48,7 +48,7 @@ def tag(cmd: C.Command) -> str:
 
 
 def readable_file(script: C.Script, name: str, src: C.Source, what: str) -> Path:
-    """A file a script reads, by the rule of :func:`recon_cli.scripts.readable.readable`:
+    """A file a script reads, by the rule of :func:`recon_cli.expansion.readable.readable`:
     a relative path beside the script (or in scripts_xml/) that stays inside those folders
     after resolving links."""
     return readable(name, Path(script.path).resolve().parent, src, what)
@@ -79,8 +79,7 @@ def script_cell(script: C.Script, cmd: C.SetCell) -> str:
     try:
         cell = load_cell(str(path))
         files = list(cell.sources)
-        if cell.description.suffix.lower() != ".urdf":
-            files += list(guard_xacro(cell.description))
+        expand_urdf(CellConfig(kind=CellName(str(path))))  # the description, its includes and meshes
     except ScriptError:
         raise
     except ReconError as exc:

@@ -23,81 +23,20 @@ from pathlib import Path
 
 from lxml import etree
 
-from recon_cli.errors import FileError, LimitError, ScriptError
+from recon_cli.errors import FileError, ScriptError
+from recon_cli.expansion.annotate import SRC_ATTR, Annotated, expansion_error, parser, untag
+from recon_cli.expansion.readable import script_rule
+from recon_cli.expansion.sandbox import LIMITS, sandboxed
 from recon_cli.paths import SCHEMA_DIR, SCRIPTS_DIR
 from recon_cli.scripts import commands as C
 from recon_cli.scripts.build import as_bool, build_recon, build_thesis
-from recon_cli.scripts.sandbox import LIMITS, PI_TARGET, SandboxError, readable, sandboxed
 
-XACRO_NS = "http://www.ros.org/wiki/xacro"
-SRC_ATTR = "recon_source"
 DIALECTS = {"recon": "recon_script.xsd", "script": "thesis_script.xsd"}
 MAX_BYTES = LIMITS.max_file_bytes
 
 
 def _parser() -> etree.XMLParser:
-    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, dtd_validation=False,
-                           huge_tree=False, remove_blank_text=False)
-
-
-def _parse_file(path: Path) -> etree._ElementTree:
-    if not path.is_file():
-        raise FileError(f"script {path} does not exist", hint="check the path")
-    if path.stat().st_size > MAX_BYTES:
-        raise ScriptError(f"{path}: {path.stat().st_size} bytes is too large for a script",
-                          hint=f"scripts are limited to {MAX_BYTES // 1_000_000} MB")
-    try:
-        tree = etree.parse(str(path), _parser())
-    except etree.XMLSyntaxError as exc:
-        line, col = exc.position if exc.position else (0, 0)
-        raise ScriptError(f"{path}:{line}:{col}: not well-formed XML ({exc.msg})",
-                          hint="fix the XML syntax") from None
-    if tree.docinfo.doctype or tree.docinfo.internalDTD is not None:
-        raise ScriptError(f"{path}:1: DOCTYPE declarations are not allowed in scripts",
-                          hint="remove the <!DOCTYPE ...> (and any entities); use xacro properties instead")
-    return tree
-
-
-def _resolve_include(name: str, here: Path, script_dir: Path, where: str) -> Path:
-    if any(ch in name for ch in "$(){}"):
-        raise ScriptError(f"{where}: xacro:include filename {name!r} must be a plain relative path",
-                          hint="include files beside the script or in scripts_xml/, e.g. macros.xml", source=where)
-    return readable(name, script_dir, where, "included file", beside=here)
-
-
-# xacro directives; every other xacro:NAME element is a macro call
-_DIRECTIVES = {"macro", "property", "include", "arg", "if", "unless", "insert_block", "element", "attribute"}
-
-
-def _annotate(path: Path, out_dir: Path, copies: dict[Path, Path], display: dict[Path, str],
-              script_dir: Path) -> Path:
-    """Copy ``path`` into out_dir with every element tagged file:line, every macro call
-    preceded by a ``<?recon-src file:line?>`` instruction, and includes resolved to their
-    tagged copies (``script_dir``: the folder of the script being loaded). Returns the copy's path."""
-    path = path.resolve()
-    if path in copies:
-        return copies[path]
-    if len(copies) >= LIMITS.max_files:
-        raise SandboxError(f"{display.get(path, path.name)}: the script includes more than the limit of "
-                           f"{LIMITS.max_files} files", hint="merge macro files")
-    tree = _parse_file(path)
-    target = out_dir / f"{len(copies):03d}_{path.name}"
-    copies[path] = target
-    label = display.setdefault(path, path.name)
-    for el in tree.getroot().iter():
-        if not isinstance(el.tag, str):
-            continue
-        if el.tag == f"{{{XACRO_NS}}}include":
-            where = f"{label}:{el.sourceline}"
-            included = _resolve_include(el.get("filename", ""), path.parent, script_dir, where)
-            display.setdefault(included, included.name)
-            el.set("filename", str(_annotate(included, out_dir, copies, display, script_dir)))
-        elif not el.tag.startswith(f"{{{XACRO_NS}}}"):
-            el.set(SRC_ATTR, f"{label}:{el.sourceline}")
-        elif etree.QName(el).localname not in _DIRECTIVES and el.getparent() is not None:
-            el.addprevious(etree.ProcessingInstruction(PI_TARGET, f"{label}:{el.sourceline}"))
-    tree.write(str(target), xml_declaration=True, encoding="utf-8")
-    return target
+    return parser()
 
 
 def expand(path: Path) -> tuple[etree._Element, dict[etree._Element, C.Source], str]:
@@ -108,30 +47,28 @@ def expand(path: Path) -> tuple[etree._Element, dict[etree._Element, C.Source], 
     path = Path(path)
     tmp = Path(tempfile.mkdtemp(prefix="recon-script-"))
     try:
-        main = _annotate(path, tmp, {}, {path.resolve(): path.name}, path.resolve().parent)
+        files = Annotated(tmp, script_rule(path.resolve().parent), "script", MAX_BYTES)
+        files.display[path.resolve()] = path.name
+        if not path.is_file():
+            raise FileError(f"script {path} does not exist", hint="check the path")
+        main = files.add(path)
         frames = None
         try:
-            with sandboxed(path.resolve().parent) as frames:
+            with sandboxed(files.rule, includes=files.includes) as frames:
                 doc = xacro.process_file(str(main))
                 text = doc.toxml()
         except Exception as exc:  # xacro reports macro/property errors as exceptions
-            raise _expansion_error(path, exc, frames, tmp) from None
+            raise expansion_error(path.name, exc, frames, files) from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     try:
         root = etree.fromstring(text.encode(), _parser())
     except etree.XMLSyntaxError as exc:  # xacro:element, xacro:attribute and expressions can make anything
         raise _not_xml(path, doc, exc) from None
-    for pi in root.xpath("//processing-instruction()"):
-        if pi.getparent() is not None:
-            pi.getparent().remove(pi)
     tagged = {}
-    for el in root.iter():
-        if isinstance(el.tag, str) and (tagged_at := el.get(SRC_ATTR)):
-            file, _, line = tagged_at.rpartition(":")
-            tagged[el] = C.Source(file, int(line))
-            del el.attrib[SRC_ATTR]
-    etree.cleanup_namespaces(root)
+    for el, tagged_at in untag(root).items():
+        file, _, line = tagged_at.rpartition(":")
+        tagged[el] = C.Source(file, int(line))
     expanded = etree.tostring(root, pretty_print=True, encoding="unicode")
     # re-parse so that line numbers (of validation errors) refer to the expanded text
     clean = etree.fromstring(expanded.encode(), _parser())
@@ -200,34 +137,6 @@ def _not_xml(path: Path, doc, exc: etree.XMLSyntaxError) -> ScriptError:
         stack.extend((child, where, prefixes) for child in reversed(node.childNodes)
                      if child.nodeType == child.ELEMENT_NODE)
     return ScriptError(f"{path.name}: the expansion is not XML ({exc.msg})", hint=hint, source=path.name)
-
-
-def _expansion_error(path: Path, exc: BaseException, frames, tmp: Path) -> ScriptError:
-    """One line for an error of the expansion: where (the element or macro call being
-    expanded, and the macro calls that led there) and what."""
-    cause: BaseException | None = exc
-    seen = set()
-    while cause is not None and not isinstance(cause, SandboxError) and id(cause) not in seen:
-        seen.add(id(cause))
-        cause = getattr(cause, "exc", None) or cause.__cause__ or cause.__context__
-    limit = None
-    if isinstance(cause, SandboxError):
-        what, hint, limit = cause.message, cause.hint, cause
-    elif isinstance(exc, RecursionError):
-        what, hint = "macros or properties recurse without end", "end the recursion with xacro:if"
-    else:
-        what = " ".join(str(exc).split()) or type(exc).__name__
-        for copy in tmp.iterdir():
-            what = what.replace(str(copy), copy.name[4:])
-        what, hint = f"xacro: {what}", "fix the macro call or property"
-    stack = (frames.failure or frames.stack) if frames is not None else []
-    where = stack[-1][1] if stack else path.name
-    calls = [src for kind, src in stack if kind == "macro" and src != where]
-    if calls:
-        what += " (in macro called at " + ", called at ".join(reversed(calls)) + ")"
-    if limit is not None:
-        return LimitError(f"{where}: {what}", hint=hint, limit=limit.limit, bound=limit.bound)
-    return ScriptError(f"{where}: {what}", hint=hint, source=where)
 
 
 def shipped_or_given(path: Path) -> Path:

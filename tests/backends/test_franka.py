@@ -428,12 +428,12 @@ def _files(tmp_path: Path, cell: str = "fr3", speed1: float = 0.3, accel1: float
 def _careless_cell(tmp_path: Path) -> str:
     """The FR3 cell with a limits file whose accelerations and jerks are 30 times
     the FR3's: recon's own check passes what the controller refuses."""
-    text = (CELLS_DIR / "fr3.yaml").read_text().replace("../robot/", f"{ROBOT_DIR}/")
+    text = (CELLS_DIR / "fr3.yaml").read_text().replace("../robot/", "")  # found in recon's robot/
     limits = (ROBOT_DIR / "fr3" / "limits.yaml").read_text()
     limits = limits.replace("acceleration: 572.9578", "acceleration: 17188.734").replace(
         "jerk: 286478.8976", "jerk: 8594366.93")
     (tmp_path / "careless_limits.yaml").write_text(limits)
-    text = text.replace(f"{ROBOT_DIR}/fr3/limits.yaml", "careless_limits.yaml")
+    text = text.replace("limits: fr3/limits.yaml", "limits: careless_limits.yaml")
     (tmp_path / "careless_fr3.yaml").write_text(text)
     return "careless_fr3.yaml"
 

@@ -340,12 +340,12 @@ base: base_link
 flange: flange
 camera:
   frame: camera
-  sensor: {robot}/camera.yaml
+  sensor: camera.yaml
 table:
   shape: table_top
 board:
   frame: marker
-  spec: {robot}/board.yaml
+  spec: board.yaml
 objects:
   position: [0.6, 0.0, 0.4]
 limits:
@@ -367,7 +367,7 @@ def test_a_cell_file_naming_a_urdf_with_meshes_builds_a_cell(tmp_path):
 
     _robot(tmp_path)
     path = tmp_path / "toy.yaml"
-    path.write_text(CELL.format(robot=ROBOT_DIR, sd=SD))
+    path.write_text(CELL.format(sd=SD))
     config = CellConfig(kind=str(path))
     capsules = {c.link: c for c in mesh_capsules(config)}
     assert set(capsules) == {"base_link", "link_1", "link_2", "link_3"}
@@ -394,7 +394,7 @@ def test_a_plain_urdfs_primitives_are_inflated_by_the_safety_distance(tmp_path):
 
     _robot(tmp_path)
     path = tmp_path / "toy.yaml"
-    path.write_text(CELL.format(robot=ROBOT_DIR, sd=SD))
+    path.write_text(CELL.format(sd=SD))
     for sd in (0.0, 0.03):
         urdf = expand_urdf(CellConfig(kind=str(path), safety_distance=sd))
         top = next(c for c in etree.fromstring(urdf.encode()).iter("collision") if c.get("name") == "table_top")

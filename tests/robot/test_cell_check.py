@@ -34,9 +34,8 @@ def test_reachability_counts_the_directions_of_each_point():
 
 def test_a_cell_whose_home_collides_fails_the_check(tmp_path, capsys):
     shutil.copytree(ROBOT_DIR, tmp_path / "robot", ignore=shutil.ignore_patterns("realism"))
-    (tmp_path / "cells").mkdir()
-    cell = tmp_path / "cells" / "bent.yaml"
-    text = (CELLS_DIR / "fr3.yaml").read_text()
+    cell = tmp_path / "bent.yaml"
+    text = (CELLS_DIR / "fr3.yaml").read_text().replace("../robot/", "robot/")
     home = next(line for line in text.splitlines() if line.strip().startswith("home:"))
     cell.write_text(text.replace(home, "  home: [0, 100, 0, -170, 0, 40, 0]"))
     assert main(["cell", "check", str(cell), "--step", "0.4", "-o", str(tmp_path / "out")]) == 1

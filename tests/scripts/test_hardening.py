@@ -305,7 +305,7 @@ def test_export_through_a_link_made_during_the_run_is_refused(tree, tmp_path):
 
 
 def test_expansion_time_limit(tree, capsys, monkeypatch):
-    from recon_cli.scripts import sandbox
+    from recon_cli.expansion import sandbox
 
     monkeypatch.setattr(sandbox, "LIMITS", sandbox.Limits(max_seconds=0.0))
     code, _, err = run_case(tree, capsys, recon(MOVE), V)

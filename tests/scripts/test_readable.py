@@ -1,4 +1,4 @@
-"""What a script may read: one rule (``recon_cli.scripts.sandbox.readable``) for every path
+"""What a script may read: one rule (``recon_cli.expansion.readable.readable``) for every path
 attribute, applied by ``recon validate``, by ``recon run`` before anything is written, and
 again by the command itself when it runs.
 

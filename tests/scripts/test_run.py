@@ -180,9 +180,8 @@ def test_the_cell_option_runs_a_script_on_another_cell(tmp_path):
     from recon_cli.paths import CELLS_DIR, ROBOT_DIR
 
     shutil.copytree(ROBOT_DIR, tmp_path / "robot", ignore=shutil.ignore_patterns("realism"))
-    (tmp_path / "cells").mkdir()
-    cell = tmp_path / "cells" / "lab.yaml"
-    cell.write_text((CELLS_DIR / "fr3.yaml").read_text().replace("name: fr3", "name: lab"))
+    cell = tmp_path / "lab.yaml"
+    cell.write_text((CELLS_DIR / "fr3.yaml").read_text().replace("name: fr3", "name: lab").replace("../robot/", "robot/"))
     script = tmp_path / "two.xml"
     script.write_text(HEAD + '<recon name="two" on_failure="skip">\n  <cell kind="gantry" resolution="0.25"/>\n'
                       '  <object name="bottle"/>\n  <box/>\n'
@@ -199,15 +198,14 @@ def test_the_cell_option_runs_a_script_on_another_cell(tmp_path):
 
 
 def _lab_cell(folder: Path, name: str = "lab.yaml") -> Path:
-    """The FR3 cell file copied into ``folder`` with its robot files beside it."""
+    """The FR3 cell file copied into ``folder``/cells with its robot files beside it."""
     import shutil
 
     from recon_cli.paths import CELLS_DIR, ROBOT_DIR
 
-    shutil.copytree(ROBOT_DIR, folder / "robot", ignore=shutil.ignore_patterns("realism"))
-    (folder / "cells").mkdir()
+    shutil.copytree(ROBOT_DIR, folder / "cells" / "robot", ignore=shutil.ignore_patterns("realism"))
     cell = folder / "cells" / name
-    cell.write_text((CELLS_DIR / "fr3.yaml").read_text().replace("name: fr3", "name: lab"))
+    cell.write_text((CELLS_DIR / "fr3.yaml").read_text().replace("name: fr3", "name: lab").replace("../robot/", "robot/"))
     return cell
 
 
@@ -233,12 +231,12 @@ def test_a_script_cell_file_that_names_files_elsewhere_is_refused(tmp_path, caps
     cell = _lab_cell(tmp_path / "elsewhere")
     here = tmp_path / "here"
     (here / "cells").mkdir(parents=True)
-    text = cell.read_text().replace("../robot/", str(tmp_path / "elsewhere" / "robot") + "/")
+    text = cell.read_text().replace("robot/", str(tmp_path / "elsewhere" / "cells" / "robot") + "/")
     (here / "cells" / "lab.yaml").write_text(text)
     script = here / "lab.xml"
     script.write_text(HEAD + '<recon name="lab">\n  <cell kind="cells/lab.yaml"/>\n  <object name="bottle"/>\n'
                       '</recon>\n')
     assert main(["run", str(script), "--out", str(tmp_path / "run")]) == 1
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "lab.xml:3: the cell file cells/lab.yaml names" in err
-    assert "outside the script's folder" in err and not (tmp_path / "run").exists()
+    assert err.count("\n") == 1 and "lab.xml:3: " in err and "description.file" in err
+    assert "outside the cell file's folder" in err and not (tmp_path / "run").exists()

@@ -6,8 +6,8 @@ conditionals, literals, subscripts and calls of a fixed set of pure functions (`
 anything but xacro's namespaces. Every operation and call then runs through a guard that
 refuses values beyond :class:`Limits` (integers, string and list sizes) before they are
 built, and checks the expansion's deadline. The symbol table offers xacro's namespaces
-restricted to that set, with ``xacro.load_yaml`` confined to the script's folder and
-scripts_xml/. :mod:`recon_cli.scripts.sandbox` installs all this into xacro.
+restricted to that set, with ``xacro.load_yaml`` confined by the expansion's read rule
+(:mod:`.readable`). :mod:`.sandbox` installs all this into xacro.
 """
 
 from __future__ import annotations
@@ -16,13 +16,15 @@ import ast
 import builtins
 import math
 import operator
+import re
 import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 from recon_cli.errors import LimitError, ScriptError
-from recon_cli.scripts.readable import readable
+from recon_cli.expansion.readable import ReadRule, readable
+from recon_cli.inputs.yamlfile import plain, read_yaml
 
 
 @dataclass(frozen=True)
@@ -39,6 +41,7 @@ class Limits:
     max_files: int = 50  # script + included files
     max_commands: int = 10_000  # typed commands after expansion (rings included)
     max_ring_count: int = 3600  # views of one <ring>
+    percent_format: bool = False  # '%r 0 %r' % (x, y), with widths and precisions of at most 3 digits
 
 
 LIMITS = Limits()
@@ -148,9 +151,15 @@ def _binop(name: str, a, b):
                                    "or items", hint="use smaller strings and lists", limit="max_size",
                                    bound=lim.max_size)
     if name == "Mod" and isinstance(a, str):
-        raise SandboxError("%-formatting of strings is not allowed in scripts", hint="use + to join strings")
+        if not lim.percent_format:
+            raise SandboxError("%-formatting of strings is not allowed in scripts", hint="use + to join strings")
+        if _WIDE.search(a):
+            raise SandboxError("a %-format with a width or precision of more than 3 digits (or '*') is not allowed",
+                               hint="use widths and precisions below 1000")
     return g.value(_BINOPS[name](a, b))
 
+
+_WIDE = re.compile(r"%(\([^)]*\))?[-+ #0]*(\*|\d{4,}|\d*\.(\*|\d{4,}))")
 
 # functions an expression may call (besides the math module's)
 _PURE = ("list", "dict", "len", "str", "float", "int", "bool", "min", "max", "round", "abs", "all", "any",
@@ -319,8 +328,11 @@ class _CallableSet:
         return id(f) in _allowed
 
 
-def symbol_table(script_dir: Path) -> dict:
-    """xacro's global symbols, restricted: pure builtins, math, and a confined load_yaml."""
+def symbol_table(rule: ReadRule | Path, originals: dict[str, Path] | None = None) -> dict:
+    """xacro's global symbols, restricted: pure builtins, math, and a load_yaml confined by
+    ``rule`` (a script's folder: :func:`~.readable.script_rule`). ``originals`` maps the
+    files xacro expands (annotated copies) to the user's files: ``load_yaml`` then looks
+    beside the user's file that calls it, as plain xacro does; without it beside the rule's home."""
 
     import xacro
 
@@ -338,7 +350,7 @@ def symbol_table(script_dir: Path) -> dict:
             m[name] = getattr(math, name)
             table[name] = m[name]
     x = xacro.NameSpace()
-    x["load_yaml"] = table["load_yaml"] = _confined_load_yaml(script_dir)
+    x["load_yaml"] = table["load_yaml"] = _confined_load_yaml(rule, originals)
     x["dotify"] = table["dotify"] = xacro.YamlDictWrapper
     x["tokenize"] = xacro.tokenize
     x["arg"] = lambda name: xacro.substitution_args_context["arg"][name]
@@ -362,17 +374,20 @@ def _fatal(*args):
     raise SandboxError("xacro.fatal: " + " ".join(map(str, args)), hint="the script stopped itself")
 
 
-def _confined_load_yaml(script_dir: Path):
+def _confined_load_yaml(rule: ReadRule | Path, originals: dict[str, Path] | None):
     def load_yaml(filename):
         import xacro
 
-
         name = str(filename)
         if any(ch in name for ch in "$(){}"):
-            raise SandboxError(f"xacro.load_yaml({name!r}): scripts may load YAML files only by a plain relative "
-                               "path beside the script or in scripts_xml/", hint="copy the file beside the script")
+            raise SandboxError(f"xacro.load_yaml({name!r}): YAML files are loaded only by a plain relative path",
+                               hint="copy the file beside the file that loads it")
+        beside = None
+        if originals is not None and xacro.filestack:
+            user_file = originals.get(str(xacro.filestack[-1]))
+            beside = user_file.parent if user_file is not None else None
         try:
-            path = readable(name, script_dir, None, "YAML file")
+            path = readable(name, rule, None, "YAML file", beside=beside)
         except LimitError:
             raise
         except ScriptError as exc:
@@ -381,9 +396,17 @@ def _confined_load_yaml(script_dir: Path):
         if size > current_guard().limits.max_file_bytes:
             raise SandboxError(f"xacro.load_yaml({name!r}): {size} bytes exceeds the limit of "
                                f"{current_guard().limits.max_file_bytes} bytes", hint="use a smaller file")
-        return current_guard().value(xacro.load_yaml(str(path)))
+        return current_guard().value(_read_yaml(path))
 
     return load_yaml
+
+
+def _read_yaml(path: Path):
+    """A YAML file through recon's guarded reader (no aliases, no tags, bounded), as xacro's
+    wrappers (``a.b`` for ``a['b']``)."""
+    import xacro
+
+    return xacro.YamlListWrapper.wrap(plain(read_yaml(path, "YAML file")))
 
 
 def clear_symbols() -> None:

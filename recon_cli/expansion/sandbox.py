@@ -1,14 +1,17 @@
-"""What xacro may do while it expands a script: no files, no environment, bounded work.
+"""What xacro may do while it expands a user's file (an automation script, a cell's robot
+description): no code, no files beyond its read rule, no environment, bounded work.
 
 xacro evaluates ``${...}`` with Python's ``eval`` and ``$(...)`` with substitution commands
 that read the environment (``env``, ``optenv``), the file system (``find``, ``dirname``,
 ``cwd``, ``xacro.load_yaml``) or run an unrestricted ``eval`` (``$(eval ...)``). A script
-may come from someone else, so during the expansion of a script (and only then; the robot
-description is expanded by plain xacro) :func:`sandboxed` replaces those entry points:
+or a cell file may come from someone else, so during the expansion of either
+:func:`sandboxed` replaces those entry points:
 
 * expressions go through :mod:`recon_cli.scripts.expressions` (checked, guarded, bounded);
 * ``$(arg ...)`` and ``$(eval ...)`` (the same checked evaluator) are the only substitution
   commands; ``env``, ``optenv``, ``find``, ``dirname`` and ``cwd`` are refused;
+* ``xacro:include`` reads only the files the caller resolved and checked beforehand (by
+  their read rule, :mod:`.readable`), whatever an expression or ``xacro:element`` makes;
 * the expansion is bounded in macro nesting, evaluated elements, evaluated text and time.
 
 Every refusal is a :class:`~recon_cli.errors.LimitError` that names the limit; the loader
@@ -29,12 +32,13 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from recon_cli.scripts import expressions as X
-from recon_cli.scripts.expressions import LIMITS, Limits, SandboxError, safe_eval
-from recon_cli.scripts.readable import readable, readable_roots
+from recon_cli.expansion import expressions as X
+from recon_cli.expansion.expressions import LIMITS, Limits, SandboxError, safe_eval
+from recon_cli.expansion.readable import ReadRule, readable, readable_roots
 
 PI_TARGET = "recon-src"  # processing instruction placed before macro calls: <?recon-src file:line?>
-__all__ = ["LIMITS", "PI_TARGET", "Frames", "Limits", "SandboxError", "readable", "readable_roots", "sandboxed"]
+__all__ = ["LIMITS", "PI_TARGET", "Frames", "Limits", "ReadRule", "SandboxError", "readable", "readable_roots",
+           "sandboxed"]
 
 
 # --------------------------------------------------------------------- substitution args
@@ -175,25 +179,52 @@ _SRC_ATTR = "recon_source"
 _lock = threading.Lock()
 
 
+def _include_guard(original, allowed: frozenset[str]):
+    """xacro's process_include, for the files resolved beforehand only."""
+    import xacro
+
+    def process_include(elt, macros, symbols, func):
+        X.current_guard().tick()
+        spec = elt.getAttribute("filename")
+        if spec not in allowed:
+            raise SandboxError("xacro:include of a file named by an expression or made by xacro:element is refused",
+                               hint="include files by a plain relative path written in the file")
+        for name in ("ns", "optional"):
+            if elt.hasAttribute(name):
+                raise SandboxError(f"xacro:include {name}=... is not supported here",
+                                   hint="include the file without it")
+        if xacro.first_child_element(elt):
+            raise SandboxError("xacro:include has child elements", hint="remove them")
+        return original(elt, macros, symbols, func)
+
+    return process_include
+
+
 @contextlib.contextmanager
-def sandboxed(script_dir: Path, limits: Limits | None = None) -> Iterator[Frames]:
-    """Patch xacro for the expansion of one script; yields the expansion's frames (for
-    error locations). xacro's module state is global, so expansions are serialized."""
+def sandboxed(rule: ReadRule | Path, limits: Limits | None = None, *, includes: frozenset[str] = frozenset(),
+              originals: dict[str, Path] | None = None) -> Iterator[Frames]:
+    """Patch xacro for the expansion of one user's file; yields the expansion's frames (for
+    error locations). ``rule``: where ``xacro.load_yaml`` may read (a script's folder for
+    :func:`~.readable.script_rule`); ``includes``: the files ``xacro:include`` may name (the
+    checked copies); ``originals``: copy -> the user's file (see :func:`.expressions.symbol_table`).
+    xacro's module state is global, so expansions are serialized."""
     import xacro
 
     with _lock:
-        saved = {name: getattr(xacro, name) for name in
-                 ("safe_eval", "eval_extension", "eval_text", "eval_all", "handle_macro_call", "_global_symbols")}
+        names = ("safe_eval", "eval_extension", "eval_text", "eval_all", "handle_macro_call", "process_include",
+                 "_global_symbols")
+        saved = {name: getattr(xacro, name) for name in names}
         X.STATE.guard = X.Guard(limits or LIMITS)
         X.STATE.frames = Frames()
         eval_text, eval_all, macro_call = _patched(saved["eval_text"], saved["eval_all"], saved["handle_macro_call"])
         try:
-            xacro._global_symbols = X.symbol_table(Path(script_dir))
+            xacro._global_symbols = X.symbol_table(rule, originals)
             xacro.safe_eval = safe_eval
             xacro.eval_extension = eval_extension
             xacro.eval_text = eval_text
             xacro.eval_all = eval_all
             xacro.handle_macro_call = macro_call
+            xacro.process_include = _include_guard(saved["process_include"], includes)
             with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
                 yield X.STATE.frames
         finally:

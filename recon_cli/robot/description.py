@@ -21,6 +21,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from lxml import etree
@@ -336,7 +337,7 @@ def expand_xacro(cell: CellFile, files: Annotated, args: tuple[tuple[str, str], 
     return text.replace(str(main), str(cell.description))
 
 
-def _untag(node) -> None:
+def _untag(node: Any) -> None:
     """Take the source tags and instructions of :class:`Annotated` off an expanded DOM."""
     if node.nodeType == node.ELEMENT_NODE and node.hasAttribute(SRC_ATTR):
         node.removeAttribute(SRC_ATTR)

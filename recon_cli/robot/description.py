@@ -30,7 +30,7 @@ from recon_cli.errors import InputError, ScriptError, UnknownNameError
 from recon_cli.expansion.annotate import SRC_ATTR, Annotated, expansion_error, parser
 from recon_cli.expansion.expressions import Limits
 from recon_cli.expansion.readable import cell_rule
-from recon_cli.expansion.sandbox import PI_TARGET, sandboxed
+from recon_cli.expansion.sandbox import sandboxed
 from recon_cli.geometry.transforms import invert
 from recon_cli.inputs.files import file_errors, read_limited
 from recon_cli.robot.capsule_fit import FittedCapsule, MeshFit, fit_mesh_collisions
@@ -302,6 +302,10 @@ def _check_xml(text: str, where: str) -> None:
     if tree.docinfo.doctype or tree.docinfo.internalDTD is not None:
         raise InputError(f"{where}:1: DOCTYPE declarations are not allowed in a robot description",
                          hint="remove the <!DOCTYPE ...> (and any entities)")
+    for pi in (*root.itersiblings(preceding=True), *root.itersiblings(), *root.iter()):
+        if isinstance(pi, etree._ProcessingInstruction):
+            raise InputError(f"{where}:{pi.sourceline or 1}: a processing instruction <?{pi.target} ...?> in the "
+                             "robot description", hint="remove it: a URDF holds none")
 
 
 def _annotated(cell: CellFile, tmp: Path) -> Annotated:
@@ -329,7 +333,7 @@ def expand_xacro(cell: CellFile, files: Annotated, args: tuple[tuple[str, str], 
     try:
         with sandboxed(files.rule, DESCRIPTION_LIMITS, includes=files.includes, originals=files.originals) as frames:
             doc = xacro.process_file(str(main), mappings=dict(args))
-            _untag(doc.documentElement)
+            _untag(doc)
             text = str(doc.toprettyxml(indent="  "))
     except Exception as exc:  # the description's mistakes and refusals, as one line
         error = expansion_error(str(cell.description), exc, frames, files)
@@ -338,11 +342,12 @@ def expand_xacro(cell: CellFile, files: Annotated, args: tuple[tuple[str, str], 
 
 
 def _untag(node: Any) -> None:
-    """Take the source tags and instructions of :class:`Annotated` off an expanded DOM."""
+    """Take the source tags of :class:`Annotated` and every processing instruction (a URDF
+    holds none; the URDF parsers of pinocchio and MuJoCo refuse some) off an expanded DOM."""
     if node.nodeType == node.ELEMENT_NODE and node.hasAttribute(SRC_ATTR):
         node.removeAttribute(SRC_ATTR)
     for child in list(node.childNodes):
-        if child.nodeType == child.PROCESSING_INSTRUCTION_NODE and child.target == PI_TARGET:
+        if child.nodeType == child.PROCESSING_INSTRUCTION_NODE:
             node.removeChild(child)
         elif child.nodeType == child.ELEMENT_NODE:
             if child.hasAttribute(SRC_ATTR):

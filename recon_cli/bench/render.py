@@ -183,3 +183,15 @@ def cell_planners_report(result: dict) -> Iterator:
     if result["profile"]:
         yield "where recon's planning time goes (cProfile, cumulative):"
         yield from result["profile"]
+
+
+def inputs_report(result) -> Iterator:
+    """The hostile-input campaign: cases, refused, accepted and failed per input kind."""
+    table = _table("hostile and careless inputs, each in its own recon process",
+                   ("input", "cases", "refused", "accepted", "failed", "slowest [s]", "peak [MB]"))
+    for kind, c in result.counts.items():
+        table.add_row(kind, str(c.cases), str(c.refused), str(c.accepted), str(c.failed), f"{c.slowest_s:.1f}",
+                      f"{c.peak_mb:.0f}")
+    yield table
+    for f in result.failures:
+        yield f"failed: {f.kind} #{f.index}: {f.reason} ({f.last_line[:160]})"

@@ -14,6 +14,7 @@ import typer
 from recon_cli.bench import render
 from recon_cli.bench.cell_planners import PEERS, run_cell_planners
 from recon_cli.bench.ik import IKBenchConfig, run_ik_bench
+from recon_cli.bench.inputs import MAKERS, run_campaign
 from recon_cli.bench.mplib_peer import run_mplib
 from recon_cli.bench.planners import DEFAULT_PLANNERS, run_planner_bench, thesis_times, write_results
 from recon_cli.bench.profile import MAIN_N, PSTATS_FILE, QUICK_N, QUICK_RESOLUTION, run_profile, stage_png
@@ -192,6 +193,33 @@ def bench_tour(
     for item in render.tour_report(summary, rows, plan.velocity_scale, plan.acceleration_scale):
         console.print(item)
     console.print(f"results: {folder / 'bench_tour.json'}, plot: {folder / 'tour_gap.png'}")
+
+
+@bench_app.command("inputs")
+def bench_inputs(
+    per_kind: Annotated[int, typer.Option("--per-kind", min=1, max=10_000, help="Cases per input kind.")] = 50,
+    kinds: Annotated[str, typer.Option("--input-kinds", metavar="KIND,...",
+                                       help=f"Input kinds (default all): {', '.join(MAKERS)}.")] = "",
+    workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="Cases at once.")] = 2,
+    seed: SeedOpt = D.seed,
+    out: OutOpt = None,
+    force: ForceOpt = False,
+) -> None:
+    """Careless and hostile input files through the command line, each case in its own recon
+    process: refused in one line, accepted, or failed (traceback, > 20 s, > 1 GB, echo, code run)."""
+
+    chosen = tuple(k.strip() for k in kinds.split(",") if k.strip()) or tuple(MAKERS)
+    for kind in chosen:
+        if kind not in MAKERS:
+            raise InputError(f"--input-kinds: unknown input kind {kind!r}", hint=f"choose from: {', '.join(MAKERS)}")
+    folder = output_folder(out, "bench inputs", force=force).path
+    with progress_bar() as update:
+        result = run_campaign(folder, per_kind, seed, workers, chosen, update)
+    for item in render.inputs_report(result):
+        console.print(item)
+    console.print(f"results: {folder / 'bench_inputs.json'}, failing cases: {folder / 'failures'}")
+    if result.failures:
+        raise typer.Exit(1)
 
 
 @bench_app.command("profile")

@@ -1,0 +1,41 @@
+"""``recon bench inputs``: the campaign makes its cases from recon's own files, runs each in
+its own process and judges it from outside (a case that runs code or echoes a secret fails)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from recon_cli.bench import inputs as B
+
+
+def test_a_small_campaign_refuses_or_accepts_every_case(tmp_path):
+    result = B.run_campaign(tmp_path, 2, 0, 2, ("cell description", "mesh"))
+    data = json.loads((tmp_path / "bench_inputs.json").read_text())
+    assert set(data["counts"]) == {"cell description", "mesh"}
+    assert all(c.cases == 2 and c.failed == 0 for c in result.counts.values()), result.failures
+    assert not (tmp_path / "cases").exists()
+
+
+def test_a_case_that_runs_code_or_echoes_a_secret_fails(tmp_path):
+    """The judge: a command that writes the marker, or prints a secret, is a failure."""
+    root = tmp_path / "r"
+    B._secrets(root)
+    B._OUTSIDE_LISTING[str(root)] = B._listing(root / "outside")
+    folder = root / "case"
+    folder.mkdir()
+    script = folder / "s.xml"
+    script.write_text("x")
+    # `recon validate` of a missing file is a refusal; pointing it at the secret echoes nothing
+    ok = B._run_one(B.Case("t", 0, folder, ("validate", str(folder / "missing.xml"))), root)
+    assert ok.verdict == "refused" and ok.reason == ""
+    (root / "outside" / "new.txt").write_text("written")
+    wrote = B._run_one(B.Case("t", 1, folder, ("validate", str(folder / "missing.xml"))), root)
+    assert wrote.verdict == "fail" and wrote.reason == "wrote outside its folder"
+
+
+def test_mutations_are_seeded():
+    a = B._mutate("abcdefghij" * 5, B.YAML_PIECES, np.random.default_rng(3))
+    b = B._mutate("abcdefghij" * 5, B.YAML_PIECES, np.random.default_rng(3))
+    assert a == b and a != "abcdefghij" * 5

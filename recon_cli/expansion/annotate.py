@@ -112,7 +112,11 @@ class Annotated:
             elif not el.tag.startswith(f"{{{XACRO_NS}}}"):
                 el.set(SRC_ATTR, f"{label}:{el.sourceline}")
             elif etree.QName(el).localname not in _DIRECTIVES and el.getparent() is not None:
-                el.addprevious(etree.ProcessingInstruction(PI_TARGET, f"{label}:{el.sourceline}"))
+                # before the comments right above the call, which xacro removes with the call
+                first = el
+                while isinstance(first.getprevious(), etree._Comment) and not (first.getprevious().tail or "").strip():
+                    first = first.getprevious()
+                first.addprevious(etree.ProcessingInstruction(PI_TARGET, f"{label}:{el.sourceline}"))
         tree.write(str(target), xml_declaration=True, encoding="utf-8")
         return target
 

@@ -1,14 +1,17 @@
-"""Stop requests (Ctrl-C, SIGTERM) as one exception, so that a run can stop the robot,
+"""Stop requests (Ctrl-C, SIGTERM, SIGHUP) as one exception, so that a run can stop the robot,
 keep what it completed and say what was interrupted.
 
 SIGINT raises ``KeyboardInterrupt`` as usual; inside :func:`stop_signals` SIGTERM (what a
 batch system or ``kill`` sends) raises :class:`Interrupted`, a ``KeyboardInterrupt`` too,
-so every handler of Ctrl-C handles both.
+so every handler of Ctrl-C handles both. With ``hangup=True`` SIGHUP (the terminal was
+closed) does the same, and what recon writes to that terminal from then on is dropped, so
+that the cleanup after it cannot fail on a terminal that is gone.
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import threading
 from collections.abc import Iterator
@@ -32,9 +35,39 @@ def exit_code(name: str) -> int:
     return 128 + int(getattr(signal, name, signal.SIGINT))
 
 
+def _terminals() -> tuple[int, ...]:
+    """Which of standard output and error go to a terminal (asked before a hang-up: a
+    terminal that is gone answers no more)."""
+    found = []
+    for fd in (1, 2):
+        try:
+            if os.isatty(fd):
+                found.append(fd)
+        except OSError:
+            pass
+    return tuple(found)
+
+
+def _drop_output(fds: tuple[int, ...]) -> None:
+    """``fds`` write to /dev/null from now on."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+    except OSError:
+        return
+    try:
+        for fd in fds:
+            try:
+                os.dup2(null, fd)
+            except OSError:
+                pass
+    finally:
+        os.close(null)
+
+
 @contextlib.contextmanager
-def stop_signals() -> Iterator[None]:
-    """Turn SIGTERM into :class:`Interrupted` while the block runs (main thread only)."""
+def stop_signals(hangup: bool = False) -> Iterator[None]:
+    """Turn SIGTERM (and with ``hangup`` SIGHUP, unless it is ignored, as under ``nohup``)
+    into :class:`Interrupted` while the block runs (main thread only)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -42,8 +75,17 @@ def stop_signals() -> Iterator[None]:
     def on_term(signum, frame):
         raise Interrupted("SIGTERM")
 
-    previous = signal.signal(signal.SIGTERM, on_term)
+    terminals = _terminals() if hangup else ()
+
+    def on_hangup(signum, frame):
+        _drop_output(terminals)
+        raise Interrupted("SIGHUP")
+
+    previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, on_term)}
+    if hangup and hasattr(signal, "SIGHUP") and signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
+        previous[signal.SIGHUP] = signal.signal(signal.SIGHUP, on_hangup)
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)

@@ -2,10 +2,14 @@
 from here on request, otherwise the commands that open it elsewhere.
 
 The viewer is rerun's own program (the ``rerun`` binary of rerun-sdk), run as a child of
-recon: ``--bind`` goes to it (the web viewer's HTTP server and the gRPC server that feeds
-it listen on 127.0.0.1 unless the user says otherwise), its output is kept off the
-terminal (recon prints the address itself), and it ends with recon: Ctrl-C and SIGTERM stop
-it and wait for it, and on Linux it also gets SIGTERM should recon die without cleaning up.
+recon in a process group of its own: ``--bind`` goes to it (the web viewer's HTTP server and
+the gRPC server that feeds it listen on 127.0.0.1 unless the user says otherwise), its
+output is kept off the terminal (recon prints the address itself), and it ends with recon.
+Ctrl-C, SIGTERM and SIGHUP (the terminal closed) make recon stop the group (SIGTERM, SIGKILL
+after STOP_TIMEOUT_S), reap the child, wait until no process of the group is left and
+check that neither port answers any more before it exits; a port that still answers is an
+error. On Linux the child also gets SIGTERM should recon be killed without cleaning up
+(SIGKILL).
 """
 
 from __future__ import annotations
@@ -34,7 +38,9 @@ DEFAULT_BIND = "127.0.0.1"
 WEB_PORT = 9090
 START_TIMEOUT_S = 30.0  # until the web viewer answers
 STOP_TIMEOUT_S = 5.0  # after SIGTERM, before SIGKILL
-_STOP = (signal.SIGINT, signal.SIGTERM)
+WAIT_STEP_S = 0.2  # how soon a stop signal is acted on while rerun runs
+GONE_TIMEOUT_S = 10.0  # after SIGKILL, until the group is empty and the ports are closed
+_STOP = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 def find_recording(target: Path) -> Path:
@@ -191,34 +197,86 @@ def _child_setup() -> Callable[[], None]:
     return setup
 
 
-def _start(command: list[str], log) -> subprocess.Popen:
-    """Start rerun with stop signals held back, so that a Ctrl-C cannot fall between the
-    start and the moment recon knows the child it has to stop."""
+def _start(command: list[str], log, started: list[subprocess.Popen]) -> None:
+    """Start rerun in a process group of its own and append it to ``started``, with stop
+    signals held back until it is there, so that a Ctrl-C cannot fall between the start and
+    the moment recon knows the child it has to stop."""
     if sys.platform == "win32":  # pragma: no cover
-        return subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
+        started.append(subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT))
+        return
     setup = _child_setup()
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP)
     try:
-        return subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
-                                preexec_fn=setup)
+        started.append(subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                                        preexec_fn=setup, process_group=0))
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
+def _signal_group(child: subprocess.Popen, sig: int) -> bool:
+    """Send ``sig`` to the child's process group (its pid); False when no process is left in it."""
+    if sys.platform == "win32":  # pragma: no cover
+        if child.poll() is None:
+            child.kill()
+        return child.poll() is None
+    try:
+        os.killpg(child.pid, sig)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # a member that is not ours any more: it is there all the same
+        return True
+    return True
+
+
 def _stop(child: subprocess.Popen) -> None:
-    """SIGTERM, then SIGKILL after STOP_TIMEOUT_S; always waits (no process is left behind)."""
+    """SIGTERM to the child's group, SIGKILL after STOP_TIMEOUT_S; always reaps the child
+    and waits until no process of its group is left (a second Ctrl-C only hurries it)."""
     if child.poll() is None:
-        child.terminate()
+        _signal_group(child, signal.SIGTERM)
         try:
             child.wait(STOP_TIMEOUT_S)
         except subprocess.TimeoutExpired:
-            child.kill()
+            pass
+        except KeyboardInterrupt:
+            pass
+    deadline = time.monotonic() + GONE_TIMEOUT_S
     while True:
         try:
+            _signal_group(child, signal.SIGKILL)  # whatever is still in the group
             child.wait()
+            while _signal_group(child, 0) and time.monotonic() < deadline:  # grandchildren, reaped by init
+                time.sleep(0.05)
             return
         except KeyboardInterrupt:  # a second Ctrl-C: keep waiting for the child, it is ending
-            child.kill()
+            continue
+
+
+def _closed(address: str, ports: tuple[int, ...]) -> None:
+    """Wait until none of ``ports`` answers on ``address`` (after rerun's processes are
+    gone), else a ReconError naming the port."""
+    deadline = time.monotonic() + GONE_TIMEOUT_S
+    while True:
+        try:
+            still = [p for p in ports if _answers(address, p)]
+            if not still:
+                return
+            if time.monotonic() > deadline:
+                raise ReconError(f"port {still[0]} on {address} still answers after rerun's viewer ended",
+                                 hint=f"another program listens there: ss -ltnp 'sport = :{still[0]}' names it")
+            time.sleep(0.1)
+        except KeyboardInterrupt:  # a second Ctrl-C: the check goes on, it is bounded
+            continue
+
+
+def _wait(child: subprocess.Popen) -> int:
+    """The child's exit code, waited for in short steps: a stop signal that the kernel hands
+    to another of recon's threads (rerun's SDK runs some) only sets a flag, and a blocking
+    wait for the child would never return to the main thread to raise it."""
+    while True:
+        try:
+            return child.wait(WAIT_STEP_S)
+        except subprocess.TimeoutExpired:
+            continue
 
 
 def _last_line(log) -> str:
@@ -243,38 +301,53 @@ def _wait_until_listening(child: subprocess.Popen, address: str, ports: tuple[in
 def open_viewer(path: Path, web: bool = False, port: int | None = None, bind: str = DEFAULT_BIND,
                 say: Callable[[str], None] = print) -> int:
     """Open the recording in rerun's viewer (until its window is closed), or serve the web
-    viewer on ``bind`` (until Ctrl-C or SIGTERM; ``say`` gets the address to open). Either
-    way rerun's program ends before this returns; rerun's viewer analytics are switched off
-    first. Returns 0 (also after a stop signal)."""
+    viewer on ``bind`` (until Ctrl-C, SIGTERM or SIGHUP; ``say`` gets the address to open).
+    Either way rerun's processes are gone and the web viewer's ports closed before this
+    returns; rerun's viewer analytics are switched off first. Returns 0 (also after a stop
+    signal)."""
     require_rerun()
     bind = check_bind(bind)
+    with stop_signals(hangup=True):
+        return _open_viewer(path, web, port, bind, say)
+
+
+def _open_viewer(path: Path, web: bool, port: int | None, bind: str, say: Callable[[str], None]) -> int:
     command = _rerun_command()
     subprocess.run([*command, "analytics", "disable"], check=False, capture_output=True, timeout=60)
+    ports: tuple[int, ...] = ()
     if web:
         web_port = port or WEB_PORT
         problem = _bind_problem(bind, web_port)
         if problem is not None:
             raise problem
         grpc_port = _free_port(bind)
+        ports = (web_port, grpc_port)
         args = ["--serve-web", "--bind", bind, "--web-viewer-port", str(web_port), "--port", str(grpc_port)]
     else:
         args = ["--bind", bind]
     stopped_by = None
-    with tempfile.TemporaryFile() as log, stop_signals():
+    started: list[subprocess.Popen] = []
+    served = False  # the ports answered: rerun's own, to be closed when it ends
+    with tempfile.TemporaryFile() as log:
         try:
-            child = _start([*command, *args, str(path)], log)
-        except OSError as exc:
-            raise ReconError(f"cannot start rerun's viewer ({exc.strerror or exc})",
-                             hint=f"pip install rerun-sdk=={RERUN_VERSION}") from None
-        try:
+            try:
+                _start([*command, *args, str(path)], log, started)
+            except OSError as exc:
+                raise ReconError(f"cannot start rerun's viewer ({exc.strerror or exc})",
+                                 hint=f"pip install rerun-sdk=={RERUN_VERSION}") from None
+            child = started[0]
             if web:
-                _wait_until_listening(child, _local_address(bind), (web_port, grpc_port), log)
+                _wait_until_listening(child, _local_address(bind), ports, log)
+                served = True
                 say(f"web viewer: {viewer_url(bind, web_port, grpc_port)} (listening on {bind}; Ctrl-C stops it)")
-            code = child.wait()
+            code = _wait(child)
         except KeyboardInterrupt as exc:
             stopped_by = signal_name(exc)
         finally:
-            _stop(child)
+            for child in started:
+                _stop(child)
+            if served:
+                _closed(_local_address(bind), ports)
         if stopped_by is not None:
             say(f"viewer stopped ({stopped_by})")
             return 0

@@ -118,6 +118,10 @@ def load_camera_file(path: Path) -> CameraCalibration:
 
     path = Path(path)
     data = read_yaml(path, "camera file", hint="write one with recon calibrate intrinsics (its intrinsics.yaml)")
+    if not isinstance(data, dict):  # named by its kind: a message never shows what a file holds
+        kind = "nothing" if data is None else "a list" if isinstance(data, list) else "a text or a number"
+        raise InputError(f"{path}: the camera file holds {kind}, not a mapping (key: value lines)",
+                         hint="write one with recon calibrate intrinsics (its intrinsics.yaml)")
     check(data, "camera", path)
     line = line_of(data, "camera")
     return CameraCalibration.from_mapping(data["camera"], f"{path}:{line}: camera" if line else f"{path}: camera")

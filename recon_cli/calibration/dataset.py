@@ -18,13 +18,21 @@ angles in rad or deg. Every pose becomes ``base_T_flange`` (4, 4) [m].
 A view that cannot be used (no pose file, no board in the image, a quaternion that is not
 normalised, a translation that looks like millimetres when the mapping says metres, ...) is
 skipped with one line naming its file and what to do; the others still calibrate.
+
+Every file the data set names (images, pose files, the index, a mapping's board file) must
+lie inside the data set folder, links resolved, before it is read; the number of views,
+image and pose files and the bytes of every file are bounded before they are read; every
+number is checked finite and inside its range where it is read, with its key path; no
+message shows what a file holds (its values or text), only where and what was expected.
 """
 
 from __future__ import annotations
 
 import csv
 import io
+import json
 import math
+import os
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
@@ -40,22 +48,37 @@ from recon_cli.calibration.setups import CornerView, Setup
 from recon_cli.errors import FileError, InputError, ReconError
 from recon_cli.geometry.transforms import invert, rpy_to_matrix
 from recon_cli.inputs import files
-from recon_cli.inputs.images import read_color
+from recon_cli.inputs.images import native_output_captured, read_color
 from recon_cli.inputs.jsonfile import load_json
 from recon_cli.inputs.schema import check
-from recon_cli.inputs.yamlfile import line_of, read_yaml
+from recon_cli.inputs.yamlfile import LIMITS, line_of, read_yaml
 from recon_cli.perception.camera_model import Intrinsics
-from recon_cli.perception.charuco import BoardSpec, board_file, detect, estimate_pose
+from recon_cli.perception.charuco import BoardSpec, detect, estimate_pose
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 POSE_SUFFIXES = (".yaml", ".yml", ".json")
 #: columns that name the image in a CSV file, when the mapping names none
 IMAGE_COLUMNS = ("image", "image_file", "filename", "file", "img", "name")
-#: bytes of one pose file, of the index and of a CSV file
-MAX_POSE_BYTES = 1_000_000
+#: bytes of one pose file (libfranka's whole robot state is about 6 kB), of all pose files of a
+#: data set together, of the index and of a CSV file
+MAX_POSE_BYTES = 64 * 2**10
+MAX_POSES_BYTES = 16 * 2**20
+MAX_INDEX_BYTES = 1_000_000
 MAX_CSV_BYTES = 16 * 2**20
-#: views in one data set
-MAX_VIEWS = 10_000
+#: values (numbers, texts, lists, mappings) of one YAML pose file
+MAX_POSE_VALUES = 2_000
+#: columns of a CSV file
+MAX_CSV_COLUMNS = 1_000
+#: views (image and pose pairs) in one data set; image files and pose files of a folder
+MAX_VIEWS = 1_000
+#: entries of one folder of the data set, counted before any is looked at
+MAX_FOLDER_ENTRIES = 100_000
+#: YAML/JSON files at the top of a data set folder looked into for an index
+MAX_TOP_FILES = 20
+#: characters of a file name an index or CSV file gives
+MAX_NAME = 4_096
+#: numbers of one key (a 4x4 matrix is 16, a robot's joints fewer than 64)
+MAX_NUMBERS = 64
 #: [m] a robot pose further from the base than this is not in metres
 MAX_TRANSLATION = 10.0
 #: a quaternion whose norm is off 1 by more than this is refused; less is normalised
@@ -64,6 +87,13 @@ QUATERNION_TOLERANCE = 1e-3
 ROTATION_TOLERANCE = 1e-3
 #: [rad] an angle beyond this, in a mapping that says radians, is in degrees
 MAX_RADIANS = 2 * math.pi + 1e-6
+#: [deg] an angle beyond this, in a mapping that says degrees, is refused
+MAX_DEGREES = 360.0 + 1e-6
+#: [px] focal lengths and principal point of an index file's intrinsics (as the mapping's camera)
+FOCAL_RANGE = (1.0, 100_000.0)
+CENTRE_RANGE = (-100_000.0, 100_000.0)
+#: distortion coefficients of an index file's intrinsics: at most 5 (k1, k2, p1, p2, k3), each in
+DISTORTION_RANGE = (-100.0, 100.0)
 MIN_CORNERS = 8
 MAPPING_HINT = "see docs/calibration.md, Calibrating from your own data"
 
@@ -213,12 +243,18 @@ def _keys(value: Any) -> tuple[str, ...]:
     return (str(value),) if isinstance(value, str) else tuple(str(v) for v in value)
 
 
-def read_mapping(path: Path) -> DatasetSpec:
-    """Read and check a mapping file (schemas/handeye_dataset.schema.json)."""
+def read_mapping(path: Path, dataset: Path | None = None) -> DatasetSpec:
+    """Read and check a mapping file (schemas/handeye_dataset.schema.json). A board file it
+    names lies inside the data set folder (``dataset``; without it, the mapping's folder),
+    links resolved; it is checked before it is read."""
     path = Path(path)
-    doc = read_yaml(path, "mapping file", hint=MAPPING_HINT)
+    _not_leaving_its_folder(path, "mapping file", MAPPING_HINT)
+    doc = _read_doc(path, "mapping file", LIMITS.max_bytes, MAPPING_HINT)
     if doc is None:
         return DatasetSpec(source=path)
+    if not isinstance(doc, dict):
+        raise InputError(f"{path}: the mapping file holds {_kind(doc)}, not a mapping (key: value lines)",
+                         hint=MAPPING_HINT)
     check(doc, "handeye_dataset", path)
     values: dict[str, Any] = {}
     for f in fields(PoseMapping):
@@ -229,15 +265,21 @@ def read_mapping(path: Path) -> DatasetSpec:
     board = None
     if "board" in doc:
         b = doc["board"]
+        where = f"{path}:{line_of(doc, 'board') or 1}"
         if isinstance(b, str):
-            board = board_file(_beside(path, b))
+            if dataset is None:
+                root = path.parent.resolve()
+            else:
+                root = (Path(dataset) if Path(dataset).is_dir() else Path(dataset).parent).resolve()
+            board_path = _inside(root, path.parent, b, f"{where}: board")
+            doc_b = _read_doc(board_path, "board file", LIMITS.max_bytes, "give the board's keys in the mapping")
+            if not isinstance(doc_b, dict):
+                raise InputError(f"{board_path}: the board file holds {_kind(doc_b)}, not a mapping (key: value "
+                                 "lines)", hint="a board file holds squares_x, squares_y, square_length, "
+                                                "marker_length and dictionary")
+            board = _board(doc_b, board_path, f"{board_path}:{line_of(doc_b, 'marker_length') or 1}: ")
         else:
-            check(b, "board", path)
-            if float(b["marker_length"]) >= float(b["square_length"]):
-                raise InputError(f"{path}:{line_of(doc, 'board') or 1}: board.marker_length is not smaller than "
-                                 "board.square_length", hint="a ChArUco marker sits inside its square")
-            board = BoardSpec(int(b["squares_x"]), int(b["squares_y"]), float(b["square_length"]),
-                              float(b["marker_length"]), str(b["dictionary"]))
+            board = _board(b, path, f"{where}: board.")
     camera = None
     if "camera" in doc:
         c = doc["camera"]
@@ -249,9 +291,121 @@ def read_mapping(path: Path) -> DatasetSpec:
                        path)
 
 
-def _beside(path: Path, name: str) -> Path:
-    p = Path(name)
-    return p if p.is_absolute() else path.parent / p
+def _board(b: dict, path: Path, where: str) -> BoardSpec:
+    """A board of a board file's keys (schemas/board.schema.json), the marker smaller than
+    the square; ``where`` prefixes the key in a refusal."""
+    check(b, "board", path)
+    if float(b["marker_length"]) >= float(b["square_length"]):
+        raise InputError(f"{where}marker_length is not smaller than square_length",
+                         hint="a ChArUco marker sits inside its square")
+    return BoardSpec(int(b["squares_x"]), int(b["squares_y"]), float(b["square_length"]),
+                     float(b["marker_length"]), str(b["dictionary"]))
+
+
+def _kind(value: Any) -> str:
+    """What a value is, in words (a message names the kind, never the value a file holds)."""
+    if value is None:
+        return "nothing"
+    if isinstance(value, bool):
+        return "true or false"
+    if isinstance(value, int | float):
+        return "a number"
+    if isinstance(value, str):
+        return "a text"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, dict):
+        return "a mapping"
+    return "a value"
+
+
+def _not_leaving_its_folder(path: Path, what: str, hint: str) -> None:
+    """Refuse a file given on the command line that is a link leading out of its own folder,
+    before it is read."""
+    try:
+        target = path.resolve(strict=True)
+    except (OSError, RuntimeError, ValueError):
+        raise FileError(f"{what} {path} does not exist", hint=hint) from None
+    if not target.is_relative_to(path.parent.resolve()):
+        raise InputError(f"{path}: the {what} is a link leading out of its folder; not read",
+                         hint="copy the file into the folder instead of linking it")
+
+
+def _read_doc(path: Path, what: str, max_bytes: int, hint: str = "check the data set", max_values: int | None = None
+              ) -> Any:
+    """A YAML or JSON file (by its suffix) through the guarded readers; a number that is not
+    finite is refused with its key path (``poses/3.json:1: O_T_EE[5] is not a finite number``)."""
+    is_json = path.suffix.lower() == ".json"
+    try:
+        if is_json:
+            return load_json(path, what, max_bytes=max_bytes)
+        limits = replace(LIMITS, max_bytes=max_bytes, max_nodes=max_values or LIMITS.max_nodes)
+        return read_yaml(path, what, hint=hint, limits=limits)
+    except ReconError as exc:
+        if "finite number" not in exc.message and "too large for a number" not in exc.message:
+            raise
+        found = _non_finite_key(path, is_json, max_bytes)
+        if found is None:
+            raise
+        key, line = found
+        if line is None:
+            m = re.search(r"(\d+)", str(getattr(exc, "where", None) or ""))
+            line = int(m.group(1)) if m else None
+        raise InputError(f"{path}{f':{line}' if line else ''}: {key} is not a finite number",
+                         hint="write a finite number (NaN and infinity are not numbers)") from None
+
+
+_NON_FINITE = re.compile(r"^[-+]?(\.inf|\.nan|[0-9][0-9_]*(\.[0-9_]*)?[eE][-+]?[0-9]+|\.[0-9_]+[eE][-+]?[0-9]+)$",
+                         re.IGNORECASE)
+
+
+def _non_finite_key(path: Path, is_json: bool, max_bytes: int) -> tuple[str, int | None] | None:
+    """The key path (and line) of the first number that is not finite in a file a guarded
+    reader refused for it (so its size, nesting, aliases and tags have passed the reader's
+    checks), or None."""
+    import yaml
+
+    def key_path(at: list) -> str:
+        return "".join(f"[{k}]" if isinstance(k, int) else f".{k}" if i else str(k) for i, k in enumerate(at))
+
+    try:
+        text = files.read_limited(path, max_bytes, lambda r: OSError(r.reason)).decode("utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None
+    if is_json:
+        try:
+            doc = json.loads(text, object_pairs_hook=lambda pairs: pairs)
+        except (ValueError, RecursionError):
+            return None
+        stack: list[tuple[Any, list]] = [(doc, [])]  # depth first, in the file's order
+        while stack:
+            node, at = stack.pop()
+            if isinstance(node, float) and not math.isfinite(node):
+                return key_path(at), None
+            if isinstance(node, list) and node and all(isinstance(p, tuple) and len(p) == 2 for p in node) \
+                    and all(isinstance(p[0], str) for p in node):  # an object's (key, value) pairs
+                stack.extend((v, [*at, k]) for k, v in reversed(node))
+            elif isinstance(node, list):
+                stack.extend((node[i], [*at, i]) for i in reversed(range(len(node))))
+        return None
+    try:
+        root = yaml.compose(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+    except (yaml.YAMLError, RecursionError):
+        return None
+    nodes: list[tuple[Any, list]] = [(root, [])]
+    while nodes:
+        node, at = nodes.pop()
+        if isinstance(node, yaml.ScalarNode):
+            if not node.style and _NON_FINITE.match(node.value.strip()) and \
+                    not math.isfinite(float(node.value.replace("_", "").lower().replace(".inf", "inf")
+                                            .replace(".nan", "nan"))):
+                return key_path(at), node.start_mark.line + 1
+        elif isinstance(node, yaml.MappingNode):
+            nodes.extend((v, [*at, k.value if isinstance(k, yaml.ScalarNode) else "?"])
+                         for k, v in reversed(node.value))
+        elif isinstance(node, yaml.SequenceNode):
+            nodes.extend((node.value[i], [*at, i]) for i in reversed(range(len(node.value))))
+    return None
 
 
 # --------------------------------------------------------------------- one pose
@@ -271,19 +425,46 @@ def _lookup(record: Any, key: str) -> tuple[Any, bool]:
 
 
 def _key_list(record: Any) -> str:
-    names = list(record) if isinstance(record, dict) else []
-    return ", ".join(map(str, names[:12])) + (", ..." if len(names) > 12 else "") if names else "none"
+    names = [str(k) if len(str(k)) <= 40 else str(k)[:37] + "..." for k in record] if isinstance(record, dict) else []
+    return ", ".join(names[:12]) + (", ..." if len(names) > 12 else "") if names else "none"
 
 
 def _number(value: Any, what: str, where: str) -> float:
+    """A finite float of a pose's value (a CSV cell is a text to convert); the refusal names
+    ``where`` and the key path ``what``, not the value."""
     if isinstance(value, str):  # CSV cells
         try:
             value = float(value.strip())
         except ValueError:
-            raise InputError(f"{where}: {what} is {value!r}, not a number", hint="write plain numbers") from None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise InputError(f"{where}: {what} is {value!r}, not a finite number", hint="write plain numbers")
-    return float(value)
+            raise InputError(f"{where}: {what} is a text, not a number", hint="write plain numbers") from None
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InputError(f"{where}: {what} is {_kind(value)}, not a number", hint="write plain numbers")
+    try:
+        x = float(value)
+    except OverflowError:
+        raise InputError(f"{where}: {what} is too large for a number", hint="write plain numbers") from None
+    if not math.isfinite(x):
+        raise InputError(f"{where}: {what} is not a finite number",
+                         hint="write a finite number (NaN and infinity are not numbers)")
+    return x
+
+
+def _in_range(value: Any, what: str, where: str, lo: float, hi: float, unit: str = "") -> float:
+    """A finite float inside [lo, hi], or one line naming ``where``, the key path and the range."""
+    x = _number(value, what, where)
+    if not lo <= x <= hi:
+        u = f" {unit}" if unit else ""
+        raise InputError(f"{where}: {what} = {x:.6g}{u} is outside [{lo:g}, {hi:g}]{u}",
+                         hint="give a value inside the range")
+    return x
+
+
+def _whole(value: Any, what: str, where: str, lo: int, hi: int) -> int:
+    """A whole number inside [lo, hi] (an integral float is taken)."""
+    x = _in_range(value, what, where, lo, hi)
+    if not float(x).is_integer():
+        raise InputError(f"{where}: {what} = {x:g} is not a whole number", hint="write a whole number")
+    return int(x)
 
 
 def _flat(value: Any) -> list[Any]:
@@ -292,19 +473,23 @@ def _flat(value: Any) -> list[Any]:
     return [value]
 
 
-def _numbers(record: Any, keys: tuple[str, ...], n: int | None, where: str, role: str) -> np.ndarray:
-    """The numbers of ``keys``: one key holding a list (nested lists are read row by row), or
-    one key per number. ``n`` None: as many as there are."""
+def _numbers(record: Any, keys: tuple[str, ...], n: int | None, where: str, role: str
+             ) -> tuple[np.ndarray, list[str]]:
+    """The numbers of ``keys`` and the key path of each: one key holding a list (nested lists
+    are read row by row), or one key per number. ``n`` None: as many as there are (at most
+    MAX_NUMBERS)."""
     if len(keys) == 1:
         value, found = _lookup(record, keys[0])
         if not found:
             raise InputError(f"{where}: no key {keys[0]!r} (the {role}; keys: {_key_list(record)})",
                              hint=f"name the keys in a mapping file or the options ({MAPPING_HINT})")
         items = _flat(value)
-        if n is not None and len(items) != n:
-            raise InputError(f"{where}: {keys[0]} holds {len(items)} numbers, the {role} takes {n}",
+        if (n is not None and len(items) != n) or len(items) > MAX_NUMBERS:
+            raise InputError(f"{where}: {keys[0]} holds {len(items)} numbers, the {role} takes "
+                             f"{n if n is not None else f'at most {MAX_NUMBERS}'}",
                              hint=f"check the pose format and its keys ({MAPPING_HINT})")
-        return np.array([_number(v, f"{keys[0]}[{i}]", where) for i, v in enumerate(items)])
+        names = [f"{keys[0]}[{i}]" if isinstance(value, list) else keys[0] for i in range(len(items))]
+        return np.array([_number(v, name, where) for v, name in zip(items, names, strict=True)]), names
     if n is not None and len(keys) != n:
         raise InputError(f"{where}: the mapping names {len(keys)} keys for the {role}, which takes {n}",
                          hint=MAPPING_HINT)
@@ -315,27 +500,33 @@ def _numbers(record: Any, keys: tuple[str, ...], n: int | None, where: str, role
             raise InputError(f"{where}: no key {k!r} (the {role}; keys: {_key_list(record)})",
                              hint=f"name the keys in a mapping file or the options ({MAPPING_HINT})")
         out.append(_number(value, k, where))
-    return np.array(out)
+    return np.array(out), list(keys)
 
 
-def _translation(values: np.ndarray, mapping: PoseMapping, where: str) -> np.ndarray:
+def _translation(values: np.ndarray, names: list[str], mapping: PoseMapping, where: str) -> np.ndarray:
     t = values * mapping.length_unit.metres
-    norm = float(np.linalg.norm(t))
+    with np.errstate(over="ignore"):
+        norm = float(np.linalg.norm(t))
     if norm > MAX_TRANSLATION:
+        k = int(np.argmax(np.abs(values)))
+        largest = f"{names[k]} = {values[k]:.4g} {mapping.length_unit.value}"
         if mapping.length_unit is LengthUnit.M:
-            raise InputError(f"{where}: the translation is {norm:.4g} m from the base, more than "
+            raise InputError(f"{where}: the translation is {norm:.4g} m from the base ({largest}), more than "
                              f"{MAX_TRANSLATION:g} m: it looks like millimetres while the mapping says metres",
                              hint="set length_unit: mm in the mapping file (or --length-unit mm)")
-        raise InputError(f"{where}: the translation is {norm:.4g} m from the base, more than {MAX_TRANSLATION:g} m",
-                         hint="check the position keys and length_unit")
+        raise InputError(f"{where}: the translation is {norm:.4g} m from the base ({largest}), more than "
+                         f"{MAX_TRANSLATION:g} m", hint="check the position keys and length_unit")
     return t
 
 
-def _angles(values: np.ndarray, mapping: PoseMapping, where: str, what: str) -> np.ndarray:
-    if mapping.angle_unit is AngleUnit.RAD and np.any(np.abs(values) > MAX_RADIANS):
-        big = float(np.max(np.abs(values)))
-        raise InputError(f"{where}: {what} {big:.4g} is more than 2 pi: it looks like degrees while the mapping "
-                         "says radians", hint="set angle_unit: deg in the mapping file (or --angle-unit deg)")
+def _angles(values: np.ndarray, names: list[str], mapping: PoseMapping, where: str) -> np.ndarray:
+    for v, name in zip(values, names, strict=True):
+        if mapping.angle_unit is AngleUnit.RAD and abs(v) > MAX_RADIANS:
+            raise InputError(f"{where}: {name} = {v:.4g} is more than 2 pi: it looks like degrees while the mapping "
+                             "says radians", hint="set angle_unit: deg in the mapping file (or --angle-unit deg)")
+        if mapping.angle_unit is AngleUnit.DEG and abs(v) > MAX_DEGREES:
+            raise InputError(f"{where}: {name} = {v:.4g} deg is outside [-360, 360] deg",
+                             hint="check the angle keys and angle_unit")
     return values * mapping.angle_unit.radians
 
 
@@ -351,7 +542,13 @@ def _quaternion_matrix(values: np.ndarray, mapping: PoseMapping, where: str) -> 
     return Rotation.from_quat(q / norm).as_matrix()
 
 
-def _matrix(values: np.ndarray, mapping: PoseMapping, where: str) -> np.ndarray:
+def _matrix(values: np.ndarray, names: list[str], mapping: PoseMapping, where: str) -> np.ndarray:
+    bound = MAX_TRANSLATION / mapping.length_unit.metres
+    for v, name in zip(values, names, strict=True):
+        if abs(v) > bound:
+            raise InputError(f"{where}: {name} = {v:.4g} is outside [-{bound:g}, {bound:g}] (no number of a pose "
+                             f"matrix in {mapping.length_unit.value} is larger)",
+                             hint="check the matrix keys and length_unit")
     M = values.reshape(4, 4)
     if mapping.matrix_order is MatrixOrder.COLUMN:
         M = M.T
@@ -373,7 +570,8 @@ def _matrix(values: np.ndarray, mapping: PoseMapping, where: str) -> np.ndarray:
     U, _, Vt = np.linalg.svd(R)
     out = np.eye(4)
     out[:3, :3] = U @ Vt
-    out[:3, 3] = _translation(M[:3, 3], mapping, where)
+    column = [names[4 * i + 3] if mapping.matrix_order is MatrixOrder.ROW else names[12 + i] for i in range(3)]
+    out[:3, 3] = _translation(M[:3, 3], column, mapping, where)
     return out
 
 
@@ -386,17 +584,17 @@ def robot_pose(record: Any, where: str, mapping: PoseMapping, kin=None) -> np.nd
         raise InputError(f"{where}: the pose format is not known", hint=MAPPING_HINT)
     T = np.eye(4)
     if f is PoseFormat.MATRIX:
-        return _matrix(_numbers(record, mapping.matrix, 16, where, "4x4 matrix"), mapping, where)
+        return _matrix(*_numbers(record, mapping.matrix, 16, where, "4x4 matrix"), mapping, where)
     if f is PoseFormat.JOINTS:
         if kin is None:
             raise InputError(f"{where}: joint positions need the robot's kinematics", hint="pass --cell NAME|FILE")
         return _joints_pose(record, where, mapping, kin)
-    t = _translation(_numbers(record, mapping.position, 3, where, "position"), mapping, where)
+    t = _translation(*_numbers(record, mapping.position, 3, where, "position"), mapping, where)
     if f is PoseFormat.XYZ_QUAT:
-        T[:3, :3] = _quaternion_matrix(_numbers(record, mapping.quaternion_keys, 4, where, "quaternion"), mapping,
-                                       where)
+        q, _ = _numbers(record, mapping.quaternion_keys, 4, where, "quaternion")
+        T[:3, :3] = _quaternion_matrix(q, mapping, where)
     else:
-        rpy = _angles(_numbers(record, mapping.rpy, 3, where, "roll, pitch, yaw"), mapping, where, "an angle of")
+        rpy = _angles(*_numbers(record, mapping.rpy, 3, where, "roll, pitch, yaw"), mapping, where)
         T[:3, :3] = rpy_to_matrix(*rpy)
     T[:3, 3] = t
     return T
@@ -404,20 +602,20 @@ def robot_pose(record: Any, where: str, mapping: PoseMapping, kin=None) -> np.nd
 
 def _joints_pose(record: Any, where: str, mapping: PoseMapping, kin) -> np.ndarray:
     names = tuple(kin.joint_names)
-    q = _numbers(record, mapping.joints, None, where, "joint positions")
+    q, keys = _numbers(record, mapping.joints, None, where, "joint positions")
     if len(q) != len(names):
         raise InputError(f"{where}: {len(q)} joint positions, the cell {kin.cell.name} has {len(names)} joints "
                          f"({', '.join(names)})", hint="pass the --cell the poses were logged with")
     linear = set(kin.cell.linear_joints)
     out = np.empty(len(q))
-    for i, (name, v) in enumerate(zip(names, q, strict=True)):
+    for i, (name, key, v) in enumerate(zip(names, keys, q, strict=True)):
         if name in linear:
             out[i] = v * mapping.length_unit.metres
             if abs(out[i]) > MAX_TRANSLATION:
-                raise InputError(f"{where}: joint {name} at {out[i]:.4g} m: it looks like millimetres",
+                raise InputError(f"{where}: {key} (joint {name}) at {out[i]:.4g} m: it looks like millimetres",
                                  hint="set length_unit: mm (or --length-unit mm)")
         else:
-            out[i] = _angles(np.array([v]), mapping, where, f"joint {name} at")[0]
+            out[i] = _angles(np.array([v]), [f"{key} (joint {name})"], mapping, where)[0]
     return kin.frame_pose(out, kin.cell.flange_link)
 
 
@@ -493,26 +691,69 @@ def _refuse_file(what: str, path: Path, limit: int) -> files.Refuse:
         f"{size:,} bytes, more than the {limit:,} recon reads", "this is not a pose file recon reads"))
 
 
+def _shown(name: str) -> str:
+    return repr(name) if len(name) <= 80 else repr(name[:77] + "...")
+
+
+def _file_name(value: Any, what: str, where: str) -> str:
+    """A file name an index or CSV file gives: a text of at most MAX_NAME characters."""
+    if not isinstance(value, str):
+        raise InputError(f"{where}: the {what} is {_kind(value)}, not a file name",
+                         hint="write the path inside the data set folder, e.g. images/0.png")
+    if not value.strip():
+        raise InputError(f"{where}: the {what} names no file", hint="write the path inside the data set folder")
+    if len(value) > MAX_NAME or "\x00" in value:
+        raise InputError(f"{where}: the {what} is not a file name ({len(value):,} characters"
+                         f"{', a NUL character' if chr(0) in value else ''})",
+                         hint=f"write a path of at most {MAX_NAME:,} characters inside the data set folder")
+    return value
+
+
 def _inside(root: Path, base: Path, name: str, where: str) -> Path:
-    """``base / name``, a path the data set names, refused unless it stays inside ``root``."""
+    """``base / name``, a path the data set names, refused unless it stays inside ``root``
+    (an absolute path, '..' or '~' leave it; a link is followed, and where it leads must be
+    inside), all before it is read."""
     p = PurePath(str(name))
-    if not str(name).strip() or p.is_absolute() or ".." in p.parts or str(name).startswith("~"):
-        raise InputError(f"{where}: {name!r} leaves the data set folder", hint="name files inside it, without '..'")
+    if p.is_absolute() or ".." in p.parts or str(name).startswith("~"):
+        raise InputError(f"{where}: {_shown(str(name))} leaves the data set folder",
+                         hint="name files inside the data set folder by a relative path without '..'")
     path = base / p
     try:
         target = path.resolve(strict=True)
     except (OSError, RuntimeError, ValueError):  # ValueError: a NUL byte
         raise InputError(f"{where}: {path} does not exist", hint="check the name, or add the file") from None
     if not target.is_relative_to(root):
-        raise InputError(f"{where}: {path} is a link leading out of the data set folder",
+        raise InputError(f"{where}: {path} leads out of the data set folder (a link); not read",
                          hint="copy the file into the folder")
     return path
 
 
-def _read_record(path: Path) -> Any:
-    if path.suffix.lower() == ".json":
-        return load_json(path, "pose file", max_bytes=MAX_POSE_BYTES)
-    return read_yaml(path, "pose file", hint="check the data set")
+class _DatasetRefused(InputError):
+    """A refusal of the whole data set (a bound exceeded), not of one view."""
+
+
+class _PoseBytes:
+    """The bytes of the pose files read so far, bounded by MAX_POSES_BYTES (each file's size
+    is taken from its stat before it is read)."""
+
+    def __init__(self) -> None:
+        self.total = 0
+
+    def take(self, path: Path) -> None:
+        try:
+            self.total += os.stat(path).st_size
+        except OSError:
+            return  # the reader names the problem
+        if self.total > MAX_POSES_BYTES:
+            raise _DatasetRefused(f"{path}: the pose files hold more than {MAX_POSES_BYTES:,} bytes together",
+                                  hint=f"a pose file holds one pose (at most {MAX_POSE_BYTES:,} bytes); "
+                                       f"at most {MAX_VIEWS:,} views")
+
+
+def _read_record(path: Path, budget: _PoseBytes | None = None) -> Any:
+    if budget is not None:
+        budget.take(path)
+    return _read_doc(path, "pose file", MAX_POSE_BYTES, max_values=MAX_POSE_VALUES)
 
 
 def _dictionary_name(value: Any) -> str | None:
@@ -527,47 +768,70 @@ def _dictionary_name(value: Any) -> str | None:
 
 
 def _index_hints(doc: Any, where: str) -> IndexHints:
-    """intrinsics {fx, fy, cx, cy}, target_finder (a ChArUco grid: rows, cols, chessboard_dim,
-    aruco_marker_dim, dictionary) and static_camera of an industrial_calibration cal_data.yaml."""
+    """intrinsics {fx, fy, cx, cy, distortion}, target_finder (a ChArUco grid: rows, cols,
+    chessboard_dim, aruco_marker_dim, dictionary) and static_camera of an
+    industrial_calibration cal_data.yaml, each number finite and in its range."""
     if not isinstance(doc, dict):
         return IndexHints()
+
+    def at(container: Any, key: Any) -> str:
+        line = line_of(container, key)
+        return f"{where}:{line}" if line else where
+
     camera = board = setup = None
     intr = doc.get("intrinsics")
     if isinstance(intr, dict) and all(k in intr for k in ("fx", "fy", "cx", "cy")):
-        v = [_number(intr[k], f"intrinsics.{k}", where) for k in ("fx", "fy", "cx", "cy")]
-        if min(v[:2]) <= 0:
-            raise InputError(f"{where}: intrinsics fx, fy must be positive", hint="check the index file")
+        v = [_in_range(intr[k], f"intrinsics.{k}", at(intr, k), *(FOCAL_RANGE if k in ("fx", "fy") else CENTRE_RANGE),
+                       unit="px") for k in ("fx", "fy", "cx", "cy")]
         dist = intr.get("distortion", [])
-        d = [_number(x, "intrinsics.distortion", where) for x in dist] if isinstance(dist, list) else []
+        if not isinstance(dist, list) or len(dist) > 5:
+            raise InputError(f"{at(intr, 'distortion')}: intrinsics.distortion is "
+                             f"{f'a list of {len(dist)}' if isinstance(dist, list) else _kind(dist)}, not a list of "
+                             "at most 5 numbers", hint="write [k1, k2, p1, p2, k3] (OpenCV's order)")
+        d = [_in_range(x, f"intrinsics.distortion[{i}]", at(dist, i), *DISTORTION_RANGE) for i, x in enumerate(dist)]
         camera = CameraNumbers(v[0], v[1], v[2], v[3], tuple((d + [0.0] * 5)[:5]))
     tf = doc.get("target_finder")
     if isinstance(tf, dict) and "Charuco" in str(tf.get("type", "")):
-        try:
-            rows, cols = int(tf["rows"]), int(tf["cols"])
-            square, marker = float(tf["chessboard_dim"]), float(tf["aruco_marker_dim"])
-            name = _dictionary_name(tf["dictionary"])
-        except (KeyError, TypeError, ValueError):
-            name = None
-        if name is not None and 2 <= rows <= 100 and 2 <= cols <= 100 and 0 < marker < square <= 1:
-            board = BoardSpec(cols, rows, square, marker, name)  # OpenCV's CharucoBoard((cols, rows), ...)
-    if isinstance(doc.get("static_camera"), bool):
+        missing = [k for k in ("rows", "cols", "chessboard_dim", "aruco_marker_dim", "dictionary") if k not in tf]
+        if missing:
+            raise InputError(f"{at(doc, 'target_finder')}: target_finder lacks {', '.join(missing)}",
+                             hint="a ChArUco grid: rows, cols, chessboard_dim, aruco_marker_dim, dictionary")
+        rows = _whole(tf["rows"], "target_finder.rows", at(tf, "rows"), 2, 100)
+        cols = _whole(tf["cols"], "target_finder.cols", at(tf, "cols"), 2, 100)
+        square = _in_range(tf["chessboard_dim"], "target_finder.chessboard_dim", at(tf, "chessboard_dim"), 0.001, 1.0,
+                           unit="m")
+        marker = _in_range(tf["aruco_marker_dim"], "target_finder.aruco_marker_dim", at(tf, "aruco_marker_dim"),
+                           0.0005, 1.0, unit="m")
+        if marker >= square:
+            raise InputError(f"{at(tf, 'aruco_marker_dim')}: target_finder.aruco_marker_dim is not smaller than "
+                             "chessboard_dim", hint="a ChArUco marker sits inside its square")
+        name = _dictionary_name(tf["dictionary"])
+        if name is None:
+            raise InputError(f"{at(tf, 'dictionary')}: target_finder.dictionary is not an ArUco dictionary",
+                             hint="a DICT_... name or OpenCV's number of one (10: DICT_6X6_250)")
+        board = BoardSpec(cols, rows, square, marker, name)  # OpenCV's CharucoBoard((cols, rows), ...)
+    if "static_camera" in doc:
+        if not isinstance(doc["static_camera"], bool):
+            raise InputError(f"{at(doc, 'static_camera')}: static_camera is {_kind(doc['static_camera'])}, not true "
+                             "or false", hint="true: the camera is fixed (eye-to-hand); false: on the flange")
         setup = Setup.EYE_TO_HAND if doc["static_camera"] else Setup.EYE_IN_HAND
     return IndexHints(camera, board, setup)
 
 
 def _from_index(index: Path, root: Path) -> Dataset:
-    if index.suffix.lower() == ".json":
-        doc = load_json(index, "index file", max_bytes=MAX_POSE_BYTES)
-    else:
-        doc = read_yaml(index, "index file", hint="check the data set")
+    doc = _read_doc(index, "index file", MAX_INDEX_BYTES)
     entries = doc.get("data") if isinstance(doc, dict) else doc
     if not isinstance(entries, list):
         raise InputError(f"{index}: no list of {{image, pose}} pairs (under data:)",
                          hint="write data: [{image: images/0.png, pose: poses/0.yaml}, ...]")
     if len(entries) > MAX_VIEWS:
-        raise InputError(f"{index}: {len(entries):,} pairs, more than {MAX_VIEWS:,}", hint="split the data set")
+        raise InputError(f"{index}: {len(entries):,} pairs, more than {MAX_VIEWS:,}",
+                         hint=f"use at most {MAX_VIEWS:,} views (every second or third one of a larger set)")
+    hints = _index_hints(doc, str(index))
     views: list[DatasetView] = []
     skipped: list[SkippedImage] = []
+    names: set[str] = set()
+    budget = _PoseBytes()
     base = index.parent
     for k, e in enumerate(entries):
         line = line_of(entries, k)
@@ -575,22 +839,29 @@ def _from_index(index: Path, root: Path) -> Dataset:
         if not isinstance(e, dict) or "image" not in e or "pose" not in e:
             skipped.append(SkippedImage(f"entry {k + 1}", f"{where}: not an {{image, pose}} pair"))
             continue
-        name = str(e["image"])
-        if any(v.name == name for v in views):
-            skipped.append(SkippedImage(name, f"{where}: {name} is listed twice; the first entry is used"))
+        try:
+            name = _file_name(e["image"], "image", where)
+        except InputError as exc:
+            skipped.append(SkippedImage(f"entry {k + 1}", exc.one_line()))
+            continue
+        if name in names:
+            skipped.append(SkippedImage(name, f"{where}: {_shown(name)} is listed twice; the first entry is used"))
             continue
         try:
             image = _inside(root, base, name, where)
             if isinstance(e["pose"], dict):
                 record, at = e["pose"], where
             else:
-                pose_path = _inside(root, base, str(e["pose"]), where)
-                record, at = _read_record(pose_path), str(pose_path)
+                pose_path = _inside(root, base, _file_name(e["pose"], "pose", where), where)
+                record, at = _read_record(pose_path, budget), str(pose_path)
+        except _DatasetRefused:
+            raise
         except ReconError as exc:
             skipped.append(SkippedImage(name, exc.one_line()))
             continue
+        names.add(name)
         views.append(DatasetView(name, image, record, at))
-    return Dataset(base, f"index {index}", views, skipped, _index_hints(doc, str(index)))
+    return Dataset(base, f"index {index}", views, skipped, hints)
 
 
 def _from_csv(path: Path, root: Path, images_dir: Path, column: str | None) -> Dataset:
@@ -607,16 +878,20 @@ def _from_csv(path: Path, root: Path, images_dir: Path, column: str | None) -> D
     except (StopIteration, csv.Error):
         raise InputError(f"{path}: no header row", hint="the first row names the columns, one of them the image") \
             from None
+    if len(header) > MAX_CSV_COLUMNS:
+        raise InputError(f"{path}:1: {len(header):,} columns, more than {MAX_CSV_COLUMNS:,}",
+                         hint="a row holds an image's name and its pose")
     if len(set(header)) != len(header):
         twice = sorted({h for h in header if header.count(h) > 1})
-        raise InputError(f"{path}:1: column {twice[0]!r} appears twice", hint="give every column its own name")
+        raise InputError(f"{path}:1: column {_shown(twice[0])} appears twice", hint="give every column its own name")
     col = column or next((c for c in IMAGE_COLUMNS if c in header), None)
     if col is None or col not in header:
         raise InputError(f"{path}:1: no column naming the image ({'no ' + repr(column) if column else 'none of '}"
-                         f"{'' if column else ', '.join(IMAGE_COLUMNS)}; columns: {', '.join(header)})",
+                         f"{'' if column else ', '.join(IMAGE_COLUMNS)}; columns: {_key_list(dict.fromkeys(header))})",
                          hint="name it with image_column in the mapping file")
     views: list[DatasetView] = []
     skipped: list[SkippedImage] = []
+    names: set[str] = set()
     try:
         for row in reader:
             if not any(cell.strip() for cell in row):
@@ -629,7 +904,11 @@ def _from_csv(path: Path, root: Path, images_dir: Path, column: str | None) -> D
                                                                       f"{len(header)}"))
                 continue
             record = dict(zip(header, (c.strip() for c in row), strict=True))
-            name = record[col]
+            try:
+                name = _file_name(record[col], "image", where)
+            except InputError as exc:
+                skipped.append(SkippedImage(f"row {reader.line_num}", exc.one_line()))
+                continue
             try:
                 try:
                     image = _inside(root, path.parent, name, where)
@@ -638,13 +917,36 @@ def _from_csv(path: Path, root: Path, images_dir: Path, column: str | None) -> D
             except ReconError as exc:
                 skipped.append(SkippedImage(name, exc.one_line()))
                 continue
-            if any(v.name == name for v in views):
-                skipped.append(SkippedImage(name, f"{where}: {name} is listed twice; the first row is used"))
+            if name in names:
+                skipped.append(SkippedImage(name, f"{where}: {_shown(name)} is listed twice; the first row is used"))
                 continue
+            names.add(name)
             views.append(DatasetView(name, image, record, where))
     except csv.Error as exc:
         raise InputError(f"{path}:{reader.line_num}: not valid CSV ({exc})", hint="check the quotes") from None
     return Dataset(path.parent, f"CSV {path}", views, skipped)
+
+
+def _entries(folder: Path) -> list[Path]:
+    """The entries of a folder of the data set, refused beyond MAX_FOLDER_ENTRIES (counted
+    before any entry is looked at)."""
+    out: list[Path] = []
+    try:
+        with os.scandir(folder) as it:
+            for entry in it:
+                if len(out) >= MAX_FOLDER_ENTRIES:
+                    raise InputError(f"{folder} holds more than {MAX_FOLDER_ENTRIES:,} entries",
+                                     hint=f"a data set folder holds its images and poses (at most {MAX_VIEWS:,} "
+                                          "views)")
+                out.append(folder / entry.name)
+    except OSError as exc:
+        raise FileError(f"{folder} cannot be listed ({exc.strerror or exc})", hint="check the data set") from None
+    return out
+
+
+def _files(entries: list[Path], suffixes: tuple[str, ...]) -> list[Path]:
+    """The regular files (links followed) among ``entries`` with one of ``suffixes``."""
+    return [p for p in entries if p.suffix.lower() in suffixes and p.is_file()]
 
 
 def _images_in(folder: Path, root: Path, skipped: list[SkippedImage]) -> list[Path]:
@@ -652,10 +954,11 @@ def _images_in(folder: Path, root: Path, skipped: list[SkippedImage]) -> list[Pa
     the data set go into ``skipped``."""
     if not folder.is_dir():
         raise FileError(f"{folder} is not a folder", hint="name the images' folder with images: in the mapping file")
-    found = sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()),
-                   key=lambda p: _natural(p.name))
+    found = _files(_entries(folder), IMAGE_SUFFIXES)
     if len(found) > MAX_VIEWS:
-        raise InputError(f"{folder}: {len(found):,} images, more than {MAX_VIEWS:,}", hint="split the data set")
+        raise InputError(f"{folder}: {len(found):,} images, more than {MAX_VIEWS:,}",
+                         hint=f"use at most {MAX_VIEWS:,} views (every second or third one of a larger set)")
+    found.sort(key=lambda p: _natural(p.name))
     kept = []
     for p in found:
         if p.resolve().is_relative_to(root):
@@ -674,10 +977,15 @@ def _from_pose_files(folder: Path, root: Path, images_dir: Path, poses_dir: Path
                         hint="pass the data set folder (images/ and poses/, or images and pose files side by side)")
     if not poses_dir.is_dir():
         raise FileError(f"{poses_dir} is not a folder", hint="name the pose files' folder with poses: in the mapping")
+    pose_files = _files(_entries(poses_dir), POSE_SUFFIXES)
+    if len(pose_files) > MAX_VIEWS + MAX_TOP_FILES:
+        raise InputError(f"{poses_dir}: {len(pose_files):,} pose files, more than the {MAX_VIEWS:,} views (and "
+                         f"{MAX_TOP_FILES} other files) recon reads",
+                         hint=f"use at most {MAX_VIEWS:,} views (every second or third one of a larger set)")
     by_stem: dict[str, list[Path]] = {}
-    for p in poses_dir.iterdir():
-        if p.suffix.lower() in POSE_SUFFIXES and p.is_file():
-            by_stem.setdefault(p.stem, []).append(p)
+    for p in pose_files:
+        by_stem.setdefault(p.stem, []).append(p)
+    budget = _PoseBytes()
     stems = set()
     for image in images:
         stems.add(image.stem)
@@ -694,9 +1002,11 @@ def _from_pose_files(folder: Path, root: Path, images_dir: Path, poses_dir: Path
         pose = candidates[0]
         try:
             if not pose.resolve().is_relative_to(root):
-                raise InputError(f"{pose} is a link leading out of the data set folder",
+                raise InputError(f"{pose} leads out of the data set folder (a link); not read",
                                  hint="copy the file into the folder")
-            record = _read_record(pose)
+            record = _read_record(pose, budget)
+        except _DatasetRefused:
+            raise
         except ReconError as exc:
             skipped.append(SkippedImage(name, exc.one_line()))
             continue
@@ -711,8 +1021,8 @@ def _from_pose_files(folder: Path, root: Path, images_dir: Path, poses_dir: Path
 def _is_index(path: Path) -> bool:
     """A YAML/JSON file at the top of a data set that lists {image, pose} pairs."""
     try:
-        doc = load_json(path, "index file", max_bytes=MAX_POSE_BYTES) if path.suffix.lower() == ".json" \
-            else read_yaml(path, "index file")
+        doc = load_json(path, "index file", max_bytes=MAX_INDEX_BYTES) if path.suffix.lower() == ".json" \
+            else read_yaml(path, "index file", limits=replace(LIMITS, max_bytes=MAX_INDEX_BYTES))
     except ReconError:
         return False
     entries = doc.get("data") if isinstance(doc, dict) else doc
@@ -729,6 +1039,9 @@ def read_dataset(source: Path, spec: DatasetSpec = DatasetSpec()) -> Dataset:  #
     if source.is_file():
         folder = source.parent
         root = folder.resolve()
+        if not source.resolve().is_relative_to(root):
+            raise InputError(f"{source} leads out of its folder (a link); not read",
+                             hint="pass the data set folder, or copy the file into it")
         if source.suffix.lower() == ".csv":
             return _from_csv(source, root, folder / (spec.images or "images"), spec.image_column)
         return _from_index(source, root)
@@ -749,17 +1062,22 @@ def read_dataset(source: Path, spec: DatasetSpec = DatasetSpec()) -> Dataset:  #
     if spec.poses and spec.poses.lower().endswith(".csv"):
         return _from_csv(inside(spec.poses, "poses"), root, images_dir, spec.image_column)
     if not spec.poses:
-        image_stems = {p.stem for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES}
+        top = _entries(folder)
+        image_stems = {p.stem for p in top if p.suffix.lower() in IMAGE_SUFFIXES}
         mapping = spec.source.resolve() if spec.source is not None else None
-        tops = sorted((p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in POSE_SUFFIXES
-                       and p.stem not in image_stems and p.resolve() != mapping), key=lambda p: p.name)
+        tops = sorted((p for p in _files(top, POSE_SUFFIXES) if p.stem not in image_stems and p.resolve() != mapping
+                       and p.resolve().is_relative_to(root)), key=lambda p: p.name)
+        if len(tops) > MAX_TOP_FILES:
+            raise InputError(f"{folder} holds {len(tops)} YAML/JSON files beside its images' stems, more than the "
+                             f"{MAX_TOP_FILES} looked into for an index",
+                             hint="name the index with index: in a mapping file, or put the pose files into poses/")
         indexes = [p for p in tops if _is_index(p)]
         if len(indexes) > 1:
             raise InputError(f"{folder} holds {len(indexes)} index files ({', '.join(p.name for p in indexes)})",
                              hint="name one with index: in a mapping file")
         if indexes:
             return _from_index(indexes[0], root)
-        csvs = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() == ".csv")
+        csvs = sorted(p for p in _files(top, (".csv",)) if p.resolve().is_relative_to(root))
         if len(csvs) > 1:
             raise InputError(f"{folder} holds {len(csvs)} CSV files ({', '.join(p.name for p in csvs)})",
                              hint="name the poses' one with poses: in a mapping file")
@@ -806,30 +1124,47 @@ class DatasetViews:
 
 
 def dataset_views(dataset: Dataset, mapping: PoseMapping, board: BoardSpec, camera: CameraSource, kin=None,
-                  min_corners: int = MIN_CORNERS, progress: Callable[[str, int, int], None] | None = None
+                  min_corners: int = MIN_CORNERS, progress: Callable[[str, int, int], None] | None = None,
+                  poses_read: Callable[[list[np.ndarray], list[SkippedImage]], None] | None = None
                   ) -> DatasetViews:
     """Every pair of the data set read: its pose through the mapping, its image, the board's
-    corners in it; a pair that cannot be used is skipped with its reason."""
+    corners in it; a pair that cannot be used is skipped with its reason. Every pose is read
+    before any image: ``poses_read`` is then called with the robot poses read (base_T_flange)
+    and the views skipped so far, and may refuse the data set before an image is decoded."""
     import cv2
 
-    views: list[CornerView] = []
-    skipped = list(dataset.skipped)
-    n = len(dataset.views)
-    for k, v in enumerate(dataset.views, start=1):
+    order = {v.name: k for k, v in enumerate(dataset.views)}
+    later: list[SkippedImage] = []
+    posed: list[tuple[DatasetView, np.ndarray]] = []
+    for v in dataset.views:
         try:
             if mapping.pose_format is None:
                 mapping = detect_format(v.record, mapping, v.where)
-            base_T_flange = robot_pose(v.record, v.where, mapping, kin)
+            posed.append((v, robot_pose(v.record, v.where, mapping, kin)))
+        except ReconError as exc:
+            later.append(SkippedImage(v.name, exc.one_line()))
+    if poses_read is not None:
+        poses_read([T for _, T in posed], list(dataset.skipped) + later)
+    views: list[CornerView] = []
+    n = len(posed)
+    for k, (v, base_T_flange) in enumerate(posed, start=1):
+        try:
             bgr = read_color(v.image, "board image", hint="replace or remove the image")
         except ReconError as exc:
-            skipped.append(SkippedImage(v.name, exc.one_line()))
+            later.append(SkippedImage(v.name, exc.one_line()))
         else:
-            found = corner_view(v.name, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), base_T_flange, board, camera,
-                                min_corners, v.where)
+            with native_output_captured((1, 2)):  # OpenCV's own diagnostics stay off the terminal
+                try:
+                    found = corner_view(v.name, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), base_T_flange, board,
+                                        camera, min_corners, v.where)
+                except cv2.error as exc:
+                    reason = (str(exc).strip().splitlines() or ["no reason given"])[-1][:160]
+                    found = SkippedImage(v.name, f"{v.image}: the board cannot be found in it (OpenCV: {reason})")
             if isinstance(found, SkippedImage):
-                skipped.append(found)
+                later.append(found)
             else:
                 views.append(found)
         if progress:
             progress("board images", k, n)
-    return DatasetViews(views, skipped, mapping)
+    later.sort(key=lambda s: order.get(s.name, len(order)))
+    return DatasetViews(views, list(dataset.skipped) + later, mapping)

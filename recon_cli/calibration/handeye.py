@@ -22,6 +22,7 @@ enough, about enough axes, for the problem to be well posed.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -29,6 +30,7 @@ import numpy as np
 
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.geometry.transforms import invert, rotation_angle
+from recon_cli.inputs.images import native_output_captured
 
 #: OpenCV needs 3 views; fewer than this many make a calibration we warn about
 MIN_VIEWS = 3
@@ -37,6 +39,12 @@ RECOMMENDED_VIEWS = 10
 MIN_ROTATION_SPREAD = np.radians(20.0)
 #: the second-largest share of the motion axes' scatter below which all motions turn about one axis
 MIN_AXIS_SPREAD = 0.003
+#: [rad] the largest rotation between two views below which the motion is degenerate: every
+#: view at nearly one orientation, no rotation axis to measure (refused before any solver runs)
+DEGENERATE_ROTATION = np.radians(1.0)
+#: the axis spread below which every motion turns about one axis (all within about 1 degree of
+#: it): the translation along that axis is not observable (refused before any solver runs)
+DEGENERATE_AXIS_SPREAD = 1e-4
 
 
 class HandEyeMethod(StrEnum):
@@ -140,20 +148,72 @@ def solve_hand_eye(observations: list[BoardObservation], method: HandEyeMethod =
                          hint="install opencv-python-headless>=4.10,<5 (pyproject.toml says why)")
     world_T_flange = [o.world_T_flange for o in observations]
     camera_T_marker = [o.camera_T_marker for o in observations]
-    if method.robot_world:
-        R_w2c, t_w2c = _split(camera_T_marker)  # "world" of OpenCV = the board
-        R_b2g, t_b2g = _split([invert(T) for T in world_T_flange])  # "base" = our world frame
-        R_b2w, t_b2w, R_g2c, t_g2c = cv2.calibrateRobotWorldHandEye(R_w2c, t_w2c, R_b2g, t_b2g,
-                                                                     method=method.opencv_flag())
-        marker_T_world = _join(R_b2w, t_b2w)
-        camera_T_flange = _join(R_g2c, t_g2c)
-        return HandEyeSolution(method, invert(camera_T_flange), invert(marker_T_world))
-    R_g2b, t_g2b = _split(world_T_flange)
-    R_t2c, t_t2c = _split(camera_T_marker)
-    R_c2g, t_c2g = cv2.calibrateHandEye(R_g2b, t_g2b, R_t2c, t_t2c, method=method.opencv_flag())
-    X = _join(R_c2g, t_c2g)
-    return HandEyeSolution(method, X, mean_pose([A @ X @ B for A, B in zip(world_T_flange, camera_T_marker,
-                                                                            strict=True)]))
+    logging = cv2.utils.logging
+    level = logging.getLogLevel()
+    X: np.ndarray | None = None
+    W: np.ndarray | None = None
+    # OpenCV logs a failed Tsai solve (and returns a result): its log is read, not printed
+    with native_output_captured((1, 2), opencv=False) as printed:
+        logging.setLogLevel(logging.LOG_LEVEL_ERROR)
+        try:
+            if method.robot_world:
+                R_w2c, t_w2c = _split(camera_T_marker)  # "world" of OpenCV = the board
+                R_b2g, t_b2g = _split([invert(T) for T in world_T_flange])  # "base" = our world frame
+                R_b2w, t_b2w, R_g2c, t_g2c = cv2.calibrateRobotWorldHandEye(R_w2c, t_w2c, R_b2g, t_b2g,
+                                                                             method=method.opencv_flag())
+                X, W = invert(_join(R_g2c, t_g2c)), invert(_join(R_b2w, t_b2w))
+            else:
+                R_g2b, t_g2b = _split(world_T_flange)
+                R_t2c, t_t2c = _split(camera_T_marker)
+                R_c2g, t_c2g = cv2.calibrateHandEye(R_g2b, t_g2b, R_t2c, t_t2c, method=method.opencv_flag())
+                X, W = _join(R_c2g, t_c2g), None
+            failure = None
+        except cv2.error as exc:
+            failure = _opencv_reason(str(exc))
+        finally:
+            logging.setLogLevel(level)
+    if failure is None and printed and "failed" in printed[0]:
+        failure = _opencv_reason(printed[0])
+    if failure is None and not _is_rigid(X):
+        failure = "its result is not a rotation and a translation"
+    if failure is None and X is not None and W is None:
+        W = mean_pose([A @ X @ B for A, B in zip(world_T_flange, camera_T_marker, strict=True)])
+    if failure is None and (W is None or not _is_rigid(W)):
+        failure = "its result is not a rotation and a translation"
+    if failure is not None or X is None or W is None:
+        raise SolverFailed(method, len(observations), failure or "no result")
+    return HandEyeSolution(method, X, W)
+
+
+class SolverFailed(InputError):
+    """One of OpenCV's solvers found no solution for the views; ``reason``: OpenCV's words
+    (without its source location)."""
+
+    def __init__(self, method: HandEyeMethod, views: int, reason: str) -> None:
+        self.method = method
+        self.reason = reason
+        super().__init__(f"OpenCV's {method.value} solver found no solution for the {views} views ({reason})",
+                         hint="add views turned about other axes, or choose another --method")
+
+
+def _opencv_reason(text: str) -> str:
+    """What OpenCV said, without its source location: "Rotation normalization issue: ..." of
+    "OpenCV(4.x) /path/file.cpp:549: error: (-7:...) Rotation normalization issue: ... in
+    function 'f'", or the text of its log line."""
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    line = lines[-1] if lines else "no reason given"
+    line = re.sub(r"^.*?error: \([^)]*\)\s*", "", line)
+    line = re.sub(r"^\[[^]]*\]\s*global \S+ \S+\s*", "", line)  # "[ERROR:0@1.9] global file.cpp:335 function"
+    line = re.sub(r"\s*in function '[^']*'$", "", line)
+    return line[:160]
+
+
+def _is_rigid(T: np.ndarray | None) -> bool:
+    """A finite 4x4 transform whose rotation part is a rotation (within 1e-6)."""
+    if T is None or T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        return False
+    R = T[:3, :3]
+    return bool(np.max(np.abs(R.T @ R - np.eye(3))) < 1e-6 and np.linalg.det(R) > 0)
 
 
 def view_residuals(observations: list[BoardObservation], flange_T_camera: np.ndarray,
@@ -198,6 +258,21 @@ class Diversity:
     def ok(self) -> bool:
         return not self.issues
 
+    @property
+    def degenerate(self) -> str | None:
+        """Why no solver can find the hand-eye transform from these views (every view at
+        nearly one orientation, or every rotation between them about one axis), or None."""
+        if self.views >= 2 and self.max_rotation < DEGENERATE_ROTATION:
+            return (f"the robot poses rotate by at most {np.degrees(self.max_rotation):.2f}° against each other "
+                    f"(at least {np.degrees(DEGENERATE_ROTATION):.0f}° needed, "
+                    f"{np.degrees(MIN_ROTATION_SPREAD):.0f}° recommended): the views are taken at nearly one "
+                    "orientation")
+        if self.views >= 3 and self.axis_spread < DEGENERATE_AXIS_SPREAD:
+            return (f"every rotation between the views turns about one axis (axis spread {self.axis_spread:.2g}, "
+                    f"at least {DEGENERATE_AXIS_SPREAD:g} needed, {MIN_AXIS_SPREAD:g} recommended; rotations up "
+                    f"to {np.degrees(self.max_rotation):.1f}°): the translation along that axis is not observable")
+        return None
+
     def to_dict(self) -> dict:
         return {"views": self.views, "max_rotation_deg": float(np.degrees(self.max_rotation)),
                 "median_rotation_deg": float(np.degrees(self.median_rotation)), "axis_spread": self.axis_spread,
@@ -210,18 +285,20 @@ def pose_diversity(world_T_flange, recommended: int = RECOMMENDED_VIEWS) -> Dive
 
     Ts = np.asarray(world_T_flange, dtype=np.float64).reshape(-1, 4, 4)
     n = len(Ts)
-    angles, scatter = [], np.zeros((3, 3))
-    for i in range(n):
-        for j in range(i + 1, n):
-            rv = Rotation.from_matrix(Ts[i, :3, :3].T @ Ts[j, :3, :3]).as_rotvec()
-            a = float(np.linalg.norm(rv))
-            angles.append(a)
-            if a > 1e-9:
-                axis = Ts[i, :3, :3] @ (rv / a)  # in world axes, comparable across pairs
-                scatter += np.sin(min(a, np.pi / 2)) * np.outer(axis, axis)
+    Rs = Ts[:, :3, :3]
+    rows: list[np.ndarray] = []
+    scatter = np.zeros((3, 3))
+    for i in range(n - 1):  # every pair (i, j > i), one view's pairs at a time
+        rv = Rotation.from_matrix(np.einsum("ba,jbc->jac", Rs[i], Rs[i + 1:])).as_rotvec()
+        a = np.linalg.norm(rv, axis=1)
+        rows.append(a)
+        moved = a > 1e-9
+        axes = (rv[moved] / a[moved, None]) @ Rs[i].T  # in world axes, comparable across pairs
+        scatter += np.einsum("k,ka,kb->ab", np.sin(np.minimum(a[moved], np.pi / 2)), axes, axes)
+    angles = np.concatenate(rows) if rows else np.zeros(0)
     ev = np.sort(np.linalg.eigvalsh(scatter))[::-1] if np.trace(scatter) > 0 else np.zeros(3)
     spread = float(ev[1] / ev.sum()) if ev.sum() > 0 else 0.0
-    max_rot = max(angles, default=0.0)
+    max_rot = float(angles.max()) if angles.size else 0.0
     issues = []
     if n < recommended:
         issues.append((DiversityIssue.TOO_FEW_VIEWS,
@@ -235,4 +312,4 @@ def pose_diversity(world_T_flange, recommended: int = RECOMMENDED_VIEWS) -> Dive
                        f"the rotations between views turn about nearly one axis (axis spread {spread:.3f} < "
                        f"{MIN_AXIS_SPREAD}): translation along it is not observable; add views tilted about "
                        "another axis or rolled about the viewing direction"))
-    return Diversity(n, max_rot, float(np.median(angles)) if angles else 0.0, spread, tuple(issues))
+    return Diversity(n, max_rot, float(np.median(angles)) if angles.size else 0.0, spread, tuple(issues))

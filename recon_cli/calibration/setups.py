@@ -36,7 +36,7 @@ import numpy as np
 
 from recon_cli.calibration.camera_file import CameraCalibration
 from recon_cli.calibration.handeye import BoardObservation, HandEyeMethod, ViewResidual, solve_hand_eye
-from recon_cli.errors import UnknownNameError
+from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.geometry.transforms import invert, pose_error
 
 #: a view is an outlier when its chain residual is more than this many times the median ...
@@ -196,6 +196,9 @@ def refine(views: list[CornerView], start: SetupSolution, max_evaluations: int =
 
     x0 = np.zeros(12)
     r0 = residuals(x0)
+    if not np.all(np.isfinite(r0)):
+        raise InputError(f"the {start.method.value} solution projects some board corners to no finite point, so it "
+                         "cannot be refined", hint="calibrate with --no-refine, or with another --method")
     fit = least_squares(residuals, x0, method="lm", x_scale=np.full(12, 0.01), xtol=1e-12, ftol=1e-12, gtol=1e-12,
                         max_nfev=max_evaluations)
     solution = SetupSolution(start.setup, start.method, X0 @ _twist(fit.x[:6]), W0 @ _twist(fit.x[6:]),

@@ -228,6 +228,8 @@ def handeye(
     console.print("method      vs written [mm]  [deg]")
     for name, (dt, dr) in r.method_spread().items():
         console.print(f"{name:11s} {dt * 1e3:14.3f}  {np.degrees(dr):.4f}")
+    for m, why in r.method_failures.items():
+        console.print(f"{m.value:11s} no solution ({why})")
     X = r.solution.flange_T_camera
     dt, dr = r.change
     label = r.solution.method.value + (" refined" if r.refined else "")
@@ -283,6 +285,8 @@ def _print_dataset(r: DatasetHandEyeResult) -> None:
         console.print(f"{m.value:11s} {row.chain_rms[0] * 1e3:14.2f} {np.degrees(row.chain_rms[1]):6.3f} "
                       f"{row.reprojection_rms:12.2f} {row.vs_written[0] * 1e3:16.2f} "
                       f"{np.degrees(row.vs_written[1]):6.3f}")
+    for m, why in r.method_failures.items():
+        console.print(f"{m.value:11s} no solution ({why})")
     label = r.solution.method.value + (" refined" if r.solution.refined else "")
     for name, T in r.solution.named().items():
         console.print(f"{name} ({label}):")

@@ -37,6 +37,7 @@ from recon_cli.calibration.handeye import (
     Diversity,
     HandEyeMethod,
     HandEyeSolution,
+    SolverFailed,
     ViewResidual,
     pose_diversity,
     solve_hand_eye,
@@ -171,6 +172,7 @@ class HandEyeResult:
     station_written: Path | None
     seconds: float
     station_backup: Path | None = None  # the station file as it was (beside the file a link points to)
+    method_failures: dict[HandEyeMethod, str] = field(default_factory=dict)  # OpenCV methods without a solution
 
     @property
     def views(self) -> int:
@@ -206,6 +208,7 @@ class HandEyeResult:
             "methods": {m.value: {"flange_T_camera": s.flange_T_camera, "world_T_marker": s.world_T_marker,
                                   "vs_chosen_m_rad": list(self.method_spread()[m.value])}
                         for m, s in self.methods.items()},
+            "methods_failed": {m.value: why for m, why in self.method_failures.items()},
             "diversity": self.diversity.to_dict(),
             "skipped": [{"name": s.name, "reason": s.reason} for s in self.skipped],
             "model": {"flange_T_camera": self.model_flange_T_camera, "world_T_marker": self.model_world_T_marker,
@@ -285,7 +288,25 @@ def run_handeye(opt: HandEyeOptions, progress: Progress | None = None) -> HandEy
                          f"or more" + (f" ({'; '.join(why)})" if why else ""),
                          hint="record views the robot reaches with the whole board in sight (your own script's "
                               "scans with --scan-store; docs/calibration.md)")
-    methods = {m: solve_hand_eye(obs, m) for m in HandEyeMethod}
+    degenerate = diversity.degenerate
+    if degenerate is not None:  # before any solver runs
+        raise InputError(f"the {len(obs)} usable views of {scans} cannot determine the hand-eye calibration: "
+                         f"{degenerate}", hint="record views with the camera tilted and rolled about two or more "
+                                               "different axes, by 20° or more (docs/calibration.md)")
+    methods: dict[HandEyeMethod, HandEyeSolution] = {}
+    failures: dict[HandEyeMethod, str] = {}
+    for m in HandEyeMethod:
+        try:
+            methods[m] = solve_hand_eye(obs, m)
+        except SolverFailed as exc:
+            failures[m] = exc.reason
+            if m is opt.method:  # no solution from the method to write: refused
+                refusal = exc
+    if opt.method in failures:
+        solved = ", ".join(m.value for m in methods)
+        raise InputError(refusal.message, hint=(f"choose --method {next(iter(methods)).value} ({solved} found a "
+                                                "solution), or record views" if methods else "record views")
+                         + " turned by 20° or more about other axes")
     solution, base_rotation, chain = methods[opt.method], None, obs
     if opt.refine:
         refined = refine_hand_eye(obs, solution)
@@ -303,7 +324,7 @@ def run_handeye(opt: HandEyeOptions, progress: Progress | None = None) -> HandEy
         written = Path(opt.station)
     result = HandEyeResult(out, Path(scans), status, solution, residuals, opt.refine, base_rotation, methods,
                            diversity, found.skipped, model_X, kin.world_T_marker(), truth, recorded, written,
-                           time.perf_counter() - t0, backup)
+                           time.perf_counter() - t0, backup, failures)
     write_json(out / "handeye.json", result.to_dict())
     atomic_write(out / "handeye_residuals.png", lambda tmp: plot_handeye_residuals(result, tmp))
     return result

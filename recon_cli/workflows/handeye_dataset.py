@@ -10,7 +10,11 @@ Writes into the run folder::
     <out>/hand_eye.yaml           eye-in-hand: flange_T_camera as a station file's hand_eye block
     <out>/handeye_residuals.png   per view: reprojection RMS, chain residual [mm], [deg]
 
-Nothing is written when fewer than 3 views are usable.
+Nothing is written when fewer than 3 views are usable, or when their robot poses cannot
+determine the calibration (every view at nearly one orientation, or every rotation between
+them about one axis): both are checked on the robot poses before any image is decoded, and
+again on the usable views before any solver runs. An OpenCV method that finds no solution is
+reported as such; when it is the method to write, the calibration is refused.
 """
 
 from __future__ import annotations
@@ -25,6 +29,8 @@ import numpy as np
 
 from recon_cli.calibration.camera_file import load_camera_file
 from recon_cli.calibration.dataset import (
+    CENTRE_RANGE,
+    FOCAL_RANGE,
     AngleUnit,
     CameraNumbers,
     CameraSource,
@@ -39,7 +45,14 @@ from recon_cli.calibration.dataset import (
     read_dataset,
     read_mapping,
 )
-from recon_cli.calibration.handeye import MIN_VIEWS, Diversity, HandEyeMethod, ViewResidual, pose_diversity
+from recon_cli.calibration.handeye import (
+    MIN_VIEWS,
+    Diversity,
+    HandEyeMethod,
+    SolverFailed,
+    ViewResidual,
+    pose_diversity,
+)
 from recon_cli.calibration.intrinsics import SkippedImage
 from recon_cli.calibration.setups import (
     CornerView,
@@ -59,6 +72,7 @@ from recon_cli.config import CellConfig
 from recon_cli.console import write_json
 from recon_cli.errors import InputError, ReconError
 from recon_cli.geometry.transforms import pose_error
+from recon_cli.inputs.numbers import in_range
 from recon_cli.outputs import atomic_write, atomic_write_text
 from recon_cli.perception.charuco import BoardSpec, cell_board
 from recon_cli.robot.description import expand_urdf
@@ -143,6 +157,7 @@ class DatasetHandEyeResult:
     board: BoardSpec
     sources: dict[str, str]  # where the set-up, board and camera came from
     seconds: float
+    method_failures: dict[HandEyeMethod, str] = field(default_factory=dict)  # OpenCV methods without a solution
 
     @property
     def used(self) -> list[ViewReport]:
@@ -217,6 +232,7 @@ class DatasetHandEyeResult:
             "methods": {m.value: {**{name: T for name, T in s.solution.named().items()},
                                   "chain_rms_m_rad": list(s.chain_rms), "reprojection_rms_px": s.reprojection_rms,
                                   "vs_written_m_rad": list(s.vs_written)} for m, s in self.methods.items()},
+            "methods_failed": {m.value: why for m, why in self.method_failures.items()},
             "diversity": self.diversity.to_dict(),
             "skipped": [{"name": s.name, "reason": s.reason} for s in self.skipped],
             "mapping": self.mapping.to_dict(), "board": dataclasses.asdict(self.board),
@@ -228,10 +244,12 @@ def _camera(opt: DatasetHandEyeOptions, spec: DatasetSpec, hint: CameraNumbers |
     if opt.camera_file is not None:
         return load_camera_file(opt.camera_file), f"--camera-file {opt.camera_file}"
     if opt.intrinsics is not None:
-        fx, fy, cx, cy = opt.intrinsics[:4]
-        if fx <= 0 or fy <= 0:
-            raise InputError(f"--intrinsics: fx and fy must be positive, not {fx:g}, {fy:g}",
+        if len(opt.intrinsics) != 4:
+            raise InputError(f"--intrinsics: {len(opt.intrinsics)} numbers, fx,fy,cx,cy expected",
                              hint="give fx,fy,cx,cy in pixels")
+        fx, fy, cx, cy = (in_range(v, f"--intrinsics {name}", *(FOCAL_RANGE if name in ("fx", "fy") else CENTRE_RANGE),
+                                   unit="px", hint="give fx,fy,cx,cy in pixels")
+                          for v, name in zip(opt.intrinsics, ("fx", "fy", "cx", "cy"), strict=True))
         return CameraNumbers(fx, fy, cx, cy), "--intrinsics (no distortion)"
     if spec.camera is not None:
         return spec.camera, f"the mapping {spec.source}"
@@ -258,10 +276,58 @@ def _method_report(views: list[CornerView], s: SetupSolution, written: SetupSolu
     return MethodReport(s, (t, r), rms(reprojection_errors(views, s)), pose_error(s.X, written.X))
 
 
+def _skipped_text(skipped: list[SkippedImage], shown: int = 5) -> str:
+    """ (skipped: name: reason; ...; and N more)"""
+    if not skipped:
+        return ""
+    more = f"; and {len(skipped) - shown} more" if len(skipped) > shown else ""
+    return " (skipped: " + "; ".join(f"{s.name}: {s.reason}" for s in skipped[:shown]) + more + ")"
+
+
+def check_solvable(base_T_flange: list[np.ndarray], views: int, skipped: list[SkippedImage], setup: Setup,
+                   dataset: Path) -> None:
+    """Refuse, before any solver runs, a data set whose usable robot poses cannot determine
+    the calibration: fewer than MIN_VIEWS, or degenerate motion (every view at nearly one
+    orientation, every rotation between them about one axis). One line: the usable views,
+    what is needed, the views skipped and why."""
+    n = len(base_T_flange)
+    if n < MIN_VIEWS:
+        raise InputError(f"{n} of the {views} views of {dataset} are usable; hand-eye calibration needs {MIN_VIEWS} "
+                         f"or more{_skipped_text(skipped)}",
+                         hint="fix what the reasons say (docs/calibration.md, Calibrating from your own data)")
+    reason = pose_diversity([setup.chain_pose(T) for T in base_T_flange]).degenerate
+    if reason is not None:
+        raise InputError(f"the {n} usable views of {dataset} cannot determine the hand-eye calibration: {reason}"
+                         f"{_skipped_text(skipped)}",
+                         hint="add views with the flange turned about two or more different axes, by 20° or more "
+                              "(docs/calibration.md)")
+
+
+def solve_methods(views: list[CornerView], setup: Setup, chosen: HandEyeMethod
+                  ) -> tuple[dict[HandEyeMethod, SetupSolution], dict[HandEyeMethod, str]]:
+    """Every OpenCV method's solution, and the methods that find none with OpenCV's reason;
+    when the chosen one finds none, one line naming those that did."""
+    solutions: dict[HandEyeMethod, SetupSolution] = {}
+    failures: dict[HandEyeMethod, str] = {}
+    for m in HandEyeMethod:
+        try:
+            solutions[m] = solve(views, setup, m)
+        except SolverFailed as exc:
+            failures[m] = exc.reason
+            if m is chosen:
+                refusal = exc
+    if chosen in failures:
+        others = ", ".join(m.value for m in solutions)
+        raise InputError(refusal.message, hint=(f"choose --method {next(iter(solutions)).value} ({others} found a "
+                                                "solution), or add views" if solutions else "add views")
+                         + " turned by 20° or more about other axes")
+    return solutions, failures
+
+
 def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = None) -> DatasetHandEyeResult:
     """Read the data set, calibrate, report, write (see the module docstring)."""
     t0 = time.perf_counter()
-    spec = read_mapping(opt.mapping) if opt.mapping is not None else DatasetSpec()
+    spec = read_mapping(opt.mapping, opt.dataset) if opt.mapping is not None else DatasetSpec()
     mapping = spec.mapping.overridden(pose_format=opt.pose_format, length_unit=opt.length_unit,
                                       angle_unit=opt.angle_unit, quaternion_order=opt.quaternion_order,
                                       matrix_order=opt.matrix_order)
@@ -290,16 +356,17 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
     if mapping.pose_format is PoseFormat.JOINTS:
         kin = Kinematics(expand_urdf(opt.cell), opt.cell.cell_file)
         sources["kinematics"] = f"the cell {opt.cell.cell_file.name}, flange {opt.cell.cell_file.flange_link}"
-    found = dataset_views(dataset, mapping, board, camera, kin, opt.min_corners, progress)
+    total = len(dataset.views) + len(dataset.skipped)
+
+    def poses_read(poses: list[np.ndarray], skipped: list[SkippedImage]) -> None:
+        check_solvable(poses, total, skipped, setup, opt.dataset)
+
+    found = dataset_views(dataset, mapping, board, camera, kin, opt.min_corners, progress, poses_read)
     views = found.views
-    if len(views) < MIN_VIEWS:
-        why = "; ".join(f"{s.name}: {s.reason}" for s in found.skipped[:3])
-        raise InputError(f"{len(views)} of the {len(dataset.views) + len(dataset.skipped)} views of {opt.dataset} are "
-                         f"usable; hand-eye calibration needs {MIN_VIEWS} or more" + (f" ({why})" if why else ""),
-                         hint="fix what the reasons say (docs/calibration.md, Calibrating from your own data)")
+    check_solvable([v.base_T_flange for v in views], total, found.skipped, setup, opt.dataset)
     # outliers by the closed chains of OpenCV's solution: the refinement would spread one bad
     # view's error over all of them
-    methods = {m: solve(views, setup, m) for m in HandEyeMethod}
+    methods, failures = solve_methods(views, setup, opt.method)
     outliers = outlier_views(chain_residuals(views, methods[opt.method]))
     kept = views
     if opt.drop_outliers and outliers:
@@ -308,7 +375,12 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
             raise InputError(f"dropping the {len(outliers)} outlier views leaves {len(kept)} of {len(views)}; "
                              f"hand-eye calibration needs {MIN_VIEWS} or more",
                              hint="calibrate without --drop-outliers, or add views")
-        methods = {m: solve(kept, setup, m) for m in HandEyeMethod}
+        reason = pose_diversity([setup.chain_pose(v.base_T_flange) for v in kept]).degenerate
+        if reason is not None:
+            raise InputError(f"dropping the {len(outliers)} outlier views leaves {len(kept)} views that cannot "
+                             f"determine the hand-eye calibration: {reason}",
+                             hint="calibrate without --drop-outliers, or add views")
+        methods, failures = solve_methods(kept, setup, opt.method)
     refinement = refine(kept, methods[opt.method]) if opt.refine else None
     solution = refinement.solution if refinement is not None else methods[opt.method]
     used = {v.name for v in kept}
@@ -317,7 +389,7 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
     diversity = pose_diversity([setup.chain_pose(v.base_T_flange) for v in kept])
     result = DatasetHandEyeResult(Path(opt.out), Path(opt.dataset), dataset.layout, setup, solution, refinement,
                                   reports, method_reports, diversity, found.skipped, found.mapping, board, sources,
-                                  time.perf_counter() - t0)
+                                  time.perf_counter() - t0, failures)
     out = Path(opt.out)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "handeye.json", result.to_dict())

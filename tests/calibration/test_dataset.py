@@ -268,8 +268,10 @@ def test_joint_positions_through_a_cell(views, tmp_path):
             cv2.imwrite(str(data / "images" / f"{k}.png"), _render(C))
             (data / "poses" / f"{k}.yaml").write_text(yaml.safe_dump({"joints": np.degrees(q).tolist()}))
             k += 1
-    r = _calibrate(data, tmp_path / "out", cell=cell, angle_unit=AngleUnit.DEG)
+    # the views turn by less than the 17° per pair that OpenCV's Tsai needs (it finds no solution)
+    r = _calibrate(data, tmp_path / "out", cell=cell, angle_unit=AngleUnit.DEG, method=HandEyeMethod.PARK)
     assert r.mapping.pose_format is PoseFormat.JOINTS and len(r.used) == 6
+    assert "Not enough informative motions" in r.method_failures[HandEyeMethod.TSAI]
     dt, dr = pose_error(r.solution.named()["flange_T_camera"], FLANGE_T_CAMERA)
     assert dt < 2e-3 and np.degrees(dr) < 0.2, (dt, np.degrees(dr))
 
@@ -422,4 +424,4 @@ def test_a_mapping_file_is_checked(tmp_path, capsys):
     mapping.write_text("pose_format: xyz-quat\nquaternion_order: zyxw\n")
     code, text = _run(capsys, "calibrate", "handeye", "--dataset", tmp_path, "--mapping", mapping, "--intrinsics",
                       "900,900,480,360", "--out", tmp_path / "o")
-    assert code == 1 and f"{mapping}:2: quaternion_order = 'zyxw' is not one of xyzw, wxyz" in text, text
+    assert code == 1 and f"{mapping}:2: quaternion_order" in text and "is not one of xyzw, wxyz" in text, text

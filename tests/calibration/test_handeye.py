@@ -13,6 +13,7 @@ from recon_cli.calibration.handeye import (
     BoardObservation,
     DiversityIssue,
     HandEyeMethod,
+    SolverFailed,
     mean_pose,
     pose_diversity,
     solve_hand_eye,
@@ -154,6 +155,43 @@ def test_similar_and_few_views_are_warned():
     issues = dict(pose_diversity(_poses(near)).issues)
     assert {DiversityIssue.TOO_FEW_VIEWS, DiversityIssue.SIMILAR_ROTATIONS} <= set(issues)
     assert "4 usable views" in issues[DiversityIssue.TOO_FEW_VIEWS]
+
+
+def test_degenerate_motion_is_named():
+    """Every view at one orientation, or every rotation about one axis: no solver can find
+    the calibration, and the diversity says why."""
+    obs, _, _ = _exact(n=6)
+    assert pose_diversity([o.world_T_flange for o in obs]).degenerate is None
+    same = [obs[0].world_T_flange] * 6
+    assert pose_diversity(same).degenerate.startswith("the robot poses rotate by at most 0.00° against each other "
+                                                      "(at least 1° needed, 20° recommended)")
+    turned = []
+    for k in range(6):
+        T = obs[0].world_T_flange.copy()
+        T[:3, :3] = T[:3, :3] @ Rotation.from_rotvec([0, 0, np.radians(20 * k)]).as_matrix()
+        T[:3, 3] += [0.01 * k, 0, 0]
+        turned.append(T)
+    why = pose_diversity(turned).degenerate
+    assert why.startswith("every rotation between the views turns about one axis (axis spread ") and \
+        "rotations up to 100.0°" in why, why
+
+
+def test_a_solver_without_a_solution_is_one_line_and_prints_nothing(capfd):
+    """Four views at one pose: OpenCV's Tsai solver logs "not enough informative motions" and
+    returns the identity, Andreff's raises; both are one line naming OpenCV's reason, and
+    nothing is printed."""
+    obs, _, _ = _exact(n=6)
+    small = [BoardObservation(f"v{k}", obs[0].world_T_flange, obs[0].camera_T_marker) for k in range(4)]
+    with pytest.raises(SolverFailed) as info:
+        solve_hand_eye(small, HandEyeMethod.TSAI)
+    assert info.value.one_line().startswith("OpenCV's tsai solver found no solution for the 4 views (Hand-eye "
+                                            "calibration failed! Not enough informative motions--include larger "
+                                            "rotations.); add views turned about other axes")
+    with pytest.raises(SolverFailed, match=r"andreff solver found no solution for the 4 views \(Rotation "
+                                           r"normalization issue: determinant\(R\) is null\)"):
+        solve_hand_eye(small, HandEyeMethod.ANDREFF)
+    out, err = capfd.readouterr()
+    assert out + err == ""
 
 
 def test_view_options_are_checked():

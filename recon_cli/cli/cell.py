@@ -87,6 +87,7 @@ def check(
     c = make_cell(file, safety)
     folder = output_folder(out, "cell check", force=force).path
     with progress_bar() as update:
+        c.ik.seed_library(progress=lambda i, n: update("IK seed library", i, n))
         result = check_cell(c, np.random.default_rng(seed), step,
                             progress=lambda i, n: update("reachability", i, n))
     picture = folder / "reachability.png"

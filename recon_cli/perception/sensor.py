@@ -27,6 +27,11 @@ from recon_cli.paths import ROBOT_DIR
 from recon_cli.perception.camera_model import Intrinsics, fovy_from_hfov, intrinsics_from_fovy
 from recon_cli.robot.cell_file import CellFile
 
+#: most pixels (width x height) of a sensor's image: the simulation renders, and every scan
+#: holds, several images and buffers of this size (docs/inputs.md); the 2448 x 2048 px of
+#: the largest industrial depth cameras are 5.0 million
+MAX_SENSOR_PIXELS = 6_000_000
+
 
 @dataclass(frozen=True)
 class SensorModel:
@@ -202,6 +207,11 @@ def _sensor_file(path: Path, stamp: tuple[int, int]) -> SensorModel:
         line = line_of(d, key)
         return InputError(f"{path}:{line or 1}: {key}: {what}", hint=hint)
 
+    width, height = int(d["width"]), int(d["height"])
+    if width * height > MAX_SENSOR_PIXELS:  # before any image, buffer or framebuffer of that size exists
+        raise refuse("width", f"{width} x {height} px are {width * height:,} pixels, more than the "
+                     f"{MAX_SENSOR_PIXELS:,} of a sensor's image", f"give the depth image's size, at most "
+                     f"{MAX_SENSOR_PIXELS:,} pixels (e.g. 2448 x 2048)")
     z_min, z_max = float(d["z_min"]), float(d["z_max"])
     if z_min >= z_max:
         raise refuse("z_max", f"the working range {z_min:g} ... {z_max:g} m is empty", "z_max must exceed z_min")
@@ -213,7 +223,7 @@ def _sensor_file(path: Path, stamp: tuple[int, int]) -> SensorModel:
         raise refuse("depth_scale", f"{float(d['depth_scale']):g} units per m cannot hold z_max = {z_max:g} m in "
                      "a 16-bit depth image", f"at most {65535 / z_max:.0f} units per m")
     return SensorModel(
-        name=d["name"], width=int(d["width"]), height=int(d["height"]),
+        name=d["name"], width=width, height=height,
         hfov=math.radians(float(d["hfov_deg"])), z_min=z_min, z_max=z_max,
         noise_sigma_ref=float(d["noise_sigma_ref"]), noise_z_ref=float(d["noise_z_ref"]),
         max_incidence=math.radians(float(d["max_incidence_deg"])),

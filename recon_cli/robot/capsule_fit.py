@@ -55,7 +55,8 @@ meshes keeps its other visuals only: the simulated camera sees no geometry of it
 Visual mesh files are never read (a Collada visual is fine).
 
 Rewrites are cached per process, keyed by the URDF text, its folder, the safety distance
-and the content of the collision mesh files.
+and the version (modification time, size) of the collision mesh files. A mesh file's size is
+checked from its stat before anything reads it; only the guarded reader reads it.
 """
 
 from __future__ import annotations
@@ -76,7 +77,8 @@ from lxml import etree
 from recon_cli.errors import FileError, InputError, ScriptError
 from recon_cli.expansion.readable import ReadRule, readable
 from recon_cli.geometry.transforms import pose_from_xyz_rpy, transform_points
-from recon_cli.inputs.meshes import MESH_SUFFIXES, read_mesh
+from recon_cli.inputs.files import version_stamp
+from recon_cli.inputs.meshes import MESH_SUFFIXES, check_mesh_file, read_mesh
 
 Array = npt.NDArray[np.float64]
 
@@ -93,6 +95,7 @@ START_RATIO = 1.5
 #: Nelder-Mead's budget of objective evaluations per start
 MAX_EVALUATIONS = 600
 _SUFFIX = "_fit_capsule"
+_MESH_HINT = "repair or simplify the mesh, or give the link primitive <collision> shapes"
 _DAE_HINT = ("convert it to STL or OBJ (e.g. with MeshLab or Blender), or give the link primitive "
              "<collision> shapes (box, cylinder, sphere)")
 
@@ -383,6 +386,10 @@ def _mesh_refs(root: etree._Element, description: Path, rule: ReadRule | None = 
                 raise InputError(f"{where}: link '{name}': collision mesh {uri} does not exist ({path})",
                                  hint="put the mesh file there (package:// is searched from the description's "
                                       "folder upwards, other paths are relative to it) or fix the filename")
+            try:  # its size from its stat, before anything reads it (the cache key, the reader)
+                check_mesh_file(path, f"collision mesh of link '{name}'", _MESH_HINT)
+            except FileError as exc:
+                raise FileError(f"{exc.message} (filename {uri})", hint=exc.hint) from None
             scale = _floats(mesh.get("scale"), "1 1 1", (1, 3), f"{where}: link '{name}': mesh scale")
             origin = col.find("origin")
             xyz = _floats(None if origin is None else origin.get("xyz"), "0 0 0", (3,), f"{where}: link '{name}': xyz")
@@ -396,8 +403,7 @@ def _link_vertices(ref: _MeshRef) -> Array:
     """The vertices of one collision mesh in its link frame."""
     factor = max(abs(v) for v in ref.scale) or 1.0
     try:
-        mesh = read_mesh(ref.path, f"collision mesh of link '{ref.link}'", scale=factor,
-                         hint="repair or simplify the mesh, or give the link primitive <collision> shapes")
+        mesh = read_mesh(ref.path, f"collision mesh of link '{ref.link}'", scale=factor, hint=_MESH_HINT)
     except FileError as exc:
         raise FileError(f"{exc.message} (filename {ref.uri})", hint=exc.hint) from None
     vertices = np.asarray(mesh.vertices, dtype=np.float64) * np.asarray(ref.scale)
@@ -405,10 +411,11 @@ def _link_vertices(ref: _MeshRef) -> Array:
 
 
 def _digest(refs: list[_MeshRef]) -> str:
+    """The cache key of the meshes: their names and versions (modification time, size), read
+    from their stat (a mesh is read only by the guarded reader)."""
     h = hashlib.sha256()
     for ref in refs:
-        h.update(f"{ref.link}\0{ref.path}\0".encode())
-        h.update(ref.path.read_bytes())
+        h.update(f"{ref.link}\0{ref.path}\0{version_stamp(ref.path)}\0".encode())
     return h.hexdigest()
 
 

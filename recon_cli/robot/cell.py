@@ -14,7 +14,7 @@ from recon_cli.errors import InvalidViewError, UnreachableViewError
 from recon_cli.geometry.view import View, world_T_camera
 from recon_cli.robot.collision import CollisionModel, ObjectBox
 from recon_cli.robot.description import CellConfig, expand_urdf
-from recon_cli.robot.ik import IKOptions, IKResult, IKSolver, IKStatus
+from recon_cli.robot.ik import IKOptions, IKResult, IKSolver, IKStatus, check_library_size
 from recon_cli.robot.kinematics import Kinematics
 from recon_cli.robot.limits import JointLimits
 from recon_cli.robot.shapes import CollisionShape
@@ -28,6 +28,7 @@ class Cell:
         self.config = config
         self.urdf = expand_urdf(config)
         self.kin = Kinematics(self.urdf, config.cell_file)
+        check_library_size(self.kin)  # before the collision model, whose making takes longest
         self.collision = CollisionModel(self.urdf, self.kin, object_box, config.safety_distance)
         self.ik = IKSolver(self.kin, self.collision)
         self.world_T_marker = self.kin.world_T_marker()

@@ -30,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 from lxml import etree
 
+from recon_cli.errors import InputError
 from recon_cli.geometry.transforms import pose_from_xyz_rpy
 from recon_cli.lazy import lazy_module
 from recon_cli.robot.batch_fk import BatchFK
@@ -199,6 +200,10 @@ class CollisionModel:
         shapes = shapes_from_urdf(urdf, kin)
         self.robot_shapes = [s for s in shapes if s.joint != 0]
         self._static_env_shapes = [s for s in shapes if s.joint == 0]
+        if not self.robot_shapes:
+            raise InputError(f"{kin.cell.description}: no link that a joint moves has a <collision> shape, so "
+                             "nothing keeps the robot from hitting the table or itself",
+                             hint="give the robot's links <collision> shapes (boxes, cylinders, spheres or meshes)")
         self._robot_geoms = [_geometry(s.kind, s.dims) for s in self.robot_shapes]
         self._robot_objs = [fcl.CollisionObject(g, fcl.Transform()) for g in self._robot_geoms]
         self._robot_joints: npt.NDArray[np.intp] = np.array([s.joint for s in self.robot_shapes])

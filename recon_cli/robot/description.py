@@ -46,6 +46,7 @@ from recon_cli.robot.cell_file import (
     shipped_cells,
 )
 from recon_cli.robot.inflate import inflate_primitives
+from recon_cli.robot.urdf import check_structure
 
 
 class CellKind(StrEnum):
@@ -181,6 +182,7 @@ def _xyz_rpy(T: np.ndarray) -> tuple[str, str]:
 def _flange_T_mount(cell: CellFile) -> np.ndarray:
     """The camera frame's URDF parent in the flange frame (from the description as written)."""
     urdf = _expand_file(cell, tuple(sorted(cell.arguments)))
+    check_structure(urdf, cell.description)
     return parent_T_child(urdf, cell.flange_link, camera_parent(urdf, cell.camera_frame))
 
 
@@ -233,6 +235,7 @@ def _fitted(config: CellConfig) -> MeshFit:
     # primitives inflated here, and the capsules fitted to its meshes take it too
     cell = config.cell_file
     urdf = _expand_file(cell, tuple(sorted(config.xacro_args().items())))
+    check_structure(urdf, cell.description)  # before anything else reads the text
     if not cell.settings.safety_distance:
         urdf = inflate_primitives(urdf, config.safety_distance)
     return fit_mesh_collisions(urdf, cell.description, config.safety_distance, cell_rule(cell.path))

@@ -15,6 +15,7 @@ within the soft limits whose linear axes (if any) put the arm's base near the ca
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import TYPE_CHECKING
@@ -22,6 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from recon_cli.errors import InputError
 from recon_cli.lazy import lazy_module
 from recon_cli.robot.batch_fk import BatchFK
 from recon_cli.robot.collision import CollisionModel
@@ -43,6 +45,22 @@ LIBRARY_ROTATION_WEIGHT = 0.2
 LIBRARY_SEEDS = 6
 #: the seed library's configurations are drawn with this seed: part of the cell, not of a run
 LIBRARY_DRAW_SEED = 20250101
+#: the seed library's size at most, in joint values (configurations x joints: 100,000
+#: configurations of a 10-joint cell); its making and each solve's nearest search grow with it
+MAX_LIBRARY_VALUES = 1_000_000
+#: configurations whose camera poses are computed at once when the library is made
+LIBRARY_CHUNK = 10_000
+
+
+def check_library_size(kin: Kinematics) -> None:
+    """Refuse a cell file's ``ik.library`` of more than :data:`MAX_LIBRARY_VALUES` joint values
+    (one line naming the key and the largest library for the cell's joints)."""
+    size = kin.cell.ik_library * kin.nq
+    if size > MAX_LIBRARY_VALUES:
+        raise InputError(f"{kin.cell.where('ik.library')}: ik.library: {kin.cell.ik_library:,} configurations of "
+                         f"{kin.nq} joints are {size:,} joint values, more than the {MAX_LIBRARY_VALUES:,} of a "
+                         "seed library", hint=f"give at most {MAX_LIBRARY_VALUES // kin.nq:,} configurations for "
+                                              "this cell")
 
 
 class IKStatus(StrEnum):
@@ -132,26 +150,36 @@ class IKSolver:
         self._orthonormal = bool(np.allclose(gram, np.eye(len(self._linear)), atol=1e-9))
         self._posture_seeds = tuple(np.clip(kin.cell.pose(name, names), self._lo, self._hi)
                                     for name in kin.cell.ik_seeds)
+        check_library_size(kin)
         self._nearest: list[npt.NDArray[np.float64]] | None = None
         self._library: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None
 
     # ------------------------------------------------------------------ seed library
-    def _seed_library(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """(configurations (N, n), camera positions (N, 3), camera rotations (N, 3, 3)), made once."""
+    def seed_library(self, progress: Callable[[int, int], None] | None = None
+                     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """(configurations (N, n), camera positions (N, 3), camera rotations (N, 3, 3)), made once
+        (in chunks of :data:`LIBRARY_CHUNK` configurations; ``progress(done, total)`` after each)."""
         if self._library is None:
             model = self.kin.model
             frame = model.frames[self.kin.camera_frame_id]
-            Q = np.random.default_rng(LIBRARY_DRAW_SEED).uniform(self._lo, self._hi,
-                                                               size=(self.kin.cell.ik_library, model.nq))
-            T = BatchFK(model).joint_poses(Q)[:, int(frame.parentJoint)] @ frame.placement.homogeneous
-            self._library = (Q, T[:, :3, 3].copy(), T[:, :3, :3].copy())
+            n = self.kin.cell.ik_library
+            Q = np.random.default_rng(LIBRARY_DRAW_SEED).uniform(self._lo, self._hi, size=(n, model.nq))
+            p, R = np.empty((n, 3)), np.empty((n, 3, 3))
+            fk, joint, placement = BatchFK(model), int(frame.parentJoint), frame.placement.homogeneous
+            for start in range(0, n, LIBRARY_CHUNK):
+                part = slice(start, start + LIBRARY_CHUNK)
+                T = fk.joint_poses(Q[part])[:, joint] @ placement
+                p[part], R[part] = T[:, :3, 3], T[:, :3, :3]
+                if progress is not None:
+                    progress(min(start + LIBRARY_CHUNK, n), n)
+            self._library = (Q, p, R)
         return self._library
 
     def library_seeds(self, world_T_goal: npt.NDArray[np.float64], k: int) -> list[npt.NDArray[np.float64]]:
         """The ``k`` library configurations whose camera pose is nearest the goal's."""
         if self.kin.cell.ik_library == 0 or k <= 0:
             return []
-        Q, p, R = self._seed_library()
+        Q, p, R = self.seed_library()
         cos = (np.einsum("nij,ij->n", R, world_T_goal[:3, :3]) - 1.0) / 2.0
         d = np.linalg.norm(p - world_T_goal[:3, 3], axis=1) + LIBRARY_ROTATION_WEIGHT * np.arccos(np.clip(cos, -1, 1))
         nearest = np.argsort(d, kind="stable")[:k]

@@ -36,7 +36,7 @@ class Kinematics:
         self.model: pin.Model = pin.buildModelFromXML(urdf)
         self.data: pin.Data = self.model.createData()
         self.joint_names: tuple[str, ...] = tuple(self.model.names[1:])
-        self.limits: JointLimits = limits_from_urdf(urdf, self.joint_names, self.cell.limits)
+        self.limits: JointLimits = limits_from_urdf(urdf, self.joint_names, self.cell.limits, self.cell)
         self.camera_frame_id: int = self.model.getFrameId(self.cell.camera_frame)
         self._marker_frame_id: int = self.model.getFrameId(self.cell.board_frame)
 

@@ -17,7 +17,7 @@ import numpy.typing as npt
 from lxml import etree
 
 from recon_cli.errors import InputError
-from recon_cli.robot.cell_file import LimitTable
+from recon_cli.robot.cell_file import CellFile, LimitTable
 from recon_cli.robot.urdf import attribute, child
 
 
@@ -62,12 +62,28 @@ class JointLimits:
         return rng.uniform(self.soft_lower, self.soft_upper)
 
 
-def limits_from_urdf(urdf: str, joint_names: tuple[str, ...] | list[str], table: LimitTable) -> JointLimits:
-    """Collect the limits of the given (movable) joints from URDF text and a cell's limit table."""
+#: narrowest soft range of a joint [rad or m]: 0.06 deg, 1 mm (a joint that cannot move that far
+#: is a fixed joint; the IK scales its steps by the inverse of the range)
+MIN_SOFT_RANGE = 1e-3
+
+
+def limits_from_urdf(urdf: str, joint_names: tuple[str, ...] | list[str], table: LimitTable,
+                     cell: CellFile | None = None) -> JointLimits:
+    """Collect the limits of the given (movable) joints from URDF text and a cell's limit table.
+    Refused, one line each: a joint that is not revolute or prismatic, a lower limit not below
+    the upper one (the URDF's replaced by the table's), a soft range narrower than
+    :data:`MIN_SOFT_RANGE` (a soft margin of half the range or more). ``cell``: the cell file
+    the table belongs to, for the line of each joint in messages."""
     root = etree.fromstring(urdf.encode())
     rows = []
     for name in joint_names:
         joint = child(root, f"joint[@name='{name}']")
+        where = cell.where(f"limits.joints.{name}") if cell is not None else table.where
+        description = cell.description if cell is not None else "the robot description"
+        if joint.get("type") not in ("revolute", "prismatic"):
+            raise InputError(f"{description}: joint {name} is a {joint.get('type')} joint; recon plans revolute and "
+                             "prismatic joints with position limits",
+                             hint=f"write joint {name} as a revolute joint with <limit lower=... upper=...>")
         limit = child(joint, "limit")
         safety = joint.find("safety_controller")
         prismatic = joint.get("type") == "prismatic"
@@ -77,16 +93,32 @@ def limits_from_urdf(urdf: str, joint_names: tuple[str, ...] | list[str], table:
                              hint="give limits.joints.NAME.acceleration of every planning joint")
         k = 1.0 if prismatic else math.pi / 180.0
         margin = table.soft_margin_prismatic_m if prismatic else table.soft_margin_revolute_deg
-        lo = given.lower * k if given.lower is not None else float(attribute(limit, "lower"))
-        hi = given.upper * k if given.upper is not None else float(attribute(limit, "upper"))
+        # URDF reads a missing lower or upper limit as 0
+        lo = given.lower * k if given.lower is not None else float(limit.get("lower", "0"))
+        hi = given.upper * k if given.upper is not None else float(limit.get("upper", "0"))
         if margin is not None:
             m = margin if prismatic else margin * math.pi / 180.0
             slo, shi = lo + m, hi - m
         elif safety is not None:
-            slo = max(lo, float(attribute(safety, "soft_lower_limit")))
-            shi = min(hi, float(attribute(safety, "soft_upper_limit")))
+            slo = max(lo, float(safety.get("soft_lower_limit", lo)))
+            shi = min(hi, float(safety.get("soft_upper_limit", hi)))
         else:
             slo, shi = lo, hi
+        unit = "m" if prismatic else "deg"
+        if not lo < hi:
+            raise InputError(f"{where if given.lower is not None or given.upper is not None else description}: "
+                             f"joint {name}: the lower limit {lo / k:g} {unit} is not below the upper limit "
+                             f"{hi / k:g} {unit}", hint=f"give limits.joints.{name}.lower below its upper limit "
+                                                       f"({unit})")
+        if not shi - slo >= MIN_SOFT_RANGE:
+            if margin is not None:
+                raise InputError(f"{where}: joint {name}: the soft margin {margin:g} {unit} leaves no range inside its "
+                                 f"limits {lo / k:g} ... {hi / k:g} {unit}",
+                                 hint=f"make soft_margin_{'prismatic_m' if prismatic else 'revolute_deg'} less than "
+                                      f"half of every planning joint's range, or widen joint {name}'s limits")
+            raise InputError(f"{description}: joint {name}: its <safety_controller> soft limits leave no range inside "
+                             f"its limits {lo / k:g} ... {hi / k:g} {unit}",
+                             hint="give soft_lower_limit below soft_upper_limit, both inside the joint's limits")
         velocity = given.velocity * k if given.velocity is not None else float(attribute(limit, "velocity"))
         effort = given.effort if given.effort is not None else float(attribute(limit, "effort"))
         jerk = given.jerk * k if given.jerk is not None else math.inf

@@ -59,11 +59,11 @@ from .limits import (
     MESH_SUFFIXES,
 )
 from .ply_header import PlyElement, PlyHeader, PlyProperty, ply_header
-from .reader import read_cloud, read_mesh
+from .reader import check_mesh_file, read_cloud, read_mesh
 
 __all__ = [
     "CLOUD_SUFFIXES", "LIMITS", "MAX_COORDINATE_M", "MAX_EXTENT_M", "MAX_HEADER_BYTES", "MAX_MESH_FILE_BYTES",
     "MAX_OBJ_LINES", "MAX_PCD_UNCOMPRESSED_BYTES", "MAX_STL_TEXT_BYTES", "MAX_STL_TRIANGLES", "MAX_TEXT_TRIANGLES",
     "MAX_TEXT_VERTICES", "MAX_TRIANGLES", "MAX_VERTICES", "MESH_SUFFIXES", "PlyElement", "PlyHeader", "PlyProperty",
-    "ply_header", "read_cloud", "read_mesh",
+    "check_mesh_file", "ply_header", "read_cloud", "read_mesh",
 ]

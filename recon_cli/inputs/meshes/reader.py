@@ -27,6 +27,14 @@ def _check_file(path: Path, what: str, hint: str) -> int:
     return files.checked_size(path, MAX_MESH_FILE_BYTES, refuse, empty=False)
 
 
+def check_mesh_file(path: Path | str, what: str = "mesh", hint: str | None = None) -> int:
+    """The size of a mesh or cloud file, from its stat before a byte is read: a regular file
+    of at most :data:`MAX_MESH_FILE_BYTES` (one FileError line otherwise). :func:`read_mesh`
+    and :func:`read_cloud` start with it; a caller that looks at a file before reading it
+    (a cache key, a digest) calls it first."""
+    return _check_file(Path(path), what, hint or "check the file with a mesh viewer")
+
+
 def _refusal(path: Path, what: str, exc: _Refused | str, hint: str, units: str = _UNITS) -> FileError:
     return FileError(f"{path}: {what} {exc}", hint=units if isinstance(exc, _Units) else hint)
 

@@ -8,11 +8,16 @@ user writing a cell file for their own robot needs to know before the first scan
   table and everything else of the cell, with its clearances;
 - the board: is it in the camera's view from home, and from a view straight above it at the
   camera's scan distance (registration needs the board, or the kinematics alone);
+- the simulation: the MuJoCo scene of the cell is built (a description MuJoCo refuses is one
+  error line) and renders one small depth frame from home, its camera at the cell's camera
+  frame;
 - reachability over the table top: on a grid of points, a focus point ``focus_height`` above
   the table top, the number of viewing directions (polar angles :data:`THETAS` x
   :data:`AZIMUTHS` azimuths, at the sensor's scan distance) with a collision-free IK
-  solution: where an object can be scanned from how many sides. The cell file's object
-  position is one of the points reported.
+  solution: where an object can be scanned from how many sides, and why the other directions
+  fail (the camera inside an obstacle, every IK solution in collision, no IK solution). The
+  cell file's object position is one of the points reported, each of its directions with its
+  reason (no IK solution split into out of reach and held by a joint limit).
 
 A problem (home in collision or outside the soft limits, the board in view from no checked
 view, the object position seen from less than :data:`MIN_OBJECT_SHARE` of the directions)
@@ -27,15 +32,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from recon_cli.backends.sim.camera import render_rgbd, world_T_camera_gl
+from recon_cli.backends.sim.scene import build_scene, mujoco
 from recon_cli.errors import InputError, ReconError
-from recon_cli.geometry.transforms import invert, transform_points
+from recon_cli.geometry.transforms import invert, pose_error, transform_points
 from recon_cli.geometry.view import View
+from recon_cli.perception.camera_model import opencv_from_opengl
 from recon_cli.perception.charuco import cell_board
 from recon_cli.perception.sensor import SensorModel, cell_sensor
 from recon_cli.robot.cell import Cell
-from recon_cli.robot.cell_file import descendant_links
+from recon_cli.robot.cell_file import descendant_links, rigid_mount
 from recon_cli.robot.collision import DistanceReport
-from recon_cli.robot.ik import IKOptions
+from recon_cli.robot.ik import IKOptions, IKStatus
 from recon_cli.robot.shapes import CollisionShape
 
 #: polar angles of the checked viewing directions [deg] (0: looking straight down)
@@ -46,6 +54,19 @@ AZIMUTHS = 8
 IK = IKOptions(max_solutions=1, max_attempts=10)
 #: the cell fails the check when its object position is reachable from fewer directions
 MIN_OBJECT_SHARE = 0.5
+#: descents from which a direction without IK solution is told apart: out of reach or held by a limit
+DIAGNOSIS_DESCENTS = 3
+#: [px] width of the depth frame the check renders (it proves the scene renders, not the image)
+SIM_WIDTH = 160
+#: [m], [rad] the simulated camera lies at the kinematics' camera frame within these
+SIM_POSE_TOLERANCE = 1e-6
+
+#: why a viewing direction has no collision-free IK solution
+INSIDE = "camera inside an obstacle"
+COLLIDES = "in collision"
+NO_IK = "no IK solution"
+OUT_OF_REACH = "unreachable by IK"
+AT_LIMIT = "held by a joint limit"
 
 
 @dataclass(frozen=True)
@@ -77,6 +98,57 @@ class BoardSight:
 
 
 @dataclass(frozen=True)
+class Direction:
+    """One viewing direction of a focus point and what became of it: ``failure`` "" (reached) or
+    one of :data:`INSIDE`, :data:`COLLIDES`, :data:`NO_IK` (:data:`OUT_OF_REACH` and
+    :data:`AT_LIMIT` when told apart); ``detail``: the obstacle, the colliding pair, the joint
+    at its limit or how far the nearest IK attempt ends from the goal."""
+
+    theta: float  # [rad]
+    phi: float  # [rad]
+    failure: str = ""
+    detail: str = ""
+
+    @property
+    def reached(self) -> bool:
+        return not self.failure
+
+    @property
+    def where(self) -> str:
+        return f"theta {math.degrees(self.theta):.0f} deg, phi {math.degrees(self.phi):.0f} deg"
+
+
+def failure_summary(directions: list[Direction] | tuple[Direction, ...]) -> str:
+    """"8 out of reach, 2 in collision (e.g. a with b)": the failed directions by reason, most
+    frequent first, each with its first detail."""
+    groups: dict[str, list[Direction]] = {}
+    for d in directions:
+        if not d.reached:
+            groups.setdefault(d.failure, []).append(d)
+    parts = []
+    for failure, group in sorted(groups.items(), key=lambda kv: -len(kv[1])):
+        detail = next((d.detail for d in group if d.detail), "")
+        parts.append(f"{len(group)} {failure}" + (f" (e.g. {detail})" if detail else ""))
+    return ", ".join(parts) if parts else "none failed"
+
+
+@dataclass(frozen=True)
+class SimulationCheck:
+    """The cell's MuJoCo scene at home: its camera against the kinematics' camera frame, and a
+    small depth frame."""
+
+    camera_offset: float  # [m]
+    camera_turn: float  # [rad]
+    width: int  # [px] of the rendered depth frame
+    height: int
+    depth_share: float  # of its pixels with a depth inside the sensor's working range
+
+    @property
+    def camera_agrees(self) -> bool:
+        return self.camera_offset <= SIM_POSE_TOLERANCE and self.camera_turn <= SIM_POSE_TOLERANCE
+
+
+@dataclass(frozen=True)
 class Reachability:
     """Reachable viewing directions on a grid over the table top.
 
@@ -97,6 +169,14 @@ class Reachability:
     object_xy: tuple[float, float]
     object_count: int
     ik_ms_median: float
+    #: the grid's failed directions by reason (over all points)
+    failures: tuple[tuple[str, int], ...] = ()
+    #: the grid's reached directions per polar angle [deg] (share over all points)
+    by_theta: tuple[tuple[float, float], ...] = ()
+    #: the object position's directions, each with its reason
+    object_directions: tuple[Direction, ...] = ()
+    #: the grid's failed directions, first of each reason (for the examples)
+    grid_examples: tuple[Direction, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -107,12 +187,15 @@ class CellCheck:
     sensor: SensorModel
     home: np.ndarray
     home_margin: float  # [rad or m] smallest distance to a soft limit (negative: outside)
+    home_margin_joint: str  # the joint of home_margin
+    home_outside: tuple[str, ...]  # one text per joint of home outside its soft limits
     home_collisions: tuple[tuple[str, str], ...]
     home_distance: DistanceReport
     board_home: BoardSight
     board_above: BoardSight | None  # None: no collision-free view above the board
     reach: Reachability
     problems: tuple[str, ...]
+    simulation: SimulationCheck | None = None
 
 
 #: [m] how far the board's top face may lie from the table top's surface
@@ -163,8 +246,13 @@ def check_layout(cell: Cell) -> None:
 
 
 def camera_links(cell: Cell) -> tuple[str, ...]:
-    """The links fixed under the flange: the camera's own parts (bracket, housing, optical frame)."""
-    return descendant_links(cell.urdf, cell.config.cell_file.flange_link, fixed_only=True)
+    """The camera's own parts (bracket, housing, optical frame): the links fixed under the link
+    where the camera frame and the flange meet on their rigid body (the flange itself when the
+    camera hangs below it)."""
+    cf = cell.config.cell_file
+    mount = rigid_mount(cell.urdf, cf.flange_link, cf.camera_frame)
+    return descendant_links(cell.urdf, mount if mount and not mount.startswith("joint ") else cf.flange_link,
+                            fixed_only=True)
 
 
 def joint_rows(cell: Cell) -> tuple[JointRow, ...]:
@@ -208,21 +296,94 @@ def directions(rng_phi0: float = 0.0) -> list[tuple[float, float]]:
     return [(math.radians(t), rng_phi0 + 2.0 * math.pi * k / AZIMUTHS) for t in THETAS for k in range(AZIMUTHS)]
 
 
-def reachable_directions(cell: Cell, focus: np.ndarray, distance: float, rng: np.random.Generator,
-                         times: list[float] | None = None) -> int:
-    """Viewing directions of a focus point with a collision-free IK solution."""
-    count = 0
+def _pair(pair: tuple[str, str]) -> str:
+    return " with ".join(label.split("/")[-1] for label in pair)
+
+
+def _unit(cell: Cell, i: int, value: float) -> str:
+    """A joint value in the unit the cell file writes it in (deg, m for linear axes)."""
+    return f"{value:.4g} m" if cell.limits.prismatic[i] else f"{math.degrees(value):.4g} deg"
+
+
+def _no_solution(cell: Cell, T: np.ndarray, rng: np.random.Generator) -> tuple[str, str]:
+    """Why a camera pose has no IK solution: a few descents, the one ending nearest the goal
+    tells (a joint held at its soft limit, or out of reach and how far)."""
+    lim = cell.limits
+    best = None
+    for attempt in range(DIAGNOSIS_DESCENTS):
+        q, _, ep, er = cell.ik.descend(T, cell.ik.start(attempt, T, rng, None), IK)
+        if best is None or ep + 0.1 * er < best[1] + 0.1 * best[2]:
+            best = (q, ep, er)
+    assert best is not None
+    q, ep, er = best
+    at_lo = np.isclose(q, lim.soft_lower, rtol=0.0, atol=1e-9)
+    at_hi = np.isclose(q, lim.soft_upper, rtol=0.0, atol=1e-9)
+    held = [f"{lim.names[i]} at its soft {'lower' if at_lo[i] else 'upper'} limit "
+            f"{_unit(cell, int(i), float(q[i]))}" for i in np.nonzero(at_lo | at_hi)[0]]
+    if held:
+        return AT_LIMIT, ", ".join(held)
+    return OUT_OF_REACH, (f"the nearest attempt ends {ep * 1e3:.0f} mm, {math.degrees(er):.0f} deg off, no joint "
+                          "at a limit")
+
+
+def direction_results(cell: Cell, focus: np.ndarray, distance: float, rng: np.random.Generator,
+                      times: list[float] | None = None, diagnose: bool = False) -> list[Direction]:
+    """Each viewing direction of a focus point: reached (a collision-free IK solution) or why
+    not; ``diagnose``: a direction without IK solution is told out of reach or held by a limit
+    (a few descents more)."""
+    out = []
     for theta, phi in directions():
         try:
             T = cell.view_pose(View((float(focus[0]), float(focus[1]), float(focus[2])), distance, theta, phi))
+        except ReconError:
+            out.append(Direction(theta, phi, INSIDE, "no camera pose"))
+            continue
+        try:
             cell.check_camera_position(T)
         except ReconError:
+            inside = cell.collision.point_inside_environment(T[:3, 3])
+            out.append(Direction(theta, phi, INSIDE, inside.split("/")[-1] if inside else
+                                 f"below the table top {cell.config.cell_file.table_shape}"))
             continue
         result = cell.ik.solve(T, rng, options=IK)
         if times is not None:
             times.append(result.seconds)
-        count += result.ok
-    return count
+        if result.ok:
+            out.append(Direction(theta, phi))
+        elif result.status is IKStatus.COLLIDING:
+            out.append(Direction(theta, phi, COLLIDES, _pair(result.colliding_pairs[0])
+                                 if result.colliding_pairs else ""))
+        elif diagnose:
+            out.append(Direction(theta, phi, *_no_solution(cell, T, rng)))
+        else:
+            out.append(Direction(theta, phi, NO_IK))
+    return out
+
+
+def reachable_directions(cell: Cell, focus: np.ndarray, distance: float, rng: np.random.Generator,
+                         times: list[float] | None = None) -> int:
+    """Viewing directions of a focus point with a collision-free IK solution."""
+    return sum(d.reached for d in direction_results(cell, focus, distance, rng, times))
+
+
+def check_simulation(cell: Cell, q: np.ndarray) -> SimulationCheck:
+    """Build the cell's MuJoCo scene (one error line when MuJoCo cannot load the description)
+    and render a :data:`SIM_WIDTH` px wide depth frame at ``q``."""
+    scene = build_scene(cell.config)
+    data = mujoco.MjData(scene.model)
+    data.qpos[scene.qpos_index] = q
+    mujoco.mj_forward(scene.model, data)
+    offset, turn = pose_error(opencv_from_opengl(world_T_camera_gl(data, scene.camera_id)),
+                              cell.kin.world_T_camera(q))
+    sensor = scene.sensor
+    K = sensor.intrinsics(SIM_WIDTH / sensor.width)
+    renderer = mujoco.Renderer(scene.model, K.height, K.width)
+    try:
+        _, depth = render_rgbd(renderer, data, scene.camera_id)
+    finally:
+        renderer.close()
+    share = float(np.mean((depth >= sensor.z_min) & (depth <= sensor.z_max)))
+    return SimulationCheck(offset, turn, K.width, K.height, share)
 
 
 def check_cell(cell: Cell, rng: np.random.Generator, step: float = 0.1, focus_height: float = 0.08,
@@ -232,7 +393,16 @@ def check_cell(cell: Cell, rng: np.random.Generator, step: float = 0.1, focus_he
     check_layout(cell)
     sensor = cell_sensor(cf)
     home = cf.pose("home", cell.joint_names) if "home" in dict(cf.poses) else cell.kin.neutral()
-    margin = float(np.min(cell.limits.margin_to_soft(home)))
+    simulation = check_simulation(cell, home)
+    lim = cell.limits
+    margins = lim.margin_to_soft(home)
+    tightest = int(np.argmin(margins))
+    margin = float(margins[tightest])
+    outside = tuple(
+        f"{n} at {_unit(cell, i, float(home[i]))} is {_unit(cell, i, float(-margins[i]))} "
+        f"{'below its soft lower' if home[i] < lim.soft_lower[i] else 'above its soft upper'} limit "
+        f"{_unit(cell, i, float(lim.soft_lower[i] if home[i] < lim.soft_lower[i] else lim.soft_upper[i]))}"
+        for i, n in enumerate(lim.names) if margins[i] < 0)
     collisions = cell.collision.check(home).pairs
     distance = cell.collision.distance(home)
     points = board_corners(cell)
@@ -257,23 +427,37 @@ def check_cell(cell: Cell, rng: np.random.Generator, step: float = 0.1, focus_he
     counts = np.zeros((len(ys), len(xs)), dtype=int)
     total = len(xs) * len(ys) + 1
     times: list[float] = []
+    grid: list[Direction] = []
     for j, y in enumerate(ys):
         for i, x in enumerate(xs):
-            counts[j, i] = reachable_directions(cell, np.array([x, y, z + focus_height]), d, rng, times)
+            results = direction_results(cell, np.array([x, y, z + focus_height]), d, rng, times)
+            counts[j, i] = sum(r.reached for r in results)
+            grid += results
             if progress is not None:
                 progress(j * len(xs) + i + 1, total)
     obj = np.asarray(cf.object_position, dtype=float)
-    object_count = reachable_directions(cell, obj + np.array([0.0, 0.0, focus_height]), d, rng, times)
+    at_object = direction_results(cell, obj + np.array([0.0, 0.0, focus_height]), d, rng, times, diagnose=True)
+    object_count = sum(r.reached for r in at_object)
     if progress is not None:
         progress(total, total)
     base = cell.kin.frame_pose(home, cf.base_link)[:3, 3]
+    failures: dict[str, int] = {}
+    examples: dict[str, Direction] = {}
+    for r in grid:
+        if not r.reached:
+            failures[r.failure] = failures.get(r.failure, 0) + 1
+            examples.setdefault(r.failure, r)
+    by_theta = tuple((t, float(np.mean([r.reached for r in grid if math.isclose(math.degrees(r.theta), t)])))
+                     for t in THETAS)
     reach = Reachability(xs, ys, counts, len(directions()), d, focus_height, (x0, x1, y0, y1),
                          (float(base[0]), float(base[1])), points[:4, :2], (float(obj[0]), float(obj[1])),
-                         object_count, float(np.median(times) * 1e3) if times else math.nan)
+                         object_count, float(np.median(times) * 1e3) if times else math.nan,
+                         tuple(sorted(failures.items(), key=lambda kv: -kv[1])), by_theta, tuple(at_object),
+                         tuple(examples.values()))
 
     problems = []
-    if margin < 0:
-        problems.append(f"the home pose is outside the soft joint limits by {-margin:.3g} (rad or m)")
+    if outside:
+        problems.append(f"the home pose is outside the soft joint limits: {'; '.join(outside)}")
     if collisions:
         a, b = collisions[0]
         problems.append(f"the home pose collides ({len(collisions)} pairs, e.g. {a} with {b})")
@@ -282,9 +466,13 @@ def check_cell(cell: Cell, rng: np.random.Generator, step: float = 0.1, focus_he
                         f"{d:.3g} m")
     if object_count < MIN_OBJECT_SHARE * reach.directions:
         problems.append(f"the object position is reachable from {object_count} of {reach.directions} "
-                        f"directions at {d:.3g} m (fewer than {MIN_OBJECT_SHARE:.0%})")
-    return CellCheck(cf.name, str(cf.path), joint_rows(cell), sensor, home, margin, collisions, distance,
-                     sight_home, above, reach, tuple(problems))
+                        f"directions at {d:.3g} m (fewer than {MIN_OBJECT_SHARE:.0%}); not reached: "
+                        f"{failure_summary(at_object)}")
+    if not simulation.camera_agrees:
+        problems.append(f"the simulated camera lies {simulation.camera_offset * 1e3:.3g} mm and "
+                        f"{math.degrees(simulation.camera_turn):.3g} deg from the camera frame {cf.camera_frame}")
+    return CellCheck(cf.name, str(cf.path), joint_rows(cell), sensor, home, margin, lim.names[tightest], outside,
+                     collisions, distance, sight_home, above, reach, tuple(problems), simulation)
 
 
 def reachability_png(path, check: CellCheck) -> None:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 from rich.table import Table
 
-from recon_cli.cell_check import CellCheck
+from recon_cli.cell_check import CellCheck, Direction
 from recon_cli.geometry.transforms import invert
 from recon_cli.robot.cell import Cell
 from recon_cli.robot.ik import IKResult
@@ -77,6 +77,24 @@ def _short(pair: tuple[str, str]) -> str:
     return " ↔ ".join(label.split("/")[-1] for label in pair)
 
 
+#: what python-fcl's distance query returns for shapes that touch or overlap when it computes no
+#: depth for them (boxes, cylinders; capsules and spheres get their depth as a negative distance)
+FCL_NO_DEPTH = -1.0
+
+
+def distance_text(distance: float, pair: tuple[str, str], what: str) -> str:
+    """A smallest distance of a DistanceReport in words: in mm with its pair; "none checked"
+    when no pair of the kind is checked; the pair touching or overlapping where FCL gives no
+    depth."""
+    if not math.isfinite(distance):
+        return f"no {what} pairs checked"
+    if distance == FCL_NO_DEPTH:
+        return f"touching or overlapping ({_short(pair)}; no depth computed for these shapes)"
+    if distance < 0:
+        return f"overlapping by {-distance * 1e3:.1f} mm ({_short(pair)})"
+    return f"{distance * 1e3:.1f} mm ({_short(pair)})"
+
+
 def ik_table(cell: Cell, result: IKResult) -> Table:
     lim = cell.limits
     table = Table(title=f"{len(result.solutions)} IK solution(s) in {result.seconds * 1e3:.1f} ms "
@@ -93,8 +111,8 @@ def ik_table(cell: Cell, result: IKResult) -> Table:
         j = int(np.argmin(m / (lim.soft_upper - lim.soft_lower)))  # tightest relative to range
         margins.append(f"{joint_value(m[j], bool(lim.prismatic[j])).strip()} ({lim.names[j]})")
         d = cell.collision.distance(s.q)
-        clear.append(f"{d.environment * 1e3:.1f} mm ({_short(d.environment_pair)})")
-        selfd.append(f"{d.self_ * 1e3:.1f} mm ({_short(d.self_pair)})")
+        clear.append(distance_text(d.environment, d.environment_pair, "robot-environment"))
+        selfd.append(distance_text(d.self_, d.self_pair, "self-collision"))
     table.add_section()
     table.add_row("limit margin", *margins)
     table.add_row("clearance", *clear)
@@ -117,9 +135,12 @@ def cell_check_report(check: CellCheck) -> list:
     d = check.home_distance
     home = "collision-free" if not check.home_collisions else \
         f"IN COLLISION ({', '.join(_short(p) for p in check.home_collisions[:3])})"
-    out.append(f"home: {home}; limit margin {check.home_margin:.4g} (rad or m); clearance "
-               f"{d.environment * 1e3:.1f} mm ({_short(d.environment_pair)}), self distance "
-               f"{d.self_ * 1e3:.1f} mm ({_short(d.self_pair)})")
+    j = next(row for row in check.joints if row.name == check.home_margin_joint)
+    margin = f"{check.home_margin:.4g} m" if j.prismatic else f"{math.degrees(check.home_margin):.4g} deg"
+    out.append(f"home: {home}; limit margin {margin} ({j.name}"
+               + (", outside its soft limits" if check.home_margin < 0 else "") + "); clearance "
+               f"{distance_text(d.environment, d.environment_pair, 'robot-environment')}, self distance "
+               f"{distance_text(d.self_, d.self_pair, 'self-collision')}")
     s = check.sensor
     out.append(f"camera: {s.name}, {s.width} x {s.height} px, hfov {math.degrees(s.hfov):.1f} deg, range "
                f"{s.z_min:g} ... {s.z_max:g} m, scan distance {s.default_distance:g} m")
@@ -129,10 +150,38 @@ def cell_check_report(check: CellCheck) -> list:
             continue
         out.append(f"board from {sight.where}: {sight.points_in_view} of 5 points (corners, centre) in view"
                    f" at {sight.distance:.3f} m" + ("" if sight.seen else " (not all of it)"))
+    sim = check.simulation
+    if sim is not None:
+        camera = ("its camera at the cell's camera frame" if sim.camera_agrees else
+                  f"its camera {sim.camera_offset * 1e3:.3g} mm, {math.degrees(sim.camera_turn):.3g} deg off the "
+                  "cell's camera frame")
+        out.append(f"simulation: MuJoCo scene built, {camera}; depth frame from home ({sim.width} x {sim.height} "
+                   f"px): {sim.depth_share:.0%} of the pixels within the working range")
     r = check.reach
     share = r.counts / r.directions
     out.append(f"reachability: {r.counts.size} points on the table top, {r.directions} directions each at "
                f"{r.distance:g} m: {np.mean(share):.0%} of all views reachable; {np.count_nonzero(share >= 0.75)} "
                f"points seen from >= 75 % of the directions; object position {r.object_count} of {r.directions}; "
                f"IK median {r.ik_ms_median:.1f} ms")
+    if r.by_theta:
+        out.append("reached by polar angle: " + ", ".join(f"theta {t:g} deg {s:.0%}" for t, s in r.by_theta))
+    if r.failures:
+        examples = {e.failure: e for e in r.grid_examples}
+        out.append("not reached on the grid: " + ", ".join(
+            f"{n} {failure} (e.g. {examples[failure].where}"
+            + (f": {examples[failure].detail}" if examples[failure].detail else "") + ")"
+            for failure, n in r.failures))
+    missed: dict[str, list[Direction]] = {}
+    for direction in r.object_directions:
+        if not direction.reached:
+            missed.setdefault(direction.failure, []).append(direction)
+    if missed:
+        groups = []
+        for failure, group in sorted(missed.items(), key=lambda kv: -len(kv[1])):
+            where = ", ".join(f"{math.degrees(d.theta):.0f}/{math.degrees(d.phi):.0f}" for d in group)
+            example = next((d for d in group if d.detail), None)
+            groups.append(f"{len(group)} {failure}: {where}"
+                          + (f" (e.g. {example.where}: {example.detail})" if example else ""))
+        out.append(f"object position, not reached ({sum(map(len, missed.values()))} of {r.directions}; "
+                   f"theta/phi in deg): " + "; ".join(groups))
     return out

@@ -82,7 +82,7 @@ def check(
 ) -> None:
     """Check a cell file: joints and limits, the home pose (limits, collisions), the board in
     view, and where on the table an object can be scanned from how many directions (a picture).
-    Exits 1 when the cell is not fit to scan with."""
+    Exits 1 when the cell is not ready to scan."""
 
     c = make_cell(file, safety)
     folder = output_folder(out, "cell check", force=force).path
@@ -99,7 +99,7 @@ def check(
         for problem in result.problems:
             console.print(f"problem: {problem}")
         raise typer.Exit(1)
-    console.print(f"{result.name}: fit to scan with")
+    console.print(f"{result.name}: no problems found; the cell is ready to scan (recon autoscan --cell {file})")
 
 
 @app.command()

@@ -332,6 +332,15 @@ def _collision(doc: Any, lines: _Lines) -> tuple[tuple[AllowedPair, ...], tuple[
 
 
 # ----------------------------------------------------------------------------- against the URDF
+#: what a cell's description holds besides the arm
+WHOLE_CELL = "arm, camera, table, board"
+#: the cell file's keys that name a part of the cell outside a vendor's arm description
+_CELL_PARTS = ("camera.frame", "board.frame")
+WRAPPER_HINT = ("a vendor's arm URDF or xacro holds the arm alone: write a wrapper xacro that includes it and adds "
+                "the world, the table, the camera on the flange and the board (docs/cells.md, \"A wrapper around "
+                "a vendor's arm\")")
+
+
 def check_against_urdf(cell: CellFile, urdf: str) -> None:
     """Refuse a cell file whose names do not fit its expanded description (one line, file:line)."""
     _check(cell, urdf)
@@ -373,9 +382,17 @@ def _check(cell: CellFile, urdf: str) -> None:
     for key, name in (("base", cell.base_link), ("flange", cell.flange_link), ("camera.frame", cell.camera_frame),
                       ("board.frame", cell.board_frame)):
         if name not in links:
-            raise InputError(f"{cell.where(key)}: {key} {name} is not a link of {desc}",
-                             hint=f"its links: {', '.join(links)}")
-    if cell.flange_link not in _ancestors(root, cell.camera_frame):
+            whole = (f"; the description must hold the whole cell ({WHOLE_CELL})"
+                     if key in _CELL_PARTS and arm_alone(urdf, cell.base_link) else "")
+            raise InputError(f"{cell.where(key)}: {key} {name} is not a link of {desc}{whole}",
+                             hint=(f"{WRAPPER_HINT}; " if whole else "") + f"its links: {', '.join(links)}")
+    mount = rigid_mount(urdf, cell.flange_link, cell.camera_frame)
+    if isinstance(mount, str) and mount.startswith("joint "):
+        raise InputError(f"{cell.where('camera.frame')}: the camera frame {cell.camera_frame} is not fixed to "
+                         f"the flange {cell.flange_link}: {mount} moves between them",
+                         hint="name the link the camera is mounted on as the flange (the camera frame must ride "
+                              "rigidly on it: fixed joints only between them)")
+    if mount is None:
         raise InputError(f"{cell.where('camera.frame')}: the camera frame {cell.camera_frame} does not hang on "
                          f"the flange {cell.flange_link}", hint="name the flange link the camera is mounted on")
     for i, pair in enumerate(cell.allowed_links):
@@ -385,8 +402,10 @@ def _check(cell: CellFile, urdf: str) -> None:
                                  hint=f"its links: {', '.join(links)}")
     shapes = {f"{link.get('name')}/{c.get('name')}" for link in root.iter("link") for c in link.findall("collision")}
     if not any(s.endswith(f"/{cell.table_shape}") for s in shapes):
-        raise InputError(f"{cell.where('table.shape')}: {desc} has no collision shape {cell.table_shape}",
-                         hint="name the <collision name=...> of the table top")
+        alone = arm_alone(urdf, cell.base_link)
+        raise InputError(f"{cell.where('table.shape')}: {desc} has no collision shape {cell.table_shape}"
+                         + (f"; the description must hold the whole cell ({WHOLE_CELL})" if alone else ""),
+                         hint="name the <collision name=...> of the table top" + (f"; {WRAPPER_HINT}" if alone else ""))
     for i, shape_pair in enumerate(cell.allowed_shapes):
         for label in shape_pair:
             if label not in shapes:
@@ -397,14 +416,6 @@ def _check(cell: CellFile, urdf: str) -> None:
 def _parents(root: Any) -> dict[str, tuple[str, Any]]:
     """child link → (parent link, joint element)."""
     return {j.find("child").get("link"): (j.find("parent").get("link"), j) for j in root.iter("joint")}
-
-
-def _ancestors(root: Any, link: str) -> list[str]:
-    up, out = _parents(root), []
-    while link in up:
-        link = up[link][0]
-        out.append(link)
-    return out
 
 
 def descendant_links(urdf: str, link: str, fixed_only: bool = False) -> tuple[str, ...]:
@@ -443,27 +454,86 @@ def _tree_order(root: Any, movable: list[str]) -> list[str]:
     return out
 
 
-def parent_T_child(urdf: str, parent: str, child: str) -> npt.NDArray[np.float64]:
-    """The fixed transform from link ``parent`` to its descendant ``child`` through fixed joints."""
-    root = etree.fromstring(urdf.encode())
-    up = _parents(root)
-    chain = []
-    link = child
-    while link != parent:
-        if link not in up:
-            raise InputError(f"{child} does not hang on {parent}")
+def _rigid_path(up: dict[str, tuple[str, Any]], a: str, b: str) -> tuple[str | None, list[Any], list[Any]]:
+    """(lowest common ancestor of links ``a`` and ``b``, the joints from it down to ``a``, those
+    down to ``b``, each list nearest the ancestor last); (None, [], []) for links in two trees."""
+    chain_a, link = [a], a
+    while link in up and len(chain_a) <= len(up):
+        link = up[link][0]
+        chain_a.append(link)
+    depth = {name: i for i, name in enumerate(chain_a)}
+    joints_b: list[Any] = []
+    link = b
+    while link not in depth:
+        if link not in up or len(joints_b) > len(up):
+            return None, [], []
         link, joint = up[link]
+        joints_b.append(joint)
+    joints_a, name = [], a
+    while name != link:
+        name, joint = up[name]
+        joints_a.append(joint)
+    return link, joints_a, joints_b
+
+
+def arm_alone(urdf: str, base: str) -> bool:
+    """Does the description hold an arm alone (as a vendor ships it): every link the base link,
+    above it or below it, nothing beside it (no table top or board on a branch of their own)?"""
+    up = _parents(etree.fromstring(urdf.encode()))
+    line, link = {base, *descendant_links(urdf, base)}, base
+    while link in up and len(line) <= len(up) + 1:
+        link = up[link][0]
+        line.add(link)
+    return all(str(link.get("name")) in line for link in etree.fromstring(urdf.encode()).iter("link"))
+
+
+def rigid_mount(urdf: str, a: str, b: str) -> str | None:
+    """Where links ``a`` and ``b`` meet when they are parts of one rigid body: their lowest
+    common ancestor (``a`` itself when ``b`` hangs below it, ``b`` when ``a`` does) if only
+    fixed joints lie between them; ``"joint NAME"`` naming the first movable joint between them
+    otherwise; None for links in two separate trees."""
+    lca, joints_a, joints_b = _rigid_path(_parents(etree.fromstring(urdf.encode())), a, b)
+    if lca is None:
+        return None
+    moving = [j for j in (*reversed(joints_a), *reversed(joints_b)) if j.get("type") != "fixed"]
+    return f"joint {moving[0].get('name')}" if moving else lca
+
+
+def rigid_ancestors(urdf: str, link: str) -> tuple[str, ...]:
+    """The links above ``link`` reached through fixed joints only, nearest first: the links of
+    its rigid body it hangs on."""
+    up = _parents(etree.fromstring(urdf.encode()))
+    out: list[str] = []
+    while link in up and up[link][1].get("type") == "fixed" and len(out) < len(up):
+        link = up[link][0]
+        out.append(link)
+    return tuple(out)
+
+
+def _origin(joint: Any) -> npt.NDArray[np.float64]:
+    origin = joint.find("origin")
+    xyz = [float(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()]
+    rpy = [float(v) for v in (origin.get("rpy", "0 0 0") if origin is not None else "0 0 0").split()]
+    return pose_from_xyz_rpy(xyz, rpy)
+
+
+def parent_T_child(urdf: str, parent: str, child: str) -> npt.NDArray[np.float64]:
+    """The fixed transform between two links of one rigid body (fixed joints only between them,
+    in either direction or through a common ancestor): ``child``'s frame in ``parent``'s."""
+    lca, to_parent, to_child = _rigid_path(_parents(etree.fromstring(urdf.encode())), parent, child)
+    if lca is None:
+        raise InputError(f"{child} does not hang on {parent}")
+    for joint in (*to_parent, *to_child):
         if joint.get("type") != "fixed":
             raise InputError(f"{child} moves relative to {parent} (joint {joint.get('name')})",
                              hint="mount the camera rigidly on the flange")
-        chain.append(joint)
-    T = np.eye(4)
-    for joint in reversed(chain):
-        origin = joint.find("origin")
-        xyz = [float(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()]
-        rpy = [float(v) for v in (origin.get("rpy", "0 0 0") if origin is not None else "0 0 0").split()]
-        T = T @ pose_from_xyz_rpy(xyz, rpy)
-    return T
+    lca_T = {}
+    for name, joints in (("parent", to_parent), ("child", to_child)):
+        T = np.eye(4)
+        for joint in reversed(joints):
+            T = T @ _origin(joint)
+        lca_T[name] = T
+    return np.linalg.inv(lca_T["parent"]) @ lca_T["child"]
 
 
 def camera_parent(urdf: str, frame: str) -> str:

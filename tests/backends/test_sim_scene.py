@@ -161,3 +161,28 @@ def test_depth_of_a_box_is_metric():
     assert np.sum(hit != (depth > 0)) < 0.01 * hit.sum()
     err = np.abs(depth[both] - expected[both])
     assert err.mean() < 1e-4
+
+
+def test_a_frame_without_a_body_is_placed_on_the_body_that_carries_it():
+    """Where the scene holds no body of the camera frame's name (a link fused into its parent),
+    the camera goes on the nearest body above it through fixed joints, at the frame's pose."""
+    from recon_cli.backends.sim.scene import _place, frame_on_body, mujoco_urdf
+    from recon_cli.robot.cell import Cell
+    from recon_cli.robot.description import CellConfig
+
+    fr3 = Cell(CellConfig(kind="fr3"))
+    urdf = mujoco_urdf(fr3.config)
+    spec = mujoco.MjSpec.from_string(urdf)
+    spec.delete(spec.body("camera"))
+    body, body_T_camera = frame_on_body(spec, urdf, "camera", "camera.frame")
+    assert body.name == "camera_bracket" and not np.allclose(body_T_camera, np.eye(4))
+    cam = body.add_camera()
+    _place(cam, body_T_camera @ GL_T_CV)
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    q = fr3.config.cell_file.pose("home", fr3.joint_names)
+    data.qpos[[model.jnt_qposadr[model.joint(n).id] for n in fr3.joint_names]] = q
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_camlight(model, data)
+    dp, dr = pose_error(opencv_from_opengl(world_T_camera_gl(data, 0)), fr3.kin.world_T_camera(q))
+    assert dp < 1e-9 and dr < 1e-9

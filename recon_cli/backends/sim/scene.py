@@ -2,10 +2,12 @@
 
 The URDF's visual geometry (real sizes, safety distance 0) becomes the scene; its collision
 geometry is dropped (planning checks collisions with the coal/pinocchio collision model;
-the robot only moves along checked trajectories). Added through the MjSpec API: the flange camera (MuJoCo cameras
-look along -z, so the OpenCV optical frame is turned by pi about x), the ChArUco board as
-a texture on the board plate, the object to scan as a mesh, lights, joint motors, and the
-drive data of the cell's drives file (reflected rotor inertia, plant-only viscous friction).
+the robot only moves along checked trajectories). Added through the MjSpec API: the camera
+on the cell file's ``camera.frame`` (MuJoCo cameras look along -z, so the OpenCV optical
+frame is turned by pi about x), the ChArUco board as a texture on its ``board.frame`` (each
+on the body of its link, or at its pose on the body that carries it), the object to scan as
+a mesh, lights, joint motors, and the drive data of the cell's drives file (reflected rotor
+inertia, plant-only viscous friction). A description MuJoCo cannot load is one error line.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -21,14 +24,16 @@ import numpy as np
 from lxml import etree
 
 from recon_cli.errors import InputError
+from recon_cli.geometry.transforms import pose_from_xyz_rpy
 from recon_cli.inputs.schema import check
 from recon_cli.inputs.yamlfile import read_yaml
 from recon_cli.lazy import lazy_module
 from recon_cli.objects import SceneObject
 from recon_cli.paths import ROBOT_DIR
+from recon_cli.perception.camera_model import GL_T_CV
 from recon_cli.perception.charuco import BoardSpec, cell_board
 from recon_cli.perception.sensor import SensorModel, cell_sensor
-from recon_cli.robot.cell_file import CellFile
+from recon_cli.robot.cell_file import CellFile, parent_T_child, rigid_ancestors
 from recon_cli.robot.description import CellConfig, expand_urdf
 from recon_cli.robot.limits import limits_from_urdf
 
@@ -122,13 +127,52 @@ def _board_rgb(board: BoardSpec) -> np.ndarray:
     return np.ascontiguousarray(np.repeat(grey[:, :, None], 3, axis=2))
 
 
+def frame_on_body(spec: mujoco.MjSpec, urdf: str, link: str, where: str) -> tuple[mujoco.MjsBody, np.ndarray]:
+    """The MuJoCo body that carries a URDF link's frame, and the frame's pose on it: the link's
+    own body, or, where MuJoCo holds no body of that name (a link fused into its parent), the
+    nearest link above it through fixed joints that has one, with the frame's pose from the
+    URDF's fixed joints."""
+    for name in (link, *rigid_ancestors(urdf, link)):
+        body = spec.body(name)
+        if body is not None:
+            return body, parent_T_child(urdf, name, link)
+    raise InputError(f"{where}: the simulation has no body that carries the frame {link}",
+                     hint="hang the frame on a link through fixed joints (a link with a body in the scene)")
+
+
+#: characters of MuJoCo's reason quoted at most
+_REASON_CHARS = 160
+
+
+def _refused(cell: CellFile, exc: ValueError) -> InputError:
+    """One line for a description MuJoCo refuses: its reason and the element it names."""
+    lines = [line.strip() for line in str(exc).strip().splitlines() if line.strip()]
+    reason = "; ".join(re.sub(r"^Element name '(.*)', id \d+$", r"at \1", line.removeprefix("Error: "))
+                       for line in lines)[:_REASON_CHARS]
+    return InputError(f"{cell.where('description.file')}: the simulation (MuJoCo) cannot load the cell's "
+                      f"description {cell.description.name} ({reason})",
+                      hint="fix the description where MuJoCo says (a link a joint moves needs a mass and an "
+                           "inertia above zero); recon cell check builds the simulation too")
+
+
+def _place(element: mujoco.MjsCamera | mujoco.MjsGeom, body_T_element: np.ndarray) -> None:
+    """Set a MuJoCo element's position and orientation on its body."""
+    element.pos = body_T_element[:3, 3].tolist()
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(body_T_element[:3, :3]).ravel())
+    element.quat = quat.tolist()
+
+
 def build_scene(config: CellConfig, scene_object: SceneObject | None = None,
                 sensor: SensorModel | None = None, board: BoardSpec | None = None,
                 timestep: float = 0.001) -> SimScene:
     sensor = sensor or cell_sensor(config.cell_file)
     board = board or cell_board(config.cell_file)
     urdf = mujoco_urdf(config)
-    spec = mujoco.MjSpec.from_string(urdf)
+    try:
+        spec = mujoco.MjSpec.from_string(urdf)
+    except ValueError as exc:
+        raise _refused(config.cell_file, exc) from None
     spec.option.timestep = timestep
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.visual.global_.offwidth = max(sensor.width, 640)
@@ -143,11 +187,12 @@ def build_scene(config: CellConfig, scene_object: SceneObject | None = None,
         if geom.contype != 0 or geom.conaffinity != 0:
             spec.delete(geom)
 
-    # depth camera on the optical frame "camera": OpenGL axes = OpenCV axes turned by pi about x
-    cam_body = spec.body("camera")
+    # depth camera on the cell's optical frame: OpenGL axes = OpenCV axes turned by pi about x
+    cf = config.cell_file
+    cam_body, body_T_camera = frame_on_body(spec, urdf, cf.camera_frame, cf.where("camera.frame"))
     cam = cam_body.add_camera()
     cam.name = CAMERA_NAME
-    cam.quat = [0.0, 1.0, 0.0, 0.0]
+    _place(cam, body_T_camera @ GL_T_CV)
     cam.fovy = float(np.degrees(sensor.fovy))
 
     # the printed board on the carrier plate (top face of the plate is z = 0 of "marker")
@@ -165,11 +210,12 @@ def build_scene(config: CellConfig, scene_object: SceneObject | None = None,
     mat.specular = 0.0
     mat.shininess = 0.0
     sx, sy = board.size
-    g = spec.body("marker").add_geom()
+    board_body, body_T_marker = frame_on_body(spec, urdf, cf.board_frame, cf.where("board.frame"))
+    g = board_body.add_geom()
     g.name = BOARD_PRINT_NAME
     g.type = mujoco.mjtGeom.mjGEOM_PLANE
     g.size = [sx / 2.0, sy / 2.0, 0.01]
-    g.pos = [sx / 2.0, sy / 2.0, 1e-5]
+    _place(g, body_T_marker @ pose_from_xyz_rpy([sx / 2.0, sy / 2.0, 1e-5], [0.0, 0.0, 0.0]))
     g.material = "charuco"
     g.contype = g.conaffinity = 0
 
@@ -214,9 +260,9 @@ def build_scene(config: CellConfig, scene_object: SceneObject | None = None,
 
     try:
         model = spec.compile()
-    except ValueError as exc:  # the object's mesh is the only input MuJoCo checks here
+    except ValueError as exc:  # the cell's description or the object's mesh
         if scene_object is None or OBJECT_NAME not in str(exc):
-            raise
+            raise _refused(config.cell_file, exc) from None
         reason = str(exc).strip().splitlines()[0].removeprefix("Error: ").strip()
         raise InputError(f"the object '{scene_object.name}' cannot be simulated: MuJoCo refuses its mesh ({reason})",
                          hint="give a closed surface of the object (a solid)") from None

@@ -20,7 +20,7 @@ from recon_cli.interrupts import stop_signals
 from recon_cli.recording import require_rerun
 
 BATCH_EPILOG = ("Exit codes: 0 every job passed; 1 error in the batch file or options (nothing ran); 2 usage error; "
-                "3 some jobs failed, timed out or could not run; 130/143 interrupted by Ctrl-C/SIGTERM "
+                "3 some jobs failed, timed out or could not run; 130/143/129 interrupted by Ctrl-C/SIGTERM/SIGHUP "
                 "(finished jobs kept: --resume goes on). Batch file format: docs/batch.md.")
 
 
@@ -88,7 +88,7 @@ def batch(
                              f" {r.name} in {r.wall_s:.1f} s" + (f": {r.reason}" if r.reason else "")))
 
     options = BatchOptions(out, workers, scheduler, cluster, resume, junit, json_out, markdown, force)
-    with stop_signals(), progress_bar() as update:
+    with stop_signals(hangup=True), progress_bar() as update:
         result = run_batch(spec, options, update, on_result)
     _print_table(result)
     c = result.counts

@@ -55,7 +55,7 @@ def ensure_venv() -> Path:
 
 def srdf_for(urdf: str, cell: Cell) -> str:
     root = etree.fromstring(urdf.encode())
-    links = [link.attrib["name"] for link in root.iter("link")]
+    links = [link.attrib["name"] for link in root.iterfind("link")]
     body = {name: cell.kin.model.frames[cell.kin.model.getFrameId(name)].parentJoint for name in links}
     allowed = allowed_link_pairs(urdf, cell.kin)
     robot = etree.Element("robot", name="recon_cell")

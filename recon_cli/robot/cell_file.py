@@ -269,6 +269,8 @@ def _parse(path: Path) -> CellFile:
             raise InputError(f"{where}: IK seed {name} is not a pose of the cell",
                              hint=f"name one of poses: {', '.join(dict(poses))}")
     lines.at(doc, "safety_distance", "safety_distance")
+    if "library" in (doc.get("ik") or {}):
+        lines.at(doc["ik"], "library", "ik.library")
     return CellFile(
         path=path, name=str(doc["name"]), description=description, arguments=arguments, settings=settings,
         planning_joints=planning, linear_joints=linear, base_link=str(doc["base"]), flange_link=str(doc["flange"]),
@@ -350,8 +352,8 @@ def check_against_urdf(cell: CellFile, urdf: str) -> None:
 def _check(cell: CellFile, urdf: str) -> None:
     root = etree.fromstring(urdf.encode())
     desc = cell.description.name
-    links = [str(link.get("name")) for link in root.iter("link")]
-    joints = {str(j.get("name")): j for j in root.iter("joint")}
+    links = [str(link.get("name")) for link in root.iterfind("link")]
+    joints = {str(j.get("name")): j for j in root.iterfind("joint")}
     movable = [n for n, j in joints.items() if j.get("type") not in ("fixed", "floating", "planar")]
 
     for i, name in enumerate(cell.planning_joints):
@@ -400,7 +402,7 @@ def _check(cell: CellFile, urdf: str) -> None:
             if link not in links:
                 raise InputError(f"{cell.where(f'collision.allowed[{i}]')}: {link} is not a link of {desc}",
                                  hint=f"its links: {', '.join(links)}")
-    shapes = {f"{link.get('name')}/{c.get('name')}" for link in root.iter("link") for c in link.findall("collision")}
+    shapes = {f"{link.get('name')}/{c.get('name')}" for link in root.iterfind("link") for c in link.findall("collision")}
     if not any(s.endswith(f"/{cell.table_shape}") for s in shapes):
         alone = arm_alone(urdf, cell.base_link)
         raise InputError(f"{cell.where('table.shape')}: {desc} has no collision shape {cell.table_shape}"
@@ -415,14 +417,14 @@ def _check(cell: CellFile, urdf: str) -> None:
 
 def _parents(root: Any) -> dict[str, tuple[str, Any]]:
     """child link → (parent link, joint element)."""
-    return {j.find("child").get("link"): (j.find("parent").get("link"), j) for j in root.iter("joint")}
+    return {j.find("child").get("link"): (j.find("parent").get("link"), j) for j in root.iterfind("joint")}
 
 
 def descendant_links(urdf: str, link: str, fixed_only: bool = False) -> tuple[str, ...]:
     """The links below ``link`` in the description's tree (``link`` excluded); ``fixed_only``:
     only those reached through fixed joints (what rides rigidly on it)."""
     children: dict[str, list[str]] = {}
-    for j in etree.fromstring(urdf.encode()).iter("joint"):
+    for j in etree.fromstring(urdf.encode()).iterfind("joint"):
         if not fixed_only or j.get("type") == "fixed":
             children.setdefault(attribute(child(j, "parent"), "link"), []).append(attribute(child(j, "child"), "link"))
     out: list[str] = []
@@ -437,10 +439,10 @@ def descendant_links(urdf: str, link: str, fixed_only: bool = False) -> tuple[st
 def _tree_order(root: Any, movable: list[str]) -> list[str]:
     """The movable joints depth first from the root link, in document order (pinocchio's order)."""
     children: dict[str, list[Any]] = {}
-    for j in root.iter("joint"):
+    for j in root.iterfind("joint"):
         children.setdefault(j.find("parent").get("link"), []).append(j)
-    child_links = {j.find("child").get("link") for j in root.iter("joint")}
-    roots = [link.get("name") for link in root.iter("link") if link.get("name") not in child_links]
+    child_links = {j.find("child").get("link") for j in root.iterfind("joint")}
+    roots = [link.get("name") for link in root.iterfind("link") if link.get("name") not in child_links]
     out: list[str] = []
 
     def walk(link: str) -> None:
@@ -484,7 +486,7 @@ def arm_alone(urdf: str, base: str) -> bool:
     while link in up and len(line) <= len(up) + 1:
         link = up[link][0]
         line.add(link)
-    return all(str(link.get("name")) in line for link in etree.fromstring(urdf.encode()).iter("link"))
+    return all(str(link.get("name")) in line for link in etree.fromstring(urdf.encode()).iterfind("link"))
 
 
 def rigid_mount(urdf: str, a: str, b: str) -> str | None:

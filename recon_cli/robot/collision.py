@@ -131,7 +131,7 @@ def shapes_from_urdf(urdf: str, kin: Kinematics) -> list[CollisionShape]:
     """Collision shapes of every link, placed in the frames of their pinocchio joints."""
     root = etree.fromstring(urdf.encode())
     shapes = []
-    for link in root.iter("link"):
+    for link in root.iterfind("link"):
         link_name = attribute(link, "name")
         fid = kin.model.getFrameId(link_name, pin.BODY)
         frame = kin.model.frames[fid]
@@ -170,14 +170,14 @@ def allowed_link_pairs(urdf: str, kin: Kinematics) -> set[frozenset[str]]:
     cell file of ``kin``)."""
     root = etree.fromstring(urdf.encode())
     allowed: set[frozenset[str]] = {frozenset(pair.links) for pair in kin.cell.allowed_links}
-    links = [attribute(link, "name") for link in root.iter("link")]
+    links = [attribute(link, "name") for link in root.iterfind("link")]
     body = {name: kin.model.frames[kin.model.getFrameId(name, pin.BODY)].parentJoint
             for name in links}
     allowed.update(frozenset((a,)) for a in links)  # shapes of one link
     for a, b in itertools.combinations(links, 2):
         if body[a] == body[b]:
             allowed.add(frozenset((a, b)))
-    for joint in root.iter("joint"):
+    for joint in root.iterfind("joint"):
         allowed.add(frozenset((attribute(child(joint, "parent"), "link"), attribute(child(joint, "child"), "link"))))
     return allowed
 

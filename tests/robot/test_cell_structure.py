@@ -290,7 +290,8 @@ def test_a_seed_library_too_large_for_the_joints_is_refused(tmp_path, capsys):
     urdf = toy_urdf(32, step=0.03)
     cell = toy_cell(tmp_path, urdf, n=32, library=100_000)
     assert main(["cell", "--cell", str(cell)]) == 1
-    one_line(capsys, f"{cell}: ik.library: 100,000 configurations of 32 joints are 3,200,000 joint values, "
+    line = next(i for i, t in enumerate(cell.read_text().splitlines(), 1) if t.strip().startswith("library:"))
+    one_line(capsys, f"{cell}:{line}: ik.library: 100,000 configurations of 32 joints are 3,200,000 joint values, "
                      f"more than the {MAX_LIBRARY_VALUES:,}", f"at most {MAX_LIBRARY_VALUES // 32:,} configurations")
 
 
@@ -361,3 +362,14 @@ def test_a_sensor_image_at_the_pixel_limit_is_read(tmp_path):
     text = (ROBOT_DIR / "sensors" / "realsense_d435.yaml").read_text()
     sensor.write_text(text.replace("\nwidth: 1280\n", "\nwidth: 3000\n").replace("\nheight: 720\n", "\nheight: 2000\n"))
     assert 3000 * 2000 == MAX_SENSOR_PIXELS and sensor_file(sensor).width == 3000
+
+
+def test_a_description_with_transmissions_and_gazebo_tags_builds(tmp_path):
+    """Vendor URDFs carry <transmission> (with a nested <joint name=...>) and <gazebo>
+    elements; only the robot's own <link> and <joint> children are the model."""
+    extra = ('<transmission name="t0"><type>transmission_interface/SimpleTransmission</type>'
+             '<joint name="j0"><hardwareInterface>PositionJointInterface</hardwareInterface></joint>'
+             '<actuator name="m0"><mechanicalReduction>1</mechanicalReduction></actuator></transmission>'
+             '<gazebo reference="l0"><link name="ignored"/></gazebo>')
+    cell = toy_cell(tmp_path, toy_urdf(extra=extra))
+    assert main(["cell", "--cell", str(cell)]) == 0

@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from recon_cli.errors import InputError
+from recon_cli.errors import FileError, InputError
+from recon_cli.inputs import files
 from recon_cli.inputs.schema import check
 from recon_cli.inputs.yamlfile import line_of, plain, read_yaml
 from recon_cli.outputs import atomic_write_text
@@ -261,10 +262,16 @@ def config_from_dict(data: dict, where: str = "config.yaml") -> Config:
 
 def read_config(path: Path) -> tuple[Config, dict]:
     """The configuration of a run folder's ``config.yaml`` (through the YAML reader and the
-    schema) and its ``run`` section (what else repeats the run: command, script, store, ...)."""
+    schema) and its ``run`` section (what else repeats the run: command, script, store, ...);
+    a file that is a link leading out of its folder is refused before it is read."""
 
     hint = "give the config.yaml of a run folder (recon writes one into each)"
-    data = read_yaml(Path(path), "configuration file", hint=hint)
+    path = Path(path)
+    link = files.link_out_of(path, path.parent)
+    if link is not None:  # refused before it is read, as every file read back from a run folder
+        raise FileError(files.outside_text(files.Refusal(files.OUTSIDE, path, 0, root=path.parent, link=link),
+                                           "configuration file"), hint=files.OUTSIDE_HINT)
+    data = read_yaml(path, "configuration file", hint=hint)
     if data is None:
         raise InputError(f"{path} is empty", hint=hint)
     config = config_from_dict(data, str(path))

@@ -14,7 +14,8 @@ nothing is half-written, nothing is written, replaced or deleted through a link.
   and refuses names that leave it, directly (``..``, absolute paths) or through links
   already in the folder;
 * :func:`refuse_links` checks a folder that is being added to for links, so that no later
-  write can follow one out of it;
+  write can follow one out of it; :func:`refuse_leaving` refuses an output folder inside a
+  run folder that a link leads out of (``recon evaluate RUN`` into ``RUN/reconstruction``);
 * :func:`remove_inside` removes an entry of an output folder without following a link;
 * :func:`keep_earlier` renames an earlier run's report (``NAME-1``, ``NAME-2``, ...)
   before an appending run writes its own;
@@ -37,6 +38,7 @@ from enum import StrEnum
 from pathlib import Path
 
 from recon_cli.errors import FileError, InputError, ReconError
+from recon_cli.inputs.files import link_out_of
 from recon_cli.inputs.jsonfile import load_json
 
 
@@ -64,6 +66,7 @@ WRITTEN: dict[str, tuple[str, ...]] = {
     "recon run": ("scans", "reconstruction", "run_report.json", "run_report-[0-9]*.json", "script.expanded.xml",
                   "script.expanded-[0-9]*.xml"),
     "recon autoscan": ("reconstruction", "autoscan_report.json", "iterations"),
+    "two sides (autoscan --sides 2, <turn_over/>)": ("side_1", "side_2", "sides_report.json"),
     "recon register": ("cloud.ply", "cloud_global.ply", "mesh.ply", "report.json"),
     "recon evaluate": ("*_evaluation.json", "*_distances.png"),
     "recon replay": ("store", "reconstruction", "consistency.json", "cloud.png"),
@@ -147,7 +150,7 @@ class OutputFolder:
 def claim_output(path: Path | None, mode: OutputMode = OutputMode.NEW, *, command: str,
                  append: str | None = None, force: str | None = "--force", nested_in: Path | None = None,
                  inputs: Iterable[Path | None] = (), names: tuple[str, ...] | None = None,
-                 make: bool = True, default: str | None = None) -> OutputFolder:
+                 within: Path | None = None, make: bool = True, default: str | None = None) -> OutputFolder:
     """Take the output folder of ``command`` (see the module docstring); call it before any
     planning, robot or registration work, so that a refusal costs nothing.
 
@@ -163,12 +166,18 @@ def claim_output(path: Path | None, mode: OutputMode = OutputMode.NEW, *, comman
         nor works in a folder that is one
     names: APPEND into an existing folder another command wrote: the names this command
         writes there (only they must not be links)
+    within: the run folder the output folder is recon's choice in (``recon evaluate RUN``
+        writes into ``RUN/reconstruction``): refused, before anything is written, when the
+        folder is or lies behind a link leading out of it (the link is named, not where it
+        leads)
     make: make the folder now (and remove what FORCE removes); False: everything is checked
         now, and :meth:`OutputFolder.make` does it when the command is about to write
     """
     if path is None:
         return OutputFolder(_new_default(default or command.replace(" ", "-")), OutputMode.NEW, command, made=True)
     path = Path(path)
+    if within is not None:
+        refuse_leaving(path, Path(within))
     pending: tuple[str, ...] = ()
     if nested_in is not None and path.is_symlink():
         if mode is not OutputMode.FORCE:
@@ -386,6 +395,19 @@ def inside(root: Path, name: str | Path, what: str = "output") -> Path:
         raise FileError(f"{what} {target} is a link; recon does not write through links",
                         hint="remove the link or choose an empty output folder")
     return target
+
+
+def refuse_leaving(path: Path, run: Path) -> None:
+    """Refuse (FileError) an output folder that is, or lies behind, a link leading out of the
+    run folder ``run`` it belongs to: nothing is written through it. The message names the
+    link inside the run, never where it leads."""
+    link = link_out_of(path, run)
+    if link is None:
+        return
+    where = (f"lies behind the link {link}, which leads out of" if link != path
+             else "is a link leading out of" if path.is_symlink() else "lies outside")
+    raise FileError(f"output folder {path} {where} the run folder {run}; recon does not write through links",
+                    hint="remove the link, or choose an output folder with --out")
 
 
 def refuse_links(root: Path) -> None:

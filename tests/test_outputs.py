@@ -360,6 +360,20 @@ def test_evaluate_writes_beside_the_reconstruction_but_not_through_a_link(tmp_pa
     assert snapshot(outside) == far
 
 
+def test_force_removes_the_sides_of_an_earlier_two_sided_run_links_as_links(tmp_path, outside):
+    """side_1, side_2 and sides_report.json are recon's: --force removes them (a link among
+    them as a link), so that a two-sided run never writes a side into a folder a link leads to."""
+    out = tmp_path / "two"
+    (out / "side_2").mkdir(parents=True)
+    (out / "side_1").symlink_to(outside / "victim_dir")
+    (out / "sides_report.json").write_text("{}")
+    (out / "notes.txt").write_text("mine\n")
+    far = snapshot(outside)
+    folder = claim_output(out, OutputMode.FORCE, command="autoscan")
+    assert set(folder.removed) == {"side_1", "side_2", "sides_report.json"} and os.listdir(out) == ["notes.txt"]
+    assert snapshot(outside) == far
+
+
 # ----------------------------------------------------------------------------- capture, end to end
 CAPTURE = ["capture", "--object", "bottle", "--resolution", "0.1", "--no-noise"]
 

@@ -109,7 +109,7 @@ def fingerprint(job: JobSpec) -> dict:
 def _done(job: JobSpec, folder: Path) -> JobResult | None:
     """The earlier result of ``job`` in ``folder`` if it is the same job, else None."""
     try:
-        data = load_json(folder / RESULT, "job result")
+        data = load_json(folder / RESULT, "job result", root=folder)
         result = JobResult.from_dict(data)
     except (ReconError, ValueError, KeyError, TypeError, AttributeError):
         return None

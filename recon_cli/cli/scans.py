@@ -289,12 +289,13 @@ def evaluate(
                                                                  "reconstruction).")] = None,
 ) -> None:
     """Signed distances to a reference mesh, their statistics and histogram, and coverage."""
-    merged = reconstruction / "reconstruction" / "cloud.ply" if reconstruction.is_dir() else reconstruction
+    run = reconstruction if reconstruction.is_dir() else None
+    merged = reconstruction / "reconstruction" / "cloud.ply" if run is not None else reconstruction
     target = out or merged.parent
-    if target.is_dir():  # beside another command's results: only its two files, never through a link
-        stem = merged.stem
+    if target.is_dir() or target.is_symlink():  # beside another command's results: only its two files, never
+        stem = merged.stem                       # through a link, nor out of a run folder through its links
         claim_output(target, OutputMode.APPEND, command="evaluate",
-                     names=(f"{stem}_evaluation.json", f"{stem}_distances.png"))
+                     names=(f"{stem}_evaluation.json", f"{stem}_distances.png"), within=None if out else run)
     result = run_evaluate(reconstruction, reference, tolerance, scan_store, align, samples, target)
     e = result.evaluation
     console.print(f"{e.points} points: signed distance mean {e.mean * 1e3:+.4f} mm, std {e.std * 1e3:.4f} mm, "

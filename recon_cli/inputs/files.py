@@ -6,7 +6,9 @@ device or a folder, which could block or never end), be non-empty where the call
 and be within the limit, all before it is opened. :func:`read_limited` then opens it
 without blocking, checks again on the open file that it is a regular file (a FIFO put in
 its place meanwhile is refused, not waited on) and reads at most the limit and one byte
-(the file may grow between the stat and the read).
+(the file may grow between the stat and the read). Given the folder the file belongs to
+(``root``), both first refuse a file that is, or lies behind, a link leading out of that
+folder (:func:`link_out_of`), before anything is opened.
 
 Each caller words its own refusals: it passes a function that turns a :class:`Refusal`
 into the exception to raise (a FileError, a MetadataError, ...).
@@ -34,6 +36,9 @@ TOO_LARGE = "too large"
 """More bytes (``size``) than the limit, at the stat."""
 GREW = "grew"
 """More bytes than the limit were read."""
+OUTSIDE = "outside"
+"""The file is, or lies behind, a link (``link``) leading out of the folder it belongs to
+(``root``)."""
 
 
 @dataclass(frozen=True)
@@ -47,6 +52,8 @@ class Refusal:
     mode: int = 0
     error: OSError | None = None
     opened: bool = False
+    root: Path | None = None
+    link: Path | None = None
 
 
 Refuse = Callable[[Refusal], Exception]
@@ -63,9 +70,46 @@ def version_stamp(path: Path) -> tuple[int, int]:
     return (st.st_mtime_ns, st.st_size)
 
 
-def checked_size(path: Path, limit: int, refuse: Refuse, *, empty: bool = True) -> int:
+def link_out_of(path: Path, root: Path) -> Path | None:
+    """The first link on the way from the folder ``root`` to ``path`` (``path`` itself
+    included) that leads out of ``root`` (its real path outside ``root``'s), or ``path`` when
+    it lies outside ``root`` without a link (``..``); None when everything stays inside (or a
+    loop of links stops the way: nothing can be opened through it). ``root`` itself may be
+    reached through a link: what is in it counts."""
+    root, path = Path(root), Path(path)
+    try:
+        real_root = root.resolve()
+    except (OSError, RuntimeError):
+        return path
+    try:
+        rel: Path | None = path.relative_to(root)
+    except ValueError:
+        rel = None
+    if rel is None:  # not written below root: only its real path can tell
+        try:
+            real = path.resolve()
+        except (OSError, RuntimeError):
+            return path
+        return None if real == real_root or real.is_relative_to(real_root) else path
+    probe = root
+    for part in rel.parts:
+        probe = probe / part
+        try:
+            if probe.is_symlink() or part == "..":
+                real = probe.resolve()
+                if not (real == real_root or real.is_relative_to(real_root)):
+                    return probe
+        except (OSError, RuntimeError):  # a loop of links: nothing is reached through it (the stat says so)
+            return None
+    return None
+
+
+def checked_size(path: Path, limit: int, refuse: Refuse, *, empty: bool = True, root: Path | None = None) -> int:
     """The size of ``path``, a regular file of at most ``limit`` bytes (and not empty
-    unless ``empty``), from its stat, or ``refuse``'s exception."""
+    unless ``empty``), from its stat, or ``refuse``'s exception; with ``root``, first
+    refused when it is or lies behind a link leading out of that folder."""
+    if root is not None and (link := link_out_of(path, root)) is not None:
+        raise refuse(Refusal(OUTSIDE, path, limit, root=Path(root), link=link))
     try:
         st = os.stat(path)
     except FileNotFoundError:
@@ -81,11 +125,11 @@ def checked_size(path: Path, limit: int, refuse: Refuse, *, empty: bool = True) 
     return st.st_size
 
 
-def read_limited(path: Path, limit: int, refuse: Refuse, *, empty: bool = True) -> bytes:
+def read_limited(path: Path, limit: int, refuse: Refuse, *, empty: bool = True, root: Path | None = None) -> bytes:
     """The bytes of ``path``, a regular file of at most ``limit`` bytes (and not empty
-    unless ``empty``), checked before it is opened and opened without blocking, or
-    ``refuse``'s exception."""
-    checked_size(path, limit, refuse, empty=empty)
+    unless ``empty``; with ``root``, not a link leading out of that folder), checked before
+    it is opened and opened without blocking, or ``refuse``'s exception."""
+    checked_size(path, limit, refuse, empty=empty, root=root)
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
         with os.fdopen(fd, "rb") as f:
@@ -113,9 +157,23 @@ def file_errors(path: Path, what: str, hint: str, too_large: Callable[[int], tup
             return FileError(f"{path}: {what} is not a regular file", hint=hint)
         if r.reason == EMPTY:
             return FileError(f"{path}: {what} is empty (0 bytes)", hint=hint)
+        if r.reason == OUTSIDE:
+            return FileError(outside_text(r, what), hint=OUTSIDE_HINT)
         tail, large_hint = too_large(r.size)
         if r.reason == TOO_LARGE:
             return FileError(f"{path}: {what} is {tail}", hint=large_hint)
         return FileError(f"{path}: {what} grew past the limit while it was read", hint=large_hint)
 
     return refuse
+
+
+OUTSIDE_HINT = "copy the file into the folder instead of linking it, or remove the link"
+
+
+def outside_text(r: Refusal, what: str) -> str:
+    """``PATH: WHAT is a link leading out of ROOT`` (or lies behind one): the link's name, never
+    where it leads."""
+    if r.link is None or r.link == r.path:
+        how = "is a link leading out of" if r.path.is_symlink() else "lies outside"
+        return f"{r.path}: {what} {how} {r.root}"
+    return f"{r.path}: {what} lies behind the link {r.link}, which leads out of {r.root}"

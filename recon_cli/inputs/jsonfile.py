@@ -4,6 +4,8 @@ from the file, one that
 
 * is not a regular file (a FIFO, a device, a folder: nothing is opened that could block) or
   is larger than its limit (checked before it is read);
+* given the folder it belongs to (a run folder, a scan store), is or lies behind a link
+  leading out of that folder (checked before anything else);
 * is not UTF-8 or not JSON;
 * nests lists and objects deeper than :data:`MAX_DEPTH` levels (checked before it is
   parsed: Python's parser recurses once per level);
@@ -59,13 +61,17 @@ def _kind(mode: int) -> str:
     return "a special file"
 
 
-def read_bytes(path: Path, what: str, max_bytes: int = MAX_METADATA_BYTES) -> bytes:
+def read_bytes(path: Path, what: str, max_bytes: int = MAX_METADATA_BYTES, root: Path | None = None) -> bytes:
     """The bytes of a regular file of at most ``max_bytes`` bytes, or a MetadataError. The
     file's kind and size are checked before it is opened, and it is opened without
-    blocking (a FIFO put in its place meanwhile is refused, not waited on)."""
+    blocking (a FIFO put in its place meanwhile is refused, not waited on). ``root``: the
+    folder the file belongs to (a run folder, a scan store); a file that is, or lies behind,
+    a link leading out of it is refused before anything else."""
     path = Path(path)
 
     def refuse(r: files.Refusal) -> MetadataError:
+        if r.reason == files.OUTSIDE:
+            return MetadataError(files.outside_text(r, what), path=str(path), hint=files.OUTSIDE_HINT)
         if r.reason == files.MISSING or isinstance(r.error, FileNotFoundError):
             return MetadataError(f"{path}: {what} is missing", path=str(path))
         if r.reason == files.UNREADABLE and r.error is not None:
@@ -79,14 +85,15 @@ def read_bytes(path: Path, what: str, max_bytes: int = MAX_METADATA_BYTES) -> by
         return MetadataError(f"{path}: {what} grew past {max_bytes:,} bytes while it was read", path=str(path),
                              hint=_WRONG_FILE)
 
-    return files.read_limited(path, max_bytes, refuse)
+    return files.read_limited(path, max_bytes, refuse, root=root)
 
 
-def load_json(path: Path, what: str, max_bytes: int = MAX_JSON_BYTES) -> Any:
+def load_json(path: Path, what: str, max_bytes: int = MAX_JSON_BYTES, root: Path | None = None) -> Any:
     """The content of a JSON file (see the module docstring for what is refused), or a
-    MetadataError with file:line:column where there is a line."""
+    MetadataError with file:line:column where there is a line. ``root``: the folder the file
+    belongs to (see :func:`read_bytes`)."""
     path = Path(path)
-    data = read_bytes(path, what, max_bytes)
+    data = read_bytes(path, what, max_bytes, root)
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -1,7 +1,8 @@
 """JSON documents checked against their schemas in ``schemas/`` (the scan store's and the run
 folders' files): the first, most relevant violation as one
-:class:`~recon_cli.errors.MetadataError` naming the file and the key; and the check that a
-stored pose is a rigid transform."""
+:class:`~recon_cli.errors.MetadataError` naming the file, the key path and what was expected,
+never the text, list or object the file holds there (a number out of its range is named);
+and the check that a stored pose is a rigid transform."""
 
 from __future__ import annotations
 
@@ -45,11 +46,82 @@ def check(data: Any, schema: str, path: Path, what: str, hint: str | None = None
     error = jsonschema.exceptions.best_match(_validator(schema).iter_errors(data))
     if error is None:
         return
+    types: list[str] = []  # of anyOf / oneOf branches that differ by type alone
+    while error.context:  # within anyOf / oneOf: the problem inside the branch the value was meant for
+        depth = len(error.absolute_path)
+        deeper = [e for e in error.context if len(e.absolute_path) > depth]
+        shallow = [e for e in error.context if len(e.absolute_path) == depth
+                   and e.validator not in ("type", "const", "enum")]
+        if not (deeper or shallow) and all(e.validator == "type" for e in error.context):
+            for e in error.context:
+                types += [e.validator_value] if isinstance(e.validator_value, str) else list(e.validator_value)
+        error = jsonschema.exceptions.best_match(deeper or shallow or error.context)
     where = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in error.absolute_path).lstrip(".")
-    message = error.message if len(error.message) <= 160 else error.message[:157] + "..."
-    raise MetadataError(f"{path}: {what} " + (f"key '{where}': " if where else "") + message,
+    message = _message(error, types)
+    key = (f"key '{where}'" + (" " if message.startswith(("is ", "has ")) else ": ")) if where else ""
+    raise MetadataError(f"{path}: {what} {key}{message}",
                         path=str(path), where=where or None,
                         hint=hint or f"see schemas/{schema} for what {what} holds")
+
+
+_KINDS = {"number": "a number", "integer": "a whole number", "string": "a text", "boolean": "true or false",
+          "array": "a list", "object": "an object", "null": "null"}
+
+
+def _kind_of(value: Any) -> str:
+    """What a JSON value is (never what it holds)."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true or false"
+    if isinstance(value, int):
+        return "a whole number"
+    if isinstance(value, float):
+        return "a number"
+    if isinstance(value, str):
+        return "a text"
+    if isinstance(value, list):
+        return "a list"
+    return "an object"
+
+
+def _short_key(key: str) -> str:
+    return repr(key if len(key) <= 40 else key[:37] + "...")
+
+
+def _message(error: Any, types: list[str] | None = None) -> str:
+    """A schema violation in words that name what was expected and the kind of value found,
+    never the text, list or object found (a number found is named: it is what a range
+    refuses)."""
+    schema = error.schema if isinstance(error.schema, dict) else {}
+    value, rule, bound = error.instance, error.validator, error.validator_value
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    if rule == "type":
+        expected = list(dict.fromkeys(types or ([bound] if isinstance(bound, str) else list(bound))))
+        return f"is {_kind_of(value)}, not {' or '.join(_KINDS.get(t, t) for t in expected)}"
+    if rule in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum") and number:
+        return error.message  # the number and its bound, e.g. "7 is greater than the maximum of 1"
+    if rule == "required":
+        missing = [k for k in bound if isinstance(value, dict) and k not in value]
+        return f"{_short_key(missing[0]) if missing else 'a key'} is a required property"
+    if rule == "additionalProperties" and isinstance(value, dict):
+        known = set(schema.get("properties", {}))
+        extra = [k for k in value if k not in known]
+        return f"holds the unknown key {_short_key(extra[0])}" if extra else "holds an unknown key"
+    if rule in ("enum", "const"):
+        choices = bound if rule == "enum" else [bound]
+        return f"is not {'one of ' if len(choices) > 1 else ''}{', '.join(json.dumps(c) for c in choices)}"
+    if rule in ("minItems", "maxItems") and isinstance(value, list):
+        items = f"{len(value)} item" + ("" if len(value) == 1 else "s")
+        return f"has {items}, {'at least' if rule == 'minItems' else 'at most'} {bound} expected"
+    if rule in ("minLength", "maxLength") and isinstance(value, str):
+        return f"is a text of {len(value)} characters, {'at least' if rule == 'minLength' else 'at most'} {bound} " \
+               "expected"
+    if rule in ("minProperties", "maxProperties") and isinstance(value, dict):
+        return f"has {len(value)} keys, {'at least' if rule == 'minProperties' else 'at most'} {bound} expected"
+    if rule == "pattern":
+        return "is not a text of the expected form"
+    return f"is not what the schema allows here ({rule})"
 
 
 def check_pose(value: Any, path: Path, what: str, key: str) -> None:

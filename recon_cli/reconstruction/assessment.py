@@ -8,7 +8,9 @@ store gives the camera poses), writes a JSON report and a histogram PNG.
 A two-sided run folder (``sides_report.json``) is evaluated as a whole: its merged cloud, and
 what each side's cloud covers alone (side 2's moved by the registration of the sides, and
 with the merged cloud by the alignment); without a reference, the simulated object's surface
-where side 1 saw it (a simulation of a built-in or YCB object).
+where side 1 saw it (a simulation of a built-in or YCB object; side 1's scan store is
+``side_1/scans`` of a script run or ``side_1/`` of ``recon autoscan --sides 2``). What is read
+from the run folder may not leave it through a link.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 
 from recon_cli.errors import FileError, InputError
 from recon_cli.geometry.transforms import pose_error, transform_points
+from recon_cli.inputs import files
 from recon_cli.inputs.jsonschemas import check_pose
 from recon_cli.inputs.meshes import CLOUD_SUFFIXES, MESH_SUFFIXES, read_cloud, read_mesh
 from recon_cli.objects import BUILTIN, SceneObject, load_object, ycb_names
@@ -109,22 +112,35 @@ class TwoSidedRun:
     sides: dict[str, np.ndarray]  # side_1, side_2: each side's points (N, 3) in the merged cloud's frame
 
 
+def _inside_run(path: Path, folder: Path, what: str) -> Path:
+    """``path``, refused (FileError) when it is or lies behind a link leading out of the run
+    folder: what is read from a run folder lies inside it."""
+    link = files.link_out_of(path, folder)
+    if link is not None:
+        raise FileError(files.outside_text(files.Refusal(files.OUTSIDE, path, 0, root=folder, link=link), what),
+                        hint=files.OUTSIDE_HINT)
+    return path
+
+
 def two_sided_run(folder: Path) -> TwoSidedRun:
     """The merged cloud and both sides' points of a two-sided run folder (FileError or
-    MetadataError, one line, when its sides were not merged or a file is missing or broken)."""
+    MetadataError, one line, when its sides were not merged, a file is missing or broken,
+    or a file is reached through a link leading out of the folder)."""
     folder = Path(folder)
-    if not (folder / sides_file.SIDES_REPORT).exists():
+    report_path = folder / sides_file.SIDES_REPORT
+    if not (report_path.exists() or report_path.is_symlink()):
         raise FileError(f"{folder} is a folder but not a two-sided run (no {sides_file.SIDES_REPORT})",
                         hint="give a cloud or mesh file, e.g. RUN/reconstruction/cloud.ply")
-    report = sides_file.read(folder)
-    merged = folder / "reconstruction" / "cloud.ply"
+    report = sides_file.read(folder, root=folder)
+    merged = _inside_run(folder / "reconstruction" / "cloud.ply", folder, "merged cloud")
     if report.cloud is None or not merged.is_file():
         why = f" ({report.error})" if report.error else ""
         raise FileError(f"{folder}: its two sides were not merged{why}",
                         hint="evaluate one side's cloud: side_1/reconstruction/cloud.ply or side_2/...")
     T = report.registration.get("side1_T_side2")
-    check_pose(T, folder / sides_file.SIDES_REPORT, "sides report", "registration.side1_T_side2")
-    clouds = (folder / "side_1" / "reconstruction" / "cloud.ply", folder / "side_2" / "reconstruction" / "cloud.ply")
+    check_pose(T, report_path, "sides report", "registration.side1_T_side2")
+    clouds = (_inside_run(folder / "side_1" / "reconstruction" / "cloud.ply", folder, "side 1 cloud"),
+              _inside_run(folder / "side_2" / "reconstruction" / "cloud.ply", folder, "side 2 cloud"))
     return TwoSidedRun(folder, merged, registered_sides(clouds, np.asarray(T, dtype=float)))
 
 
@@ -137,12 +153,25 @@ def registered_sides(clouds: tuple[Path, Path], side1_T_side2: np.ndarray) -> di
     return {"side_1": points[0], "side_2": transform_points(side1_T_side2, points[1])}
 
 
+def side_store(folder: Path, side: int) -> Path | None:
+    """The scan store of one side of a two-sided run folder: ``side_k/scans`` of a script
+    run, ``side_k`` itself of ``recon autoscan --sides 2`` (each side an autoscan folder,
+    which is its own scan store); None when neither holds a session.json."""
+    base = Path(folder) / f"side_{side}"
+    for store in (base / "scans", base):
+        if (store / "session.json").exists() or (store / "session.json").is_symlink():
+            return store
+    return None
+
+
 def simulated_object(folder: Path) -> SceneObject | None:
-    """The simulated object where side 1 of a two-sided simulation run saw it; None when the
+    """The simulated object where side 1 of a two-sided simulation run saw it (the object
+    its session names, at the pose it records, as one-sided runs know theirs); None when the
     run was not a simulation of a built-in or YCB object."""
-    store = Path(folder) / "side_1" / "scans"
-    if not store.is_dir():
+    store = side_store(folder, 1)
+    if store is None:
         return None
+    _inside_run(store / "session.json", Path(folder), "side 1 session.json")
     session = ScanStore(store).session()
     if (session.backend != "sim" or session.world_T_object is None
             or session.object_name not in (*BUILTIN, *ycb_names())):

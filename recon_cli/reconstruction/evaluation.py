@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from recon_cli.outputs import atomic_write
 from recon_cli.perception.camera_model import Intrinsics
 from recon_cli.randomness import open3d_draws
 
@@ -163,7 +164,8 @@ def evaluate(points: np.ndarray, reference, tolerance: float = 0.001, samples: i
 
 def histogram_png(path: Path, distances_by_label: dict[str, np.ndarray], title: str,
                   limit: float = 0.002) -> None:
-    """Histogram(s) of signed distances [m] like the thesis' Figures 5.8-5.10."""
+    """Histogram(s) of signed distances [m] like the thesis' Figures 5.8-5.10, written
+    atomically (a fresh file renamed into place: never through a link)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -180,5 +182,7 @@ def histogram_png(path: Path, distances_by_label: dict[str, np.ndarray], title: 
     ax.set_title(title)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    try:
+        atomic_write(Path(path), lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
+    finally:
+        plt.close(fig)

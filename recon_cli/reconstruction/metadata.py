@@ -137,11 +137,12 @@ class SessionInfo:
 
 
 def read_session(root: Path) -> SessionInfo:
-    """``root/session.json`` checked and typed; an empty SessionInfo when there is none."""
+    """``root/session.json`` checked and typed; an empty SessionInfo when there is none. A
+    session.json that is a link leading out of the store is refused before it is read."""
     path = Path(root) / "session.json"
-    if not path.exists():
+    if not (path.exists() or path.is_symlink()):
         return SessionInfo(created=0.0)
-    data = load_json(path, "session.json", MAX_METADATA_BYTES)
+    data = load_json(path, "session.json", MAX_METADATA_BYTES, root=Path(root))
     check(data, "session.schema.json", path, "session.json",
           hint="repair or remove session.json (without it, pass the crop box with --crop-box)")
     for key, value in (("world_T_marker", data.get("world_T_marker")),
@@ -158,7 +159,7 @@ def read_scan_meta(folder: Path) -> dict[str, Any]:
     if not path.exists():
         raise MetadataError(f"{folder}: scan folder without scan.json", path=str(path),
                             hint="a scan needs scan.json beside its depth.png")
-    data = load_json(path, "scan.json", MAX_METADATA_BYTES)
+    data = load_json(path, "scan.json", MAX_METADATA_BYTES, root=Path(folder).parent)
     check(data, "scan.schema.json", path, "scan.json")
     for key in ("world_T_camera_fk", "marker_T_camera"):
         if data.get(key) is not None:

@@ -286,7 +286,7 @@ def _ground_truth(path: Path) -> dict[str, Any] | None:
     ``world_T_camera`` is a rigid 4 x 4 pose of numbers within +-1000."""
     if not (path.exists() or path.is_symlink()):
         return None
-    gt = load_json(path, "ground_truth.json", MAX_METADATA_BYTES)
+    gt = load_json(path, "ground_truth.json", MAX_METADATA_BYTES, root=path.parent.parent)
     hint = "remove ground_truth.json (it is used for evaluation only)"
     if not isinstance(gt, dict):
         raise MetadataError(f"{path}: ground_truth.json holds no JSON object", path=str(path), hint=hint)

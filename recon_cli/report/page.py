@@ -17,6 +17,7 @@ from pathlib import Path
 from recon_cli.config import DEFAULTS
 from recon_cli.console import err_console
 from recon_cli.errors import FileError, ReconError
+from recon_cli.inputs.files import link_out_of
 from recon_cli.outputs import atomic_write_text, inside
 from recon_cli.report import figures
 from recon_cli.report.markup import GENERATOR, page
@@ -41,12 +42,14 @@ class ReportPage:
 
 
 def mesh_file(run: RunFolder) -> Path | None:
-    """The mesh a run made: the registration's, else a mesh.ply beside its report."""
+    """The mesh a run made: the registration's, else a mesh.ply beside its report; never one
+    that is (or lies behind) a link leading out of the run folder."""
     candidates = []
     if run.registration is not None:
         candidates += [run.registration.mesh, run.registration.report.parent / "mesh.ply"]
     candidates += [run.folder / "reconstruction" / "mesh.ply", run.folder / "mesh.ply"]
-    return next((p for p in candidates if p is not None and p.is_file()), None)
+    return next((p for p in candidates if p is not None and p.is_file() and link_out_of(p, run.folder) is None),
+                None)
 
 
 def _draw(run: RunFolder, options: ReportOptions, out: Path) -> Assets:

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from recon_cli.errors import FileError, MetadataError
+from recon_cli.inputs.files import OUTSIDE, Refusal, link_out_of, outside_text
 from recon_cli.inputs.jsonfile import load_json
 from recon_cli.reconstruction.metadata import SessionInfo, read_session
 from recon_cli.reconstruction.scan_store import ScanStore
@@ -73,13 +74,34 @@ def _dict(value: Any) -> dict:
 
 
 class _Notes:
-    """What could not be read, for the page."""
+    """What could not be read, for the page; ``root``: the run folder, which nothing read for
+    the page may leave through a link."""
 
-    def __init__(self) -> None:
+    def __init__(self, root: Path) -> None:
         self.items: list[str] = []
+        self.root = root
 
-    def read(self, path: Path, reader: Callable[[Path], T]) -> T | None:
-        """``reader(path)``, or None (with the reason as a note) when the file cannot be read."""
+    def root_of(self, store: Path) -> Path:
+        """The folder a scan store's files may not leave: the run folder when the store lies in
+        it, else the store (a registration's store elsewhere)."""
+        inside = Path(os.path.abspath(store)).is_relative_to(os.path.abspath(self.root))
+        return self.root if inside else store
+
+    def outside(self, path: Path, what: str, root: Path | None = None) -> bool:
+        """Whether ``path`` is (or lies behind) a link leading out of ``root`` (default: the run
+        folder); then a note says so, naming the link, not where it leads."""
+        root = self.root if root is None else root
+        link = link_out_of(path, root)
+        if link is None:
+            return False
+        self.items.append(outside_text(Refusal(OUTSIDE, path, 0, root=root, link=link), what))
+        return True
+
+    def read(self, path: Path, reader: Callable[[Path], T], root: Path | None = None) -> T | None:
+        """``reader(path)``, or None (with the reason as a note) when the file cannot be read or
+        leads out of ``root`` (default: the run folder) through a link."""
+        if not (path.is_file() or path.is_symlink()) or self.outside(path, path.name, root):
+            return None
         if not path.is_file():
             return None
         try:
@@ -165,12 +187,13 @@ def _two_sides(folder: Path, kind: RunKind, notes: _Notes) -> tuple[TwoSides | N
         name = f"side_{k}"
         base = folder / name
         store = base / "scans" if kind is RunKind.RUN else base
-        scans = _scans(store, notes) if store.is_dir() else ()
+        scans = _scans(store, notes) if store.is_dir() and not notes.outside(store, "scan store") else ()
         reg_path = base / "reconstruction" / REGISTER_REPORT
         rep = notes.read(reg_path, register_file.read)
         registration = None if rep is None else replace(_registration(reg_path, rep), scan_store=store)
         cloud = base / "reconstruction" / "cloud.ply"
-        side = Side(name, base, scans, registration, cloud if cloud.is_file() else None,
+        shown = cloud.is_file() and not notes.outside(cloud, f"{name} cloud")
+        side = Side(name, base, scans, registration, cloud if shown else None,
                     report.side_seconds[k - 1] if len(report.side_seconds) >= k else None,
                     report.contributions.get(name))
         sides.append(side)
@@ -179,7 +202,8 @@ def _two_sides(folder: Path, kind: RunKind, notes: _Notes) -> tuple[TwoSides | N
             side_moves, _ = _autoscan(base / AUTOSCAN_REPORT, autoscan, base / "reconstruction")
             moves += [replace(m, label=f"{side.label}, {m.label}") for m in side_moves]
     merged = folder / "reconstruction" / "cloud.ply"
-    return TwoSides(report, tuple(sides), merged if report.cloud is not None and merged.is_file() else None), \
+    shown = report.cloud is not None and merged.is_file() and not notes.outside(merged, "merged cloud")
+    return TwoSides(report, tuple(sides), merged if shown else None), \
         tuple(moves)
 
 
@@ -245,12 +269,15 @@ def _evaluations(folder: Path, notes: _Notes) -> tuple[Evaluation, ...]:
 
 # ----------------------------------------------------------------------------- scans and files
 def _scans(store: Path, notes: _Notes) -> tuple[Scan, ...]:
+    """The scans of a store; what leads out of the run folder (or, for a store outside it, out
+    of the store) through a link is not read."""
+    root = notes.root_of(store)
     out = []
     for index, path in _scan_folders(store):
-        color = path / "color.png" if (path / "color.png").is_file() else None
-        depth = path / "depth.png" if (path / "depth.png").is_file() else None
+        color, depth = ((p if p.is_file() and link_out_of(p, root) is None else None)
+                        for p in (path / "color.png", path / "depth.png"))
         try:
-            meta = load_json(path / "scan.json", "scan.json")
+            meta = load_json(path / "scan.json", "scan.json", root=root)
             if not isinstance(meta, dict):
                 raise MetadataError(f"{path / 'scan.json'}: holds no JSON object", path=str(path / "scan.json"))
         except MetadataError as exc:
@@ -321,7 +348,7 @@ def read_run_folder(folder: Path) -> RunFolder:
     """Everything the page of ``folder`` shows (see the module docstring)."""
     folder = Path(folder)
     kind = run_kind(folder)
-    notes = _Notes()
+    notes = _Notes(folder)
     script_run = autoscan = capture = None
     moves: tuple[Move, ...] = ()
     extra: tuple[Evaluation, ...] = ()  # an evaluation a run reports itself
@@ -355,8 +382,8 @@ def read_run_folder(folder: Path) -> RunFolder:
         registration = replace(registration, scan_store=store)
     session: SessionInfo | None = None
     scans: tuple[Scan, ...] = ()
-    if store is not None and store.is_dir():
-        session = notes.read(store / "session.json", lambda path: read_session(path.parent))
+    if store is not None and store.is_dir() and not notes.outside(store, "scan store", notes.root_of(store)):
+        session = notes.read(store / "session.json", lambda path: read_session(path.parent), notes.root_of(store))
         scans = _scans(store, notes)
     two_sides, side_moves = _two_sides(folder, kind, notes) if (folder / SIDES_REPORT).is_file() else (None, ())
     if two_sides is not None:

@@ -78,8 +78,10 @@ def write(folder: Path, report: AutoscanReport) -> Path:
     return write_model(Path(folder) / AUTOSCAN_REPORT, report)
 
 
-def read(folder_or_path: Path) -> AutoscanReport:
+def read(folder_or_path: Path, root: Path | None = None) -> AutoscanReport:
     """The autoscan report of a run folder (or the file); a MetadataError when it cannot be
-    read or does not match its schema."""
+    read or does not match its schema.
+    ``root``: the run folder it belongs to (default: the folder that holds it), which it
+    may not leave through a link."""
     path = target(folder_or_path, AUTOSCAN_REPORT)
-    return read_model(path, AutoscanReport, SCHEMA, path.name)
+    return read_model(path, AutoscanReport, SCHEMA, path.name, root)

@@ -38,8 +38,10 @@ def write(folder: Path, report: CaptureReport) -> Path:
     return write_model(Path(folder) / CAPTURE_REPORT, report)
 
 
-def read(folder_or_path: Path) -> CaptureReport:
+def read(folder_or_path: Path, root: Path | None = None) -> CaptureReport:
     """The capture report of a scan store (or the file); a MetadataError when it cannot be
-    read or does not match its schema."""
+    read or does not match its schema.
+    ``root``: the run folder it belongs to (default: the folder that holds it), which it
+    may not leave through a link."""
     path = target(folder_or_path, CAPTURE_REPORT)
-    return read_model(path, CaptureReport, SCHEMA, path.name)
+    return read_model(path, CaptureReport, SCHEMA, path.name, root)

@@ -52,11 +52,12 @@ def write(folder: Path, report: EvaluationReport) -> Path:
     return write_model(Path(folder) / file_name(report.name), report)
 
 
-def read(path: Path) -> EvaluationReport:
+def read(path: Path, root: Path | None = None) -> EvaluationReport:
     """An evaluation report; a MetadataError when it cannot be read or does not match its
-    schema."""
+    schema. ``root``: the run folder it belongs to (default: the folder that holds it),
+    which it may not leave through a link."""
     path = Path(path)
-    return read_model(path, EvaluationReport, SCHEMA, path.name)
+    return read_model(path, EvaluationReport, SCHEMA, path.name, root)
 
 
 def reports(folder: Path) -> list[Path]:

@@ -161,11 +161,13 @@ def write(folder: Path, report: RegisterReport) -> Path:
     return write_model(Path(folder) / REGISTER_REPORT, report)
 
 
-def read(folder_or_path: Path) -> RegisterReport:
+def read(folder_or_path: Path, root: Path | None = None) -> RegisterReport:
     """The registration report of a folder (or the file); a MetadataError when it cannot be
-    read or does not match its schema."""
+    read or does not match its schema.
+    ``root``: the run folder it belongs to (default: the folder that holds it), which it
+    may not leave through a link."""
     path = target(folder_or_path, REGISTER_REPORT)
-    return read_model(path, RegisterReport, SCHEMA, path.name)
+    return read_model(path, RegisterReport, SCHEMA, path.name, root)
 
 
 def is_registration(path: Path) -> bool:
@@ -174,7 +176,7 @@ def is_registration(path: Path) -> bool:
 
     path = Path(path)
     try:
-        data = load_json(path, path.name)
+        data = load_json(path, path.name, root=path.parent)
     except MetadataError:
         return path.is_file()
     return isinstance(data, dict) and isinstance(data.get("scans"), list)

@@ -110,9 +110,11 @@ def write(folder: Path, report: ScriptRunReport) -> Path:
     return write_model(Path(folder) / RUN_REPORT, report)
 
 
-def read(folder_or_path: Path) -> ScriptRunReport:
+def read(folder_or_path: Path, root: Path | None = None) -> ScriptRunReport:
     """The run report of a run folder (or the report file itself, e.g. ``run_report-1.json``);
-    a MetadataError when it cannot be read or does not match its schema."""
+    a MetadataError when it cannot be read or does not match its schema.
+    ``root``: the run folder it belongs to (default: the folder that holds it), which it
+    may not leave through a link."""
     path = target(folder_or_path, RUN_REPORT)
-    return read_model(path, ScriptRunReport, SCHEMA, path.name)
+    return read_model(path, ScriptRunReport, SCHEMA, path.name, root)
 

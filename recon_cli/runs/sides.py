@@ -56,8 +56,10 @@ def write(folder: Path, report: SidesReport) -> Path:
     return write_model(Path(folder) / SIDES_REPORT, report)
 
 
-def read(folder_or_path: Path) -> SidesReport:
+def read(folder_or_path: Path, root: Path | None = None) -> SidesReport:
     """The sides report of a run folder (or the file); a MetadataError when it cannot be read
-    or does not match its schema."""
+    or does not match its schema.
+    ``root``: the run folder it belongs to (default: the folder that holds it), which it
+    may not leave through a link."""
     path = target(folder_or_path, SIDES_REPORT)
-    return read_model(path, SidesReport, SCHEMA, path.name)
+    return read_model(path, SidesReport, SCHEMA, path.name, root)

@@ -150,7 +150,7 @@ def test_every_scan_bad_fails_with_the_reasons(store, tmp_path, capsys):
      r"session.json:2:\d+: session.json is broken JSON"),
     ('["not", "a", "session"]', "session.json holds a list, not a JSON object"),
     ('{"format": 1, "crop_box": {"center": [0, 0, 0.8], "size": "big"}}', "key 'crop_box.size'"),
-    ('{"format": 1, "world_T_marker": [[1, 0], [0, 1]]}', r"key 'world_T_marker\[0\]': \[1, 0\] is too short"),
+    ('{"format": 1, "world_T_marker": [[1, 0], [0, 1]]}', r"key 'world_T_marker\[0\]' has 2 items, at least 4"),
     ('{"format": 7}', "session.json has format 7, this recon reads format 1 and older"),
 ])
 def test_corrupt_session_json_is_one_line(content, expected, store, tmp_path, capsys):

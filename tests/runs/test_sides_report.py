@@ -1,11 +1,14 @@
 """``sides_report.json`` (recon_cli/runs/sides.py) reads back as written, and a broken or
-hostile file is one MetadataError line naming the file: truncated JSON, wrong types, NaN,
-numbers too large for a float or beyond the schema's bounds, a link to a device, a
+hostile file is one MetadataError line naming the file and never quoting what it holds:
+truncated JSON, wrong types, NaN, numbers too large for a float or beyond the schema's
+bounds, a huge or sparse 1 GB file (refused by its size before it is read), a FIFO, a link
+leading out of the run folder (to a device, to /etc/passwd, to a good report elsewhere), a
 dangling link, a folder in its place."""
 
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -85,7 +88,15 @@ CASES = {
     "nested too deep": (lambda p: p.write_text('{"sides": 2, "registration": ' + "[" * 100 + "]" * 100 + "}"),
                         "nests lists and objects"),
     "a key twice": (lambda p: p.write_text('{"sides": 2, "sides": 2, "registration": {}}'), "twice"),
-    "link to a device": (lambda p: (p.unlink(), p.symlink_to("/dev/zero")), "not a regular file (a character device)"),
+    "link to a device": (lambda p: (p.unlink(), p.symlink_to("/dev/zero")), "is a link leading out of"),
+    "link to /etc/passwd": (lambda p: (p.unlink(), p.symlink_to("/etc/passwd")), "is a link leading out of"),
+    "FIFO": (lambda p: (p.unlink(), os.mkfifo(p)), "not a regular file (a FIFO)"),
+    "huge": (lambda p: p.write_text('{"sides": 2, "registration": {}, "object": "' + "x" * (17 * 2**20) + '"}'),
+             "more than the 16,777,216 recon reads"),
+    "sparse 1 GB": (lambda p: os.truncate(p, 2**30), "has 1,073,741,824 bytes, more than"),
+    "object a list": (lambda p: _edited(p, lambda d: d.update(object=["SECRET"])),
+                      "key 'object' is a list, not a text or null"),
+    "cloud a number": (lambda p: _edited(p, lambda d: d.update(cloud=12345)), "key 'cloud' is a whole number"),
     "dangling link": (lambda p: (p.unlink(), p.symlink_to(p.parent / "gone.json")), "is missing"),
     "link to itself": (lambda p: (p.unlink(), p.symlink_to(p)), "cannot be read"),
     "folder in its place": (lambda p: (p.unlink(), p.mkdir()), "sides_report.json is missing"),
@@ -102,13 +113,29 @@ def test_a_hostile_file_is_one_line_naming_it(case, tmp_path):
     line = info.value.one_line()
     assert "\n" not in line and str(path) in line and needle in line, line
     assert "Traceback" not in line
+    assert not any(word in line for word in ("SECRET", "root:", "xxxx", "12345", "two")), line  # nothing it holds
 
 
-def test_a_link_to_a_good_report_is_read_as_the_report(tmp_path):
-    """A link is followed to what it names: a regular file within the limits reads as any."""
-    folder = tmp_path / "elsewhere"
-    folder.mkdir()
-    path = _written(folder)
-    (tmp_path / "run").mkdir()
-    (tmp_path / "run" / sides_file.SIDES_REPORT).symlink_to(path)
-    assert sides_file.read(tmp_path / "run") == sides_file.read(path)
+def test_a_link_leading_out_of_the_run_folder_is_refused_before_it_is_read(tmp_path):
+    """A good report elsewhere, linked into the run folder: refused, naming the link and the
+    run folder, not where it leads; a link inside the run folder is followed; the run folder
+    given decides (a report below it, behind a link to a folder outside it, is refused too)."""
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    good = _written(elsewhere)
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / sides_file.SIDES_REPORT).symlink_to(good)
+    with pytest.raises(MetadataError) as info:
+        sides_file.read(run)
+    line = info.value.one_line()
+    assert f"{run / sides_file.SIDES_REPORT}: sides_report.json is a link leading out of {run}" in line, line
+    assert "elsewhere" not in line.replace(str(run), "")
+    (run / sides_file.SIDES_REPORT).unlink()
+    (run / "kept").mkdir()
+    _written(run / "kept")
+    (run / sides_file.SIDES_REPORT).symlink_to(run / "kept" / sides_file.SIDES_REPORT)
+    assert sides_file.read(run) == sides_file.read(good)  # inside: read as the report
+    (run / "side_1").symlink_to(elsewhere)
+    with pytest.raises(MetadataError, match="lies behind the link .*side_1, which leads out of"):
+        sides_file.read(run / "side_1" / sides_file.SIDES_REPORT, root=run)

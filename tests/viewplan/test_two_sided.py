@@ -1,11 +1,14 @@
 """`recon autoscan --sides 2` in simulation: side 1, the object turned over by physics, side
 2, the sides registered by shape within 0.5 mm / 0.2 deg of the truth, one merged model that
-covers more of the whole surface (the resting faces included) than either side."""
+covers more of the whole surface (the resting faces included) than either side, and
+`recon evaluate` of the folder measures it against the simulated object."""
 
 from __future__ import annotations
 
 import importlib.util
 import json
+
+import pytest
 
 from recon_cli.cli import main
 from recon_cli.runs import sides as sides_file
@@ -31,6 +34,11 @@ def test_two_sided_autoscan_end_to_end(tmp_path, capsys):
         assert json.loads((out / side / "autoscan_report.json").read_text())["scans"] == 5
     assert "sides registered by shape" in text.out and "of the whole surface" in text.out
     _the_page_shows_both_sides(out, report, text.out)
+    # `recon evaluate RUN` without --reference: the simulated object, found in side 1's store (side_1/)
+    assert main(["evaluate", str(out)]) == 0, capsys.readouterr().err
+    ev = json.loads((out / "reconstruction" / "cloud_evaluation.json").read_text())
+    assert ev["reference"] == "the simulated toy_blocks" and ev["coverage"] == pytest.approx(report.coverage_whole,
+                                                                                            abs=0.01)
     if importlib.util.find_spec("rerun") is not None:  # the recordings: each side's, and the sides registered
         from recon_cli.recording.readback import summarize
 

@@ -29,7 +29,7 @@ from pathlib import Path
 from urllib.parse import quote
 
 from recon_cli.errors import FileError, InputError, ReconError
-from recon_cli.interrupts import signal_name, stop_signals
+from recon_cli.interrupts import held_signals, signal_name, stop_signals
 from recon_cli.recording.sdk import RECORDING_FILE, RERUN_VERSION, recording_file, require_rerun
 
 #: where the web viewer listens unless ``--bind`` says otherwise: this machine only
@@ -40,7 +40,6 @@ START_TIMEOUT_S = 30.0  # until the web viewer answers
 STOP_TIMEOUT_S = 5.0  # after SIGTERM, before SIGKILL
 WAIT_STEP_S = 0.2  # how soon a stop signal is acted on while rerun runs
 GONE_TIMEOUT_S = 10.0  # after SIGKILL, until the group is empty and the ports are closed
-_STOP = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 def find_recording(target: Path) -> Path:
@@ -177,9 +176,8 @@ def _rerun_command() -> list[str]:
 
 
 def _child_setup() -> Callable[[], None]:
-    """What the child does between fork and exec: signals as usual again (the parent blocks
-    them while it starts the child) and, on Linux, SIGTERM when recon ends without stopping
-    it. Everything it needs is looked up here, in the parent."""
+    """What the child does between fork and exec: on Linux, ask for SIGTERM when recon ends
+    without stopping it. Everything it needs is looked up here, in the parent."""
     prctl = None
     if sys.platform.startswith("linux"):
 
@@ -187,12 +185,11 @@ def _child_setup() -> Callable[[], None]:
             prctl = ctypes.CDLL(None, use_errno=True).prctl
         except (OSError, AttributeError):
             prctl = None
-    term, unblock, stop = int(signal.SIGTERM), signal.pthread_sigmask, _STOP
+    term = int(signal.SIGTERM)
 
     def setup() -> None:  # pragma: no cover - runs in the child
         if prctl is not None:
             prctl(1, term)  # PR_SET_PDEATHSIG
-        unblock(signal.SIG_UNBLOCK, stop)
 
     return setup
 
@@ -205,12 +202,9 @@ def _start(command: list[str], log, started: list[subprocess.Popen]) -> None:
         started.append(subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT))
         return
     setup = _child_setup()
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP)
-    try:
+    with held_signals():
         started.append(subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
                                         preexec_fn=setup, process_group=0))
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def _signal_group(child: subprocess.Popen, sig: int) -> bool:

@@ -23,7 +23,12 @@ pytest.importorskip("pylibfranka", reason="the Franka adapter needs pylibfranka 
 
 from recon_cli.backends.hardware.franka import FrankaRobot  # noqa: E402
 from recon_cli.backends.hardware.franka_config import FrankaConfig  # noqa: E402
-from recon_cli.backends.sim.franka_standin import FrankaStandin, standin_venv, start_standin  # noqa: E402
+from recon_cli.backends.sim.franka_standin import (  # noqa: E402
+    FrankaStandin,
+    _port_open,
+    standin_venv,
+    start_standin,
+)
 from recon_cli.cli import main  # noqa: E402
 from recon_cli.errors import InputError, RobotFault  # noqa: E402
 from recon_cli.paths import CELLS_DIR, ROBOT_DIR  # noqa: E402
@@ -45,10 +50,15 @@ def fr3() -> Cell:
 
 @pytest.fixture()
 def standin(fr3):
+    """franka-sim for one test; after it, also when it failed, the stand-in's processes are
+    gone and its port refuses connections (stop() waits for both, a ReconError otherwise)."""
     s = start_standin(fr3.config)
-    yield s
-    print(f"franka-sim's log (the end):\n{s.log_tail(60)}")  # captured: shown when the test failed
-    s.stop()
+    try:
+        yield s
+    finally:
+        print(f"franka-sim's log (the end):\n{s.log_tail(60)}")  # captured: shown when the test failed
+        s.stop()
+    assert not s.alive() and not _port_open(s.host, s.port), "franka-sim outlived its test"
 
 
 def moves(s: FrankaStandin) -> int:

@@ -11,6 +11,12 @@ franka-sim pins numpy 1.26 and MuJoCo < 3.3, so it runs in its own virtual envir
 is given the cell's own description instead (:func:`standin_mjcf`: the expanded URDF
 compiled by MuJoCo with the drives file's armature and friction, no meshes), so the
 stand-in moves the same kinematics and inertias recon plans with.
+
+The stand-in runs in a session (and process group) of its own. :meth:`FrankaStandin.stop`
+and :meth:`FrankaStandin.kill` end the whole group, reap the server and return only when no
+process of the group is left and its port refuses connections (a ReconError otherwise);
+a start that fails or is interrupted (Ctrl-C) ends what it started before the error
+leaves; and a stand-in whose parent ends without stopping it ends within 0.5 s by itself.
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ import numpy as np
 
 from recon_cli.backends.sim.scene import drives, mujoco_urdf
 from recon_cli.errors import ReconError
+from recon_cli.interrupts import held_signals
 from recon_cli.lazy import lazy_module
 from recon_cli.paths import ROOT
 from recon_cli.robot.cell import Cell
@@ -53,6 +60,8 @@ DAMPING_SHARE = 0.5
 
 #: libfranka's command port (fixed in libfranka: a robot is reached by its address alone)
 COMMAND_PORT = 1337
+#: [s] after SIGKILL, until the stand-in's group is empty and its port refuses connections
+GONE_TIMEOUT_S = 10.0
 VENV_ENV = "RECON_FRANKA_SIM_VENV"
 DEFAULT_VENV = ROOT / ".venvs" / "franka-sim"
 
@@ -172,6 +181,7 @@ class FrankaStandin:
     process: subprocess.Popen = field(repr=False)
     log_path: Path
     workdir: Path
+    _ended: bool = field(default=False, init=False, repr=False)
 
     def log_tail(self, lines: int = 30) -> str:
         try:
@@ -182,20 +192,51 @@ class FrankaStandin:
     def alive(self) -> bool:
         return self.process.poll() is None
 
+    def _signal_group(self, sig: int) -> bool:
+        """``sig`` to the stand-in's process group (its own session); False when the group is empty."""
+        try:
+            os.killpg(self.process.pid, sig)
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            return True
+        return True
+
+    def _gone(self) -> None:
+        """SIGKILL to whatever is left of the group, the server reaped, then wait until the
+        group is empty and the port refuses connections; a ReconError if it does not. Once
+        that is seen, nothing is signalled again (the pid may be another process's by then)."""
+        if self._ended:
+            return
+        self._signal_group(signal.SIGKILL)
+        self.process.wait()
+        deadline = time.monotonic() + GONE_TIMEOUT_S
+        while self._signal_group(0) or _port_open(self.host, self.port):
+            if time.monotonic() > deadline:
+                what = "a process of its group is still running" if self._signal_group(0) else \
+                    f"{self.host}:{self.port} still accepts connections"
+                raise ReconError(f"franka-sim (pid {self.process.pid}) was stopped, but {what}",
+                                 hint=f"find it with: ss -ltnp 'sport = :{self.port}'")
+            time.sleep(0.05)
+        self._ended = True
+
     def kill(self) -> None:
-        if self.alive():
-            self.process.kill()
-            self.process.wait(10)
+        """End the stand-in at once (SIGKILL), as a crashed controller or a pulled cable would."""
+        self._gone()
 
     def stop(self, grace: float = 20.0) -> None:
-        if self.alive():
-            self.process.send_signal(signal.SIGTERM)
-            try:
-                self.process.wait(grace)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait(10)
-        shutil.rmtree(self.workdir, ignore_errors=True)
+        """End the stand-in: SIGTERM (it closes its server), SIGKILL after ``grace``; returns
+        when its processes are gone and its port is closed."""
+        try:
+            if self.alive() and not self._ended:
+                self.process.send_signal(signal.SIGTERM)
+                try:
+                    self.process.wait(grace)
+                except subprocess.TimeoutExpired:
+                    pass
+            self._gone()
+        finally:
+            shutil.rmtree(self.workdir, ignore_errors=True)
 
     def __enter__(self) -> FrankaStandin:
         return self
@@ -234,24 +275,32 @@ def start_standin(config: CellConfig, host: str = "127.0.0.1", port: int = COMMA
     log_path = workdir / "server.log"
     env = dict(os.environ, FR3_MJCF=str(model), MUJOCO_GL="egl", PYTHONUNBUFFERED="1")
     env.pop("PYTHONPATH", None)
-    with log_path.open("wb") as log:
-        process = subprocess.Popen([str(venv / "bin" / "python"), "-c", _LAUNCHER, host, str(port),
-                                    ",".join(repr(float(v)) for v in start), ",".join(map(repr, damping))],
-                                   stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
-                                   cwd=workdir, start_new_session=True)
-    standin = FrankaStandin(host, port, process, log_path, workdir)
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if not standin.alive():
-            tail = standin.log_tail()
-            standin.stop()
-            raise ReconError(f"franka-sim ended at start-up:\n{tail}", hint="see its log above")
-        if _port_open(host, port):
-            return standin
-        time.sleep(0.1)
-    tail = standin.log_tail()
-    standin.stop()
-    raise ReconError(f"franka-sim did not listen on {host}:{port} within {timeout:g} s:\n{tail}")
+    standin = None
+    try:
+        with held_signals():  # no Ctrl-C between the start and the moment the stand-in can be stopped
+            with log_path.open("wb") as log:
+                process = subprocess.Popen([str(venv / "bin" / "python"), "-c", _LAUNCHER, host, str(port),
+                                            ",".join(repr(float(v)) for v in start), ",".join(map(repr, damping))],
+                                           stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
+                                           cwd=workdir, start_new_session=True)
+            standin = FrankaStandin(host, port, process, log_path, workdir)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if not standin.alive():
+                raise ReconError(f"franka-sim ended at start-up:\n{standin.log_tail()}", hint="see its log above")
+            if _port_open(host, port):
+                return standin
+            time.sleep(0.1)
+        raise ReconError(f"franka-sim did not listen on {host}:{port} within {timeout:g} s:\n{standin.log_tail()}")
+    except BaseException:  # also Ctrl-C: nothing started here outlives the failed start
+        if standin is None:
+            shutil.rmtree(workdir, ignore_errors=True)
+        else:
+            try:
+                standin.kill()
+            finally:
+                shutil.rmtree(workdir, ignore_errors=True)
+        raise
 
 
 @contextlib.contextmanager

@@ -114,8 +114,8 @@ class Annotated:
             elif etree.QName(el).localname not in _DIRECTIVES and el.getparent() is not None:
                 # before the comments right above the call, which xacro removes with the call
                 first = el
-                while isinstance(first.getprevious(), etree._Comment) and not (first.getprevious().tail or "").strip():
-                    first = first.getprevious()
+                while isinstance(above := first.getprevious(), etree._Comment) and not (above.tail or "").strip():
+                    first = above
                 first.addprevious(etree.ProcessingInstruction(PI_TARGET, f"{label}:{el.sourceline}"))
         tree.write(str(target), xml_declaration=True, encoding="utf-8")
         return target

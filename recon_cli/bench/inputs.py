@@ -200,8 +200,8 @@ def _listing(folder: Path) -> list[tuple[str, int]]:
     return sorted((str(p.relative_to(folder)), p.stat().st_size) for p in folder.rglob("*") if p.is_file())
 
 
-def _run_one(case: Case, root: Path) -> Outcome:
-    """Run one case in its own process and judge it."""
+def _run_one(case: Case, root: Path, seconds_bound: float = SECONDS) -> Outcome:
+    """Run one case in its own process and judge it (``seconds_bound``: its wall-clock bound [s])."""
     marker = case.folder / "ran"
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "COLUMNS": "200"}
     argv = [sys.executable, "-m", "recon_cli", *(a.replace("MARK", str(marker)) for a in case.argv)]
@@ -209,7 +209,7 @@ def _run_one(case: Case, root: Path) -> Outcome:
     with open(case.folder / "stdout.txt", "wb") as out, open(case.folder / "stderr.txt", "wb") as err:
         proc = subprocess.Popen(argv, cwd=case.folder, stdout=out, stderr=err, stdin=subprocess.DEVNULL, env=env,
                                 start_new_session=True)
-        status, peak, timed_out = _wait(proc, start)
+        status, peak, timed_out = _wait(proc, start, seconds_bound)
     seconds = time.monotonic() - start
     text = (case.folder / "stdout.txt").read_text(errors="replace") + (case.folder / "stderr.txt").read_text(
         errors="replace")
@@ -218,7 +218,7 @@ def _run_one(case: Case, root: Path) -> Outcome:
                       last_line=(err_lines[-1] if err_lines else "")[:300])
     reason = ""
     if timed_out:
-        reason = f"ran longer than {SECONDS:g} s"
+        reason = f"ran longer than {seconds_bound:g} s"
     elif peak > MEMORY:
         reason = f"peak memory {peak / 1e6:.0f} MB"
     elif os.WIFSIGNALED(status):
@@ -243,9 +243,9 @@ def _run_one(case: Case, root: Path) -> Outcome:
 _OUTSIDE_LISTING: dict[str, list[tuple[str, int]]] = {}
 
 
-def _wait(proc: subprocess.Popen, start: float) -> tuple[int, int, bool]:
+def _wait(proc: subprocess.Popen, start: float, seconds_bound: float) -> tuple[int, int, bool]:
     """(wait status, peak resident memory [bytes], timed out) of a child, killed (with its
-    process group) after :data:`SECONDS` or when its memory passes :data:`MEMORY`."""
+    process group) after ``seconds_bound`` or when its memory passes 1.5 :data:`MEMORY`."""
     peak = 0
     while True:
         pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
@@ -253,11 +253,11 @@ def _wait(proc: subprocess.Popen, start: float) -> tuple[int, int, bool]:
             proc.returncode = 0  # reaped here; keep Popen from waiting again
             return status, max(peak, usage.ru_maxrss * 1024), False
         peak = max(peak, _rss(proc.pid))
-        if time.monotonic() - start > SECONDS or peak > 1.5 * MEMORY:
+        if time.monotonic() - start > seconds_bound or peak > 1.5 * MEMORY:
             os.killpg(proc.pid, signal.SIGKILL)
             _, status, usage = os.wait4(proc.pid, 0)
             proc.returncode = -9
-            return status, max(peak, usage.ru_maxrss * 1024), time.monotonic() - start > SECONDS
+            return status, max(peak, usage.ru_maxrss * 1024), time.monotonic() - start > seconds_bound
         time.sleep(0.05)
 
 
@@ -277,9 +277,10 @@ class CampaignResult:
 
 
 def run_campaign(out: Path, cases_per_kind: int, seed: int, workers: int, kinds: tuple[str, ...],
-                 update: Callable[[str, int, int], None] | None = None) -> CampaignResult:
-    """Make ``cases_per_kind`` cases of every kind (seeded), run them ``workers`` at a time,
-    keep the failing cases' folders under ``out``/failures."""
+                 update: Callable[[str, int, int], None] | None = None,
+                 seconds_bound: float = SECONDS) -> CampaignResult:
+    """Make ``cases_per_kind`` cases of every kind (seeded), run them ``workers`` at a time
+    (each within ``seconds_bound``), keep the failing cases' folders under ``out``/failures."""
     rng = np.random.default_rng(seed)
     work = out / "cases"
     cases: list[tuple[Case, Path]] = []
@@ -297,7 +298,7 @@ def run_campaign(out: Path, cases_per_kind: int, seed: int, workers: int, kinds:
     lock = threading.Lock()
 
     def one(item: tuple[Case, Path]) -> Outcome:
-        result = _run_one(*item)
+        result = _run_one(*item, seconds_bound)
         with lock:
             outcomes.append(result)
             if update:
@@ -325,7 +326,7 @@ def run_campaign(out: Path, cases_per_kind: int, seed: int, workers: int, kinds:
     shutil.rmtree(work, ignore_errors=True)
     result = CampaignResult(counts, failures, round(time.monotonic() - start, 1))
     (out / "bench_inputs.json").write_text(json.dumps(
-        {"seed": seed, "cases_per_kind": cases_per_kind, "seconds_bound": SECONDS, "memory_bound": MEMORY,
+        {"seed": seed, "cases_per_kind": cases_per_kind, "seconds_bound": seconds_bound, "memory_bound": MEMORY,
          "seconds": result.seconds, "counts": {k: asdict(v) for k, v in counts.items()},
          "failures": [asdict(f) for f in failures]}, indent=2))
     return result

@@ -120,7 +120,7 @@ def test_the_parts_of_the_package_import_each_other_without_a_circle():
 #: platform-specific; everything else is imported at the top of the module
 LATE = frozenset({"open3d", "cv2", "matplotlib", "scipy", "xacro", "ompl", "toppra", "pinocchio", "mplib",
                   "pyads", "genicam", "harvesters", "pyrealsense2", "rerun", "rerun_cli", "pyarrow",
-                  "distributed", "fcntl", "vamp", "pylibfranka"})
+                  "distributed", "psutil", "fcntl", "vamp", "pylibfranka"})
 
 
 def test_imports_stand_at_the_top_of_their_module():

@@ -27,6 +27,7 @@ import time
 import uuid
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor, as_completed
+from multiprocessing import resource_tracker
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -125,7 +126,6 @@ def _stop_resource_tracker() -> None:
     makes it clean up and exit, and it is waited for. A no-op where it is not running or
     Python has no such call."""
     try:
-        from multiprocessing import resource_tracker
 
         stop = getattr(resource_tracker._resource_tracker, "_stop", None)
         if stop is not None:

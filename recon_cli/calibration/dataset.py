@@ -41,6 +41,7 @@ from pathlib import Path, PurePath
 from typing import Any
 
 import numpy as np
+import yaml
 
 from recon_cli.calibration.camera_file import CameraCalibration
 from recon_cli.calibration.intrinsics import SkippedImage
@@ -363,8 +364,6 @@ def _non_finite_key(path: Path, is_json: bool, max_bytes: int) -> tuple[str, int
     """The key path (and line) of the first number that is not finite in a file a guarded
     reader refused for it (so its size, nesting, aliases and tags have passed the reader's
     checks), or None."""
-    import yaml
-
     def key_path(at: list) -> str:
         return "".join(f"[{k}]" if isinstance(k, int) else f".{k}" if i else str(k) for i, k in enumerate(at))
 

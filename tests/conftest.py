@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 from pathlib import Path
 
@@ -19,6 +20,20 @@ if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = ROOT.parent / "shared" / "data"
+
+
+def _scheduling() -> tuple[int, int]:
+    return os.sched_getscheduler(0), os.sched_getparam(0).sched_priority
+
+
+@pytest.fixture(autouse=True)
+def _scheduling_unchanged():
+    """No test leaves the test process under another scheduler: a thread left at real-time
+    FIFO 99 (libfranka's Robot constructor does that to its caller) starves every process
+    of its core, and the jobs a later test starts inherit it and run a hundred times slower."""
+    before = _scheduling()
+    yield
+    assert _scheduling() == before, f"the test process's scheduling changed from {before} to {_scheduling()}"
 
 
 @pytest.fixture(scope="session")

@@ -114,6 +114,20 @@ def test_planned_trajectory_executes_and_measured_joints_match(fr3, standin):
     robot.close()
 
 
+def test_connecting_and_moving_leave_the_callers_scheduling_as_it_was(fr3, standin):
+    """libfranka's Robot constructor moves its calling thread to real-time FIFO 99 (where the
+    system permits it, also with realtime: ignore) and leaves it there: recon's thread would
+    then render, plan and register at FIFO 99, starving the machine, and pass the policy on
+    to every thread and process it starts. Only the 1 kHz loop runs real-time."""
+    before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+    robot = FrankaRobot(CONFIG, fr3.joint_names, fr3.kin.limits)
+    assert (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority) == before
+    start = robot.measured_joints()
+    robot.execute(_plan(fr3, start, start + np.radians([5.0, 0, 0, 0, 0, 0, 5.0])))
+    assert (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority) == before
+    robot.close()
+
+
 def test_the_standins_arm_at_rest_stays_where_it_stands(fr3, standin):
     """The stand-in's position servo is stable on the cell's arm (its damping bounded by the
     arm's inertia, servo_damping_bound): at rest no joint moves by 10 µrad in a second. (With

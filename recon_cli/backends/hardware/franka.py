@@ -81,6 +81,27 @@ def realtime_priority() -> Iterator[bool]:
             os.sched_setscheduler(0, policy, param)
 
 
+@contextlib.contextmanager
+def scheduling_kept() -> Iterator[None]:
+    """The calling thread's scheduling policy and priority as they were before, afterwards.
+
+    libfranka's ``Robot`` constructor moves the thread that calls it to the real-time FIFO
+    scheduler at the highest priority, where the system permits it, and leaves it there, for
+    ``RealtimeConfig.kIgnore`` too. recon's thread then renders, plans and registers: at FIFO
+    99 it starves every other process of its core, and every thread and process it starts
+    inherits the policy. Only the 1 kHz loop runs real-time (:func:`realtime_priority`)."""
+    if not hasattr(os, "sched_getscheduler"):
+        yield
+        return
+    policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+    try:
+        yield
+    finally:
+        if (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority) != (policy, param.sched_priority):
+            with contextlib.suppress(OSError):
+                os.sched_setscheduler(0, policy, param)
+
+
 def _spread(window: list[np.ndarray]) -> float:
     """Largest range of any joint over consecutive states [rad]."""
     w = np.asarray(window)
@@ -129,7 +150,8 @@ class FrankaRobot:
         realtime = p.RealtimeConfig.kEnforce if config.realtime == "enforce" else p.RealtimeConfig.kIgnore
         self.robot: Any = None  # pylibfranka.Robot; None once closed
         try:
-            self.robot = p.Robot(config.ip, realtime)
+            with scheduling_kept():  # libfranka's constructor puts the calling thread under FIFO 99
+                self.robot = p.Robot(config.ip, realtime)
             state = self.robot.read_once()
         except (p.FrankaException, RuntimeError) as exc:
             self.robot = None

@@ -30,6 +30,7 @@ import yaml
 
 from recon_cli.errors import FileError, InputError
 from recon_cli.inputs import files
+from recon_cli.inputs.numbers import described
 from recon_cli.inputs.schema import check
 from recon_cli.inputs.yamlfile import line_of, plain, read_yaml
 from recon_cli.outputs import atomic_write_text
@@ -57,7 +58,8 @@ def _check_range(what: str, value: float, bounds: tuple[float, float], unit: str
     lo, hi = bounds
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
         example = f", e.g. {example}" if example else ""
-        raise InputError(f"{what} = {value!r}{unit} is outside {lo:g} ... {hi:g}{unit}",
+        shown = f"{value:g}" if isinstance(value, int | float) and not isinstance(value, bool) else described(value)
+        raise InputError(f"{what} = {shown}{unit} is outside {lo:g} ... {hi:g}{unit}",
                          hint=f"choose {what} within {lo:g} ... {hi:g}{unit}{example}")
 
 
@@ -72,11 +74,12 @@ class SceneConfig:
 
     def __post_init__(self) -> None:
         if not isinstance(self.object_name, str) or not self.object_name:
-            raise InputError(f"object name {self.object_name!r} is not a name",
+            raise InputError("the object name is empty or not a text",
                              hint="give a built-in object, a YCB object, a mesh file or 'auto'")
         scale = self.object_scale
         if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not 0 < scale <= MAX_SCALE:
-            raise InputError(f"object scale {scale!r} is not a positive number up to {MAX_SCALE:g}",
+            shown = repr(scale) if isinstance(scale, int | float) and not isinstance(scale, bool) else described(scale)
+            raise InputError(f"object scale {shown} is not a positive number up to {MAX_SCALE:g}",
                              hint="e.g. 0.001 for millimetres")
         _check_range("box margin", self.box_margin, BOX_MARGIN_RANGE, " m")
 
@@ -88,7 +91,7 @@ class SensorConfig:
 
     def __post_init__(self) -> None:
         if not isinstance(self.noise, bool):
-            raise InputError(f"sensor noise {self.noise!r} is not true or false", hint="write true or false")
+            raise InputError("sensor noise is not true or false", hint="write true or false")
         _check_range("image scale", self.resolution, RESOLUTION_RANGE, example="0.5 for 800 x 600")
 
 
@@ -138,7 +141,9 @@ class Config:
     def __post_init__(self) -> None:
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) \
                 or not SEED_RANGE[0] <= self.seed <= SEED_RANGE[1]:
-            raise InputError(f"seed {self.seed!r} is not a whole number within {SEED_RANGE[0]} ... 2^32-1",
+            seed = self.seed
+            shown = seed if isinstance(seed, int) and not isinstance(seed, bool) else described(seed)
+            raise InputError(f"seed {shown} is not a whole number within {SEED_RANGE[0]} ... 2^32-1",
                              hint="choose a seed within 0 ... 4294967295")
 
     def replace(self, **sections) -> Config:
@@ -260,10 +265,43 @@ def config_from_dict(data: dict, where: str = "config.yaml") -> Config:
     return Config(**sections)
 
 
+@dataclass(frozen=True)
+class ConfigFile:
+    """A ``config.yaml`` as read: its configuration, its ``run`` section and the document
+    itself (which knows the line of every key, for messages about its values)."""
+
+    path: Path
+    config: Config
+    run: dict
+    doc: dict
+
+    def line(self, dotted: str) -> int | None:
+        """The line of the key ``a.b.c`` (of its nearest parent written in the file)."""
+        node, line = self.doc, None
+        for key in dotted.split("."):
+            if not isinstance(node, dict) or key not in node:
+                break
+            line = line_of(node, key) or line
+            node = node[key]
+        return line
+
+    def at(self, dotted: str) -> str:
+        """``FILE:LINE: a.b.c``."""
+        line = self.line(dotted)
+        return f"{self.path}:{line}: {dotted}" if line else f"{self.path}: {dotted}"
+
+
 def read_config(path: Path) -> tuple[Config, dict]:
-    """The configuration of a run folder's ``config.yaml`` (through the YAML reader and the
-    schema) and its ``run`` section (what else repeats the run: command, script, store, ...);
-    a file that is a link leading out of its folder is refused before it is read."""
+    """The configuration of a run folder's ``config.yaml`` and its ``run`` section (see
+    :func:`load_config_file`)."""
+    file = load_config_file(path)
+    return file.config, file.run
+
+
+def load_config_file(path: Path) -> ConfigFile:
+    """A run folder's ``config.yaml`` (through the YAML reader and the schema) with its ``run``
+    section (what else repeats the run: command, script, store, ...); a file that is a link
+    leading out of its folder is refused before it is read."""
 
     hint = "give the config.yaml of a run folder (recon writes one into each)"
     path = Path(path)
@@ -271,8 +309,8 @@ def read_config(path: Path) -> tuple[Config, dict]:
     if link is not None:  # refused before it is read, as every file read back from a run folder
         raise FileError(files.outside_text(files.Refusal(files.OUTSIDE, path, 0, root=path.parent, link=link),
                                            "configuration file"), hint=files.OUTSIDE_HINT)
-    data = read_yaml(path, "configuration file", hint=hint)
+    data = read_yaml(path, "configuration file", hint=hint, root=path.parent)
     if data is None:
         raise InputError(f"{path} is empty", hint=hint)
     config = config_from_dict(data, str(path))
-    return config, plain(data.get(RUN_KEY) or {})
+    return ConfigFile(path, config, plain(data.get(RUN_KEY) or {}), data)

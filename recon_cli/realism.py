@@ -36,8 +36,9 @@ from pathlib import Path
 from typing import Any
 
 from recon_cli.errors import InputError, UnknownNameError
+from recon_cli.inputs.numbers import described
 from recon_cli.inputs.schema import check
-from recon_cli.inputs.yamlfile import parse_yaml, read_text
+from recon_cli.inputs.yamlfile import parse_yaml, read_text, shown_key, unknown_key_text
 from recon_cli.paths import ROBOT_DIR
 from recon_cli.perception.camera_model import Intrinsics
 
@@ -193,7 +194,8 @@ def parse_profile(text: str, where: str = "<profile>") -> RealismProfile:
     d = r.mapping(_profile_data(text, where, ()), "", ("format", "name", *SECTIONS))
     fmt = d.get("format", PROFILE_FORMAT)
     if fmt != PROFILE_FORMAT:
-        r.fail("format", f"is {fmt!r}, not {PROFILE_FORMAT}", "this recon reads profiles of format 1")
+        r.fail("format", f"is {described(fmt) if isinstance(fmt, str) else fmt}, not {PROFILE_FORMAT}",
+               "this recon reads profiles of format 1")
     name = str(d.get("name", Path(where).stem))
     return RealismProfile(name=name, source=where, kinematics=_kinematics(r, d.get("kinematics")),
                           camera=_camera(r, d.get("camera")), depth=_depth(r, d.get("depth")),
@@ -211,7 +213,7 @@ def _profile_data(text: str, where: str, chain: tuple[str, ...]) -> dict:
     if parent is None:
         return own
     if parent in chain:  # the built-in profiles are few: this bounds the chain
-        _Reader(where).fail("extends", f"= {parent} comes back to itself ({' -> '.join((*chain, parent))})",
+        _Reader(where).fail("extends", f"comes back to itself ({' -> '.join((*chain, parent))})",
                             "extend a built-in profile that does not extend this one")
     path = REALISM_DIR / f"{parent}.yaml"
     inherited = _profile_data(read_text(path, "realism profile"), str(path), (*chain, str(parent)))
@@ -240,7 +242,10 @@ class _Reader:
             self.fail(key or "the profile", "is not a mapping", "write 'key: value' lines under it")
         for k in value:
             if k not in known:
-                self.fail(f"{key}.{k}" if key else str(k), "is not a known key", f"known keys: {', '.join(known)}")
+                raise InputError(f"{self.where}: " + unknown_key_text(key, k) if key else
+                                 f"{self.where}: " + (f"{k} is not a known key" if shown_key(k) is not None
+                                                      else "a key is not a known key (nor a plain name)"),
+                                 hint=f"known keys: {', '.join(known)}")
         return value
 
     def number(self, d: dict, key: str, path: str, default: float, lo: float = -math.inf,
@@ -249,7 +254,8 @@ class _Reader:
             return default
         v = d[key]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            self.fail(f"{path}.{key}", f"is {v!r}, not a number")
+            self.fail(f"{path}.{key}", f"is {described(v)}, not a number" if not isinstance(v, float)
+                      else f"= {v} is not a finite number")
         if not lo <= v <= hi:
             self.fail(f"{path}.{key}", f"= {v} is outside {lo:g} ... {hi:g}")
         return float(v)
@@ -260,7 +266,7 @@ class _Reader:
         v = d[key]
         if (not isinstance(v, list) or len(v) != n
                 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
-            self.fail(f"{path}.{key}", f"is {v!r}, not a list of {n} numbers")
+            self.fail(f"{path}.{key}", f"is {described(v)}, not a list of {n} numbers")
         return tuple(float(x) for x in v)
 
 
@@ -278,7 +284,8 @@ def _kinematics(r: _Reader, value) -> KinematicErrors:
     stiffness = tuple((str(k), r.number(stiff, k, f"{p}.joint_stiffness", 0.0, 0.0)) for k in stiff)
     for k, v in stiffness:
         if v <= 0:
-            r.fail(f"{p}.joint_stiffness.{k}", f"= {v} is not positive", "leave a rigid joint out")
+            r.fail(f"{p}.joint_stiffness.{shown_key(k) or '<key>'}", f"= {v} is not positive",
+                   "leave a rigid joint out")
     return KinematicErrors(
         joint_offset_std=math.radians(r.number(d, "joint_offset_std_deg", p, 0.0, 0.0, 5.0)),
         axis_offset_std=r.number(d, "axis_offset_std_mm", p, 0.0, 0.0, 100.0) * 1e-3,
@@ -299,7 +306,7 @@ def _camera_spec(r: _Reader, value, path: str) -> CameraSpec | None:
     height = int(r.number(d, "height", path, 1200, 1, 65535))
     dist = d.get("distortion")
     if dist is not None and (not isinstance(dist, list) or len(dist) not in (4, 5)):
-        r.fail(f"{path}.distortion", f"is {dist!r}, not [k1, k2, p1, p2] or [k1, k2, p1, p2, k3]")
+        r.fail(f"{path}.distortion", f"is {described(dist)}, not [k1, k2, p1, p2] or [k1, k2, p1, p2, k3]")
     coeffs: tuple[float, ...] = ()
     if dist is not None:
         coeffs = r.numbers({"distortion": dist}, "distortion", path, len(dist)) or ()

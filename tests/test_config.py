@@ -111,8 +111,8 @@ def test_config_round_trip_to_dict_from_dict():
     (lambda d: d["viewplan"].update(bogus=1), 11, "viewplan.bogus is not a known key"),
     (lambda d: d["sensor"].update(resolution=3.0), 6, "sensor.resolution = 3 is outside [0.05, 1]"),
     (lambda d: d.update(seed=-1), 11, "seed = -1 is outside [0, 4.29497e+09]"),
-    (lambda d: d["planner"].update(planner="RRTfast"), 8, "planner.planner = 'RRTfast' is not one of"),
-    (lambda d: d["scene"].update(object_name=""), 2, "scene: object name '' is not a name"),
+    (lambda d: d["planner"].update(planner="RRTfast"), 8, "planner.planner is not one of"),
+    (lambda d: d["scene"].update(object_name=""), 2, "scene: the object name is empty or not a text"),
 ])
 def test_bad_config_is_one_line_with_file_and_line(tmp_path, edit, line, needle):
     from recon_cli.config import read_config
@@ -209,4 +209,5 @@ def test_cli_config_of_another_command_is_refused(tmp_path, capsys):
     path = write_config(tmp_path, DEFAULTS, command="autoscan")
     code = main(["capture", "--config", str(path), "--out", str(tmp_path / "c")])
     err = capsys.readouterr().err
-    assert code == 1 and "is the configuration of a 'recon autoscan' run, not of 'recon capture'" in err
+    assert code == 1 and f"{path}:" in err and ": run.command: this config.yaml was written by recon autoscan; " \
+                                              "give one written by recon capture" in err, err

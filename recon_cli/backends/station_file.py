@@ -16,7 +16,9 @@ A YAML file (documented with a complete example in docs/hardware.md)::
       genicam: {serial: PhoXi-1234, ...}
 
 Every key is checked when the file is read: an unknown key, a wrong type or a missing
-section is one line naming ``FILE: key``. The adapters (their names, what they are, how
+section is one line naming ``FILE: key``, never quoting the file's text. A station file that
+is a link leading out of its folder is refused before it is read, and so is a cell file it
+names that does not lie in that folder (links resolved). The adapters (their names, what they are, how
 their sections are read) are the registry of recon_cli/backends/adapters.py.
 """
 
@@ -34,9 +36,10 @@ from recon_cli.backends.adapters import (
     station_capabilities,
 )
 from recon_cli.backends.base import Capabilities
-from recon_cli.errors import InputError, UnknownNameError
+from recon_cli.errors import FileError, InputError, UnknownNameError
+from recon_cli.inputs import files
 from recon_cli.inputs.schema import check
-from recon_cli.inputs.yamlfile import line_of, read_yaml
+from recon_cli.inputs.yamlfile import line_of, read_yaml, unknown_key_text
 from recon_cli.robot.cell_file import load_cell
 from recon_cli.robot.description import CellConfig, CellName
 
@@ -69,7 +72,7 @@ def _known_keys(d: Any, where: str, known: tuple[str, ...]) -> None:
         raise InputError(f"{where} is not a mapping", hint="write 'key: value' lines under it")
     for key in d:
         if key not in known:
-            raise InputError(f"{where}.{key} is not a known key", hint=f"known keys: {', '.join(known)}")
+            raise InputError(unknown_key_text(where, key), hint=f"known keys: {', '.join(known)}")
 
 
 def load_station(path: Path) -> StationFile:
@@ -77,7 +80,7 @@ def load_station(path: Path) -> StationFile:
     then the adapters' own checks)."""
 
     path = Path(path)
-    data = read_yaml(path, "station file", hint="see docs/hardware.md for an example")
+    data = read_yaml(path, "station file", hint="see docs/hardware.md for an example", root=path.parent)
     w = str(path)
     check(data, "station", w)
     cell_map = data.get("cell", {}) or {}
@@ -94,7 +97,13 @@ def load_station(path: Path) -> StationFile:
         flat = tuple(v for r in rows for v in r)
     kind = str(cell_map.get("kind", "gantry"))
     if Path(kind).suffix.lower() in (".yaml", ".yml"):  # a cell file, relative to the station file
-        kind = str(path.parent / Path(kind).expanduser())
+        named = path.parent / Path(kind).expanduser()
+        if files.link_out_of(named, path.parent) is not None:  # before it is read
+            line = line_of(cell_map, "kind") or line_of(data, "cell")
+            raise FileError(f"{w}:{line}: cell.kind names a file outside the station file's folder "
+                            f"{path.parent.absolute()} (or a link leading out of it); not read",
+                            hint="keep the cell file in the station file's folder (docs/hardware.md)")
+        kind = str(named)
         load_cell(kind)  # its mistakes are lines of that file
     try:
         cell = CellConfig(kind=CellName.parse(kind),
@@ -102,8 +111,13 @@ def load_station(path: Path) -> StationFile:
                                            else None),  # type: ignore[arg-type]  # None: the cell file's
                           table_lift=float(cell_map.get("table_lift", 0.0)),
                           ceiling_xy=tuple(cell_map.get("ceiling_xy", (0.0, 0.0))), flange_T_camera=flat)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"{w}: cell: {exc}", hint="see docs/hardware.md") from None
+    except (TypeError, ValueError):  # (the schema has checked the types; Python's text would quote the value)
+        raise InputError(f"{w}: cell holds a value that is not a number where one is expected",
+                         hint="see docs/hardware.md") from None
+    except UnknownNameError as exc:  # the name is not repeated: it is the file's text
+        line = line_of(cell_map, "kind") or line_of(data, "cell")
+        raise InputError(f"{w}:{line}: cell.kind is not a shipped cell nor a cell FILE.yaml" if line else
+                         f"{w}: cell.kind is not a shipped cell nor a cell FILE.yaml", hint=exc.hint) from None
     except InputError as exc:
         key = "hand_eye" if "hand-eye" in exc.message else "cell"
         line = line_of(data, key)
@@ -124,8 +138,9 @@ def _part(data: dict, part: str, registry: dict, w: str, example: str):
         raise InputError(f"{w}: no {part} section", hint=example)
     _known_keys(mapping, f"{w}: {part}", ("adapter", *registry))
     name = str(mapping.get("adapter", ""))
-    if name not in registry:
-        raise UnknownNameError(f"{part} adapter", name, tuple(registry))
+    if name not in registry:  # (the schema refuses it first; the name is the file's text, not repeated)
+        raise InputError(f"{w}: {part}.adapter is not one of {', '.join(registry)}",
+                         hint=f"choose one of: {', '.join(registry)}")
     line = line_of(mapping, name) or line_of(data, part)
     where = f"{w}:{line}: {part}.{name}" if line else f"{w}: {part}.{name}"
     return name, registry[name].read(mapping.get(name) or {}, where)

@@ -41,8 +41,9 @@ from pathlib import Path
 from typing import Protocol
 
 from recon_cli.errors import FileError, InputError
+from recon_cli.inputs.numbers import described
 from recon_cli.inputs.schema import check as check_schema
-from recon_cli.inputs.yamlfile import Map, read_yaml
+from recon_cli.inputs.yamlfile import Map, read_yaml, shown_key
 from recon_cli.paths import BATCHES_DIR, SCRIPTS_DIR
 
 MAX_JOBS = 10_000
@@ -204,23 +205,24 @@ def _option_args(kind: JobKind, options: dict, where: dict, commands: Commands) 
     args: list[str] = []
     for key, value in options.items():
         w = where[key]
+        name = shown_key(key) or "<key>"  # (a key that is not a plain name is not repeated)
         if key in RESERVED:
             raise InputError(f"{w}: option '{key}' cannot be set in a batch", hint=RESERVED[key])
         opt = known.get(key)
         if opt is None:
-            raise InputError(f"{w}: recon {kind.value} has no option '{key}'",
+            raise InputError(f"{w}: recon {kind.value} has no option '{name}'",
                              hint="choose one of: " + ", ".join(k for k in known if k not in RESERVED))
         if opt.is_flag:
             if not isinstance(value, bool):
-                raise InputError(f"{w}: '{key}' is a switch; write true or false")
+                raise InputError(f"{w}: '{name}' is a switch; write true or false")
             piece = [opt.flag] if value else ([opt.off] if opt.off else [])
         elif isinstance(value, dict | list) or value is None:
-            raise InputError(f"{w}: '{key}' needs one value, not {type(value).__name__}")
+            raise InputError(f"{w}: '{name}' needs one value, not {described(value)}")
         else:
             piece = [opt.flag, _format_number(value)]
         problem = commands.check(kind, ("SCRIPT.xml",) * kind.takes_script + tuple(piece))
-        if problem:
-            raise InputError(f"{w}: {problem}")
+        if problem:  # the parser's words, without the value it quotes
+            raise InputError(f"{w}: {problem.replace(piece[-1], '<value>') if len(piece) > 1 else problem}")
         args += piece
     return tuple(args)
 
@@ -252,7 +254,8 @@ class Loc:
         """The location of ``mapping[key]`` (a mapping read by :func:`load_yaml`)."""
         lines = getattr(mapping, "lines", None)
         line = lines.get(key) if isinstance(lines, dict) else None
-        return Loc(self.path, line or self.line, f"{self.keys}.{key}" if self.keys else str(key))
+        name = shown_key(key) or "<key>"  # a key that is not a plain name is not repeated
+        return Loc(self.path, line or self.line, f"{self.keys}.{name}" if self.keys else name)
 
     def item(self, seq, i: int) -> Loc:
         lines = getattr(seq, "lines", None)
@@ -284,7 +287,8 @@ def _check_number(value, loc: Loc, *, integer: bool, positive: bool) -> None:
         ok = False
     if not ok or value < 0 or (positive and value == 0) or value == float("inf"):
         kind = "a whole number" if integer else "a number"
-        raise InputError(f"{loc}: {value!r} is not {kind} {'> 0' if positive else '>= 0'}")
+        shown = f"{value:g}" if isinstance(value, int | float) and not isinstance(value, bool) else described(value)
+        raise InputError(f"{loc}: {shown} is not {kind} {'> 0' if positive else '>= 0'}")
 
 
 def _number(value, loc: Loc, *, positive: bool = False) -> float:
@@ -364,7 +368,7 @@ def _env(value, loc: Loc) -> tuple[tuple[str, str], ...]:
 def _substitute(text: str, values: dict[str, str], loc: Loc) -> str:
     def repl(m: re.Match) -> str:
         if m.group(1) not in values:
-            raise InputError(f"{loc}: {{{m.group(1)}}} is not a matrix key",
+            raise InputError(f"{loc}: {{{shown_key(m.group(1)) or '<key>'}}} is not a matrix key",
                              hint="matrix keys: " + (", ".join(values) or "none (the job has no matrix)"))
         return values[m.group(1)]
 
@@ -386,7 +390,7 @@ def _resolve_script(text: str, base: Path, loc: Loc) -> Path:
 def _job_name(value: str, loc: Loc | str) -> str:
     name = _NAME_CHARS.sub("_", value).strip("._")
     if not name:
-        raise InputError(f"{loc}: job name {value!r} has no letters or digits")
+        raise InputError(f"{loc}: the job name has no letters or digits")
     return name[:120]
 
 
@@ -431,11 +435,13 @@ def _expand(path: Path, entry: dict, loc: Loc, defaults: _Defaults, overrides: O
         if any(isinstance(v, dict | list) or v is None for v in values):
             raise InputError(f"{mat_loc.at(matrix, key)}: matrix values are single values (text or numbers)")
         if key in options:
-            raise InputError(f"{mat_loc.at(matrix, key)}: '{key}' is set both in the matrix and in the options")
+            raise InputError(f"{mat_loc.at(matrix, key)}: '{shown_key(key) or '<key>'}' is set both in the matrix "
+                             "and in the options")
         if key not in command_keys and not (_uses(entry.get("name"), key) or _uses(raw, key)
                                             or any(_uses(v, key) for v in options.values())):
-            raise InputError(f"{mat_loc.at(matrix, key)}: '{key}' is no option of recon {kind.value} and no "
-                             f"{{{key}}} uses it", hint="use it as {" + str(key) + "} in the name or a value")
+            name = shown_key(key) or "<key>"
+            raise InputError(f"{mat_loc.at(matrix, key)}: '{name}' is no option of recon {kind.value} and no "
+                             f"{{{name}}} uses it", hint="use it as {" + name + "} in the name or a value")
     ex_loc = loc.at(entry, "exclude")
     excludes = entry.get("exclude") or []
     if not isinstance(excludes, list) or any(not isinstance(x, dict) for x in excludes):
@@ -443,7 +449,7 @@ def _expand(path: Path, entry: dict, loc: Loc, defaults: _Defaults, overrides: O
     for x in excludes:
         for k in x:
             if k not in matrix:
-                raise InputError(f"{ex_loc}: '{k}' is not a matrix key")
+                raise InputError(f"{ex_loc}: '{shown_key(k) or '<key>'}' is not a matrix key")
     keys = [str(k) for k in matrix]
     count = math.prod(len(v) for v in matrix.values())
     if count - len(excludes) > MAX_JOBS:  # counted before anything is expanded

@@ -28,8 +28,9 @@ import numpy as np
 import yaml
 
 from recon_cli.errors import InputError
+from recon_cli.inputs.numbers import described
 from recon_cli.inputs.schema import check
-from recon_cli.inputs.yamlfile import line_of, plain, read_yaml
+from recon_cli.inputs.yamlfile import line_of, plain, read_yaml, unknown_key_text
 from recon_cli.outputs import atomic_write_text
 from recon_cli.perception.camera_model import Intrinsics
 from recon_cli.realism import BUILT_IN, REALISM_DIR, CameraSpec, parse_profile
@@ -71,19 +72,21 @@ class CameraCalibration:
             raise InputError(f"{where} is not a mapping", hint=f"give {', '.join(CAMERA_KEYS)}")
         for key in d:
             if key not in CAMERA_KEYS:
-                raise InputError(f"{where}.{key} is not a known key", hint=f"known keys: {', '.join(CAMERA_KEYS)}")
+                raise InputError(unknown_key_text(where, key), hint=f"known keys: {', '.join(CAMERA_KEYS)}")
         values = {}
         for key in CAMERA_KEYS[:6]:
             v = d.get(key)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-                raise InputError(f"{where}.{key} is {v!r}, not a positive number",
+                shown = f"{v:g}" if isinstance(v, int | float) and not isinstance(v, bool) else described(v)
+                raise InputError(f"{where}.{key} is {shown}, not a positive number",
                                  hint="width, height, fx, fy, cx, cy in pixels")
             values[key] = v
         dist = d.get("distortion", [0.0] * 5)
         if (not isinstance(dist, list) or len(dist) not in (4, 5)
                 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
                            for x in dist)):
-            raise InputError(f"{where}.distortion is {dist!r}, not [k1, k2, p1, p2] or [k1, k2, p1, p2, k3]")
+            raise InputError(f"{where}.distortion is {described(dist)}, not [k1, k2, p1, p2] or [k1, k2, p1, p2, k3] "
+                             "(finite numbers)")
         dist = [float(x) for x in dist] + [0.0] * (5 - len(dist))
         K = Intrinsics(int(values["width"]), int(values["height"]), float(values["fx"]), float(values["fy"]),
                        float(values["cx"]), float(values["cy"]))

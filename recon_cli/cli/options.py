@@ -6,9 +6,10 @@ Open3D), so ``recon --help`` shows the same numbers a run uses.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
 
@@ -18,14 +19,17 @@ from recon_cli.config import (
     DEFAULTS,
     MAX_SCALE,
     RESOLUTION_RANGE,
+    RUN_KEY,
     SEED_RANGE,
     VIEWPLAN_DC,
     VIEWPLAN_N,
     Config,
-    read_config,
+    ConfigFile,
+    load_config_file,
 )
 from recon_cli.errors import InputError, UnknownNameError
 from recon_cli.geometry.view import MAX_COORDINATE, MAX_RADIUS, Frame, View
+from recon_cli.inputs.numbers import described
 from recon_cli.objects import BUILTIN, ycb_names
 from recon_cli.outputs import OutputMode, claim_output
 from recon_cli.planning.options import PLANNERS, SIMPLIFICATIONS
@@ -329,32 +333,91 @@ def positive(value: float, option: str, hint: str) -> float:
 
 
 @dataclass(frozen=True)
+class OptionRange:
+    """The range of a number option (its ``min`` and ``max``), for the values a --config
+    file gives in its place."""
+
+    flag: str
+    lo: float
+    hi: float
+    whole: bool
+
+
+def option_ranges(ctx: typer.Context) -> dict[str, OptionRange]:
+    """The range of every number option of the command being run, by parameter name."""
+    out = {}
+    for param in ctx.command.params:
+        lo, hi = getattr(param, "min", None), getattr(param, "max", None)
+        if param.name and lo is not None and hi is not None and param.opts:
+            annotation = getattr(getattr(param, "type_descriptor", None), "annotation", None)
+            whole = annotation is int or int in getattr(annotation, "__args__", ())
+            flag = max((o for o in param.opts if o.startswith("--")), key=len, default=param.opts[0])
+            out[param.name] = OptionRange(flag, lo, hi, whole)
+    return out
+
+
+@dataclass(frozen=True)
 class RunBase:
     """What a command starts from: the configuration and the ``run:`` section of ``--config
-    FILE`` (else the defaults and nothing), and which options were given on the command line."""
+    FILE`` (else the defaults and nothing), and which options were given on the command line.
+
+    A number the file gives in place of an option is refused outside that option's range
+    (``ranges``), as on the command line: --config takes what the options take."""
 
     config: Config
     run: dict
     path: Path | None
     given: frozenset[str]
+    file: ConfigFile | None = None
+    command: str = ""
+    ranges: dict[str, OptionRange] = field(default_factory=dict)
 
-    def pick(self, name: str, value, stored):
+    def _checked(self, name: str, value, dotted: str):
+        """``value``, given by the file at ``dotted`` for the option ``name``, within the
+        option's range."""
+        r = self.ranges.get(name)
+        if r is None or self.file is None or value is None:
+            return value
+        at = self.file.at(dotted)
+        kind = "a whole number" if r.whole else "a number"
+        if isinstance(value, bool) or not isinstance(value, int | float) \
+                or (r.whole and not (math.isfinite(value) and float(value).is_integer())):
+            shown = f"= {value:g} is" if isinstance(value, float) else f"is {described(value)},"
+            raise InputError(f"{at} {shown} not {kind} (the value of {r.flag})",
+                             hint=f"write {kind} within {r.lo:g} ... {r.hi:g}")
+        if not (math.isfinite(value) and r.lo <= value <= r.hi):
+            raise InputError(f"{at} = {value:g} is outside {r.lo:g} ... {r.hi:g}, the range of {r.flag}",
+                             hint=f"give a value the command line takes (recon {self.command} --help)")
+        return value
+
+    def pick(self, name: str, value, stored, at: str | None = None):
         """The option ``name``'s ``value`` where it was given or there is no --config file,
-        else the file's ``stored`` value."""
-        return value if self.path is None or name in self.given else stored
+        else the file's ``stored`` value (at the key ``at`` of the file, by default
+        ``run.NAME``), refused outside the option's range."""
+        if self.path is None or name in self.given:
+            return value
+        return self._checked(name, stored, at or f"{RUN_KEY}.{name}")
 
     def picked(self, **options) -> dict:
         """``{config path: value}`` of the options that override the file (all without
         --config): ``options`` maps an option's parameter name to (dotted config path, value);
-        a value may be a function, called only when it is used."""
+        a value may be a function, called only when it is used. The file's values of the
+        other options are checked against the options' ranges."""
         out = {}
         for name, (path, value) in options.items():
             if self.path is None or name in self.given:
                 out[path] = value() if callable(value) else value
+            elif name in self.ranges:
+                self._checked(name, functools.reduce(getattr, path.split("."), self.config), path)
         return out
 
     def stored(self, key: str, default=None):
         return self.run.get(key, default)
+
+
+#: the commands that take --config FILE, and every command whose run folder holds a config.yaml
+CONFIG_COMMANDS = ("autoscan", "capture", "register", "run")
+CONFIG_WRITERS = (*CONFIG_COMMANDS, "calibrate", "bench registration", "bench viewplan", "bench sim")
 
 
 def run_base(ctx: typer.Context, path: Path | None, command: str) -> RunBase:
@@ -366,9 +429,15 @@ def run_base(ctx: typer.Context, path: Path | None, command: str) -> RunBase:
     if path is None:
         return RunBase(DEFAULTS, {}, None, given)
 
-    config, run = read_config(path)
-    written = run.get("command")
+    file = load_config_file(path)
+    written = file.run.get("command")
     if written is not None and written != command:
-        raise InputError(f"{path} is the configuration of a 'recon {written}' run, not of 'recon {command}'",
-                         hint=f"repeat it with recon {written} --config {path}")
-    return RunBase(config, run, Path(path), given)
+        if isinstance(written, str) and written in CONFIG_WRITERS:
+            hint = (f"repeat it with recon {written} --config {path}" if written in CONFIG_COMMANDS
+                    else f"give one written by recon {command} (its run folder's config.yaml)")
+            raise InputError(f"{file.at(RUN_KEY + '.command')}: this config.yaml was written by recon {written}; "
+                             f"give one written by recon {command}", hint=hint)
+        raise InputError(f"{file.at(RUN_KEY + '.command')} names no command that writes a config.yaml "
+                         f"(one of {', '.join(CONFIG_WRITERS)})",
+                         hint=f"give the config.yaml of a recon {command} run folder")
+    return RunBase(file.config, file.run, Path(path), given, file, command, option_ranges(ctx))

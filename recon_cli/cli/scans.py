@@ -113,8 +113,10 @@ def capture(
     check_record(record)
     base = run_base(ctx, config_file, "capture")
     stored_view = base.stored("view") or {}
+    if not isinstance(stored_view, dict):
+        raise InputError(f"{config_file}: run.view is not a mapping", hint="give the config.yaml of a capture run")
     focus, radius, theta, phi, alpha, frame = (
-        base.pick(name, value, stored_view.get(name, value))
+        base.pick(name, value, stored_view.get(name, value), at=f"run.view.{name}")
         for name, value in (("focus", focus), ("radius", radius), ("theta", theta), ("phi", phi), ("alpha", alpha),
                             ("frame", frame)))
     views = base.pick("views", views, base.stored("views", views))

@@ -3,6 +3,9 @@ and inside its documented range, or the read fails with one line naming where it
 
 NaN compares false with everything, so a check written ``if not value > 0`` lets nothing
 through, but ``if value < lo`` lets NaN through: every check here tests finiteness first.
+
+A refusal shows a number as the number it was read as; anything else (a text, a list) is
+described, never quoted (:func:`described`).
 """
 
 from __future__ import annotations
@@ -17,10 +20,25 @@ def _fmt(x: float) -> str:
     return f"{x:g}"
 
 
+def described(value: object) -> str:
+    """What ``value`` is, without its content (``a text``, ``true``, ``a list of 3 items``)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if value is None:
+        return "empty"
+    if isinstance(value, str | bytes):
+        return "a text"
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list | tuple):
+        return f"a list of {len(value)} item{'s' if len(value) != 1 else ''}"
+    return "not a plain value"
+
+
 def real(value: object, where: str, *, hint: str | None = None) -> float:
     """``value`` as a finite float (bools and strings are refused, ints accepted)."""
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise InputError(f"{where} = {value!r} is not a number", hint=hint or "write a plain number, e.g. 0.5")
+        raise InputError(f"{where} is {described(value)}, not a number", hint=hint or "write a plain number, e.g. 0.5")
     try:
         x = float(value)
     except OverflowError:
@@ -57,11 +75,12 @@ def integer(value: object, where: str, lo: int | None = None, hi: int | None = N
             hint: str | None = None) -> int:
     """An int inside ``[lo, hi]`` (a float with an integral value is accepted)."""
     if isinstance(value, bool):
-        raise InputError(f"{where} = {value!r} is not a whole number", hint=hint or "e.g. 40")
+        raise InputError(f"{where} is {described(value)}, not a whole number", hint=hint or "e.g. 40")
     if isinstance(value, float) and math.isfinite(value) and value.is_integer():
         value = int(value)
     if not isinstance(value, int):
-        raise InputError(f"{where} = {value!r} is not a whole number", hint=hint or "e.g. 40")
+        text = f"= {value:g} is" if isinstance(value, float) else f"is {described(value)},"
+        raise InputError(f"{where} {text} not a whole number", hint=hint or "e.g. 40")
     if (lo is not None and value < lo) or (hi is not None and value > hi):
         raise InputError(f"{where} = {value} is outside {range_text(lo, hi)}",
                          hint=hint or "give a value inside the range")

@@ -1,8 +1,9 @@
 """One schema per YAML file kind (schemas/KIND.schema.json, JSON Schema 2020-12): the keys
 a file may hold, their types, and the documented range of every number. A document read by
 :mod:`.yamlfile` is checked against its kind's schema before anything is built from it, and
-the first problem is one line naming ``file:line key.path``, the value, what is allowed and
-what to do.
+the first problem is one line naming ``file:line key.path``, what is allowed and what to do.
+It never quotes the file's text: a number outside its range is named as the parsed number, a
+text or a key that is not a plain name is described ("a text", "a key"), not shown.
 
 Besides JSON Schema's own keywords a schema may carry ``unit`` (printed after numbers and
 ranges) and ``hint`` (the "what to do" of a refusal at that place). The tables of
@@ -21,7 +22,7 @@ import jsonschema
 
 from recon_cli.errors import InputError
 from recon_cli.inputs.numbers import range_text
-from recon_cli.inputs.yamlfile import line_of
+from recon_cli.inputs.yamlfile import key_path, line_of, shown_key
 from recon_cli.paths import SCHEMA_DIR
 
 #: the YAML file kinds with a schema (schemas/KIND.schema.json)
@@ -45,17 +46,33 @@ def _validator(kind: str, part: str | None = None):
     return cls(schema)
 
 
-def key_path(path) -> str:
-    """``a.b[2].c`` of a JSON path."""
-    out = ""
-    for part in path:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
-    return out
+__all__ = ["KINDS", "check", "key_path", "load_schema", "range_rows"]
 
 
-def _short(value: Any) -> str:
-    text = repr(value) if isinstance(value, str) else json.dumps(value, default=str)
-    return text if len(text) <= 60 else text[:57] + "..."
+def _what(value: Any) -> str:
+    """What a value is, without its content: a number is shown (parsed), anything else is
+    described (a text of 12 characters, a list of 3 items, ...)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return f"{value:g}" if isinstance(value, float) else str(value)
+    if value is None:
+        return "empty"
+    if isinstance(value, str):
+        return f"a text of {len(value)} character{'s' if len(value) != 1 else ''}"
+    if isinstance(value, dict):
+        return f"a mapping of {len(value)} key{'s' if len(value) != 1 else ''}"
+    if isinstance(value, list):
+        return f"a list of {len(value)} item{'s' if len(value) != 1 else ''}"
+    return "a value"
+
+
+def _is(value: Any) -> str:
+    """``= 3 is`` for a number, ``is a text of 5 characters,`` for anything else (followed by
+    ``not ...``)."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return f"= {_what(value)} is"
+    return f"is {_what(value)},"
 
 
 def _locate(doc: Any, path) -> tuple[Any, Any]:
@@ -100,8 +117,11 @@ def _message(error, doc: Any, where: str) -> InputError:
         key = extra[0] if extra else "?"
         line = line_of(instance, key) or _line(doc, path)
         at = f"{where}:{line}" if line else where
-        name = key_path([*path, key])
-        return InputError(f"{at}: {name} is not a known key",
+        if shown_key(key) is not None:
+            text = f"{key_path([*path, key])} is not a known key"
+        else:  # not a plain name: not shown
+            text = f"a key of {key_path(path) or 'the file'} is not a known key (nor a plain name)"
+        return InputError(f"{at}: {text}",
                           hint=f"known keys{(' of ' + key_path(path)) if path else ''}: {', '.join(known)}")
     line = _line(doc, path)
     at = f"{where}:{line}" if line else where
@@ -114,7 +134,7 @@ def _message(error, doc: Any, where: str) -> InputError:
                               hint=hint or "see docs/inputs.md")
         return InputError(f"{at}: {name} lacks {', '.join(missing)}", hint=hint or "see docs/inputs.md")
     if validator == "type":
-        return InputError(f"{at}: {name} = {_short(instance)} is not {_type_text(error.validator_value)}",
+        return InputError(f"{at}: {name} {_is(instance)} not {_type_text(error.validator_value)}",
                           hint=hint)
     if validator in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
         lo = schema.get("minimum", schema.get("exclusiveMinimum"))
@@ -126,7 +146,8 @@ def _message(error, doc: Any, where: str) -> InputError:
                           hint=hint or "give a value inside the range")
     if validator in ("enum", "const"):
         choices = error.validator_value if validator == "enum" else [error.validator_value]
-        return InputError(f"{at}: {name} = {_short(instance)} is not "
+        shown = f" = {_what(instance)}" if isinstance(instance, int | float) and not isinstance(instance, bool) else ""
+        return InputError(f"{at}: {name}{shown} is not "
                           f"{'one of ' if len(choices) > 1 else ''}{', '.join(map(str, choices))}",
                           hint=hint or f"choose {' or '.join(map(str, choices))}")
     if validator in ("minItems", "maxItems"):
@@ -135,9 +156,10 @@ def _message(error, doc: Any, where: str) -> InputError:
         return InputError(f"{at}: {name} has {len(instance)} items, {want} expected", hint=hint)
     if validator in ("minLength", "maxLength", "pattern", "minProperties", "maxProperties", "propertyNames",
                      "not"):
-        return InputError(f"{at}: {name} = {_short(instance)} is not accepted here "
+        return InputError(f"{at}: {name} {_is(instance)} not accepted here "
                           f"({schema.get('description') or validator})", hint=hint)
-    return InputError(f"{at}: {name}: {error.message}", hint=hint)
+    # jsonschema's own message quotes the value: not used
+    return InputError(f"{at}: {name} {_is(instance)} not accepted here ({validator})", hint=hint)
 
 
 def _best(errors) -> Any:

@@ -46,6 +46,9 @@ class Faults:
     freeze_at: float | None = None  # the drive stops moving, the PLC stays "moving"
     drift_at: float | None = None  # the drive stops following (tracking error grows)
     settle_offset: float | None = None  # at the goal the last axis holds this far off (it never settles)
+    # at the goal the last axis swings around it: (amplitude, period in robot time [s]); it passes
+    # through the goal twice a period and never comes to rest
+    oscillate: tuple[float, float] | None = None
     ignore_chunks: bool = False
     motion: int | None = None  # only during this motion (1-based); None: every motion
     # garbage: from this fraction of a motion on (0: from the start, also at rest) the PLC publishes
@@ -73,6 +76,7 @@ class PLCStandIn:
         self.started = 0  # motions started
         self.crash: str | None = None
         self._garbage = False
+        self._done_clock = 0.0  # robot time at which the last motion reached its end
         L, S16, D, U, B = constants.ADST_REAL64, constants.ADST_INT16, constants.ADST_INT32, constants.ADST_UINT32, \
             constants.ADST_BIT
         spec = {"chunk": (bytes(8 * chunk_points * n), L), "chunk_offset": (0, D), "chunk_count": (0, D),
@@ -251,12 +255,16 @@ class PLCStandIn:
                     self.log.append((t, k, self.measured.copy(), self.clock))
                     if t >= duration:
                         state, hold = 2, self.buffer[count - 1].copy()
+                        self._done_clock = self.clock
                         if f.settle_offset is not None:
                             hold[-1] += f.settle_offset
                         self.events.append((self.clock, now, "done"))
         elif state == 2:  # hold the goal: the axes converge
             alpha = 1.0 - np.exp(-cycle * self.speedup / self.tau)
             self.measured = self.measured + alpha * (hold - self.measured)
+            if f.oscillate is not None:
+                amplitude, period = f.oscillate
+                self.measured[-1] = hold[-1] + amplitude * np.sin(2 * np.pi * (self.clock - self._done_clock) / period)
         if f.garbage_at is not None and (f.garbage_at == 0 or (state == 1 and frac >= f.garbage_at)):
             self._garbage = True
         published_state, measured = state, self.measured.copy()

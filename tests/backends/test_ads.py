@@ -410,3 +410,19 @@ def test_robot_that_never_settles_is_stopped(cell, start, plc):
     assert "the robot did not settle at the goal within 0.3 s (final error arm_joint_7 0.01 rad (tolerance " \
            "0.0002)); no scan was taken; the robot was stopped (confirmed by the PLC after" in text
     assert plc.get("stop", "B")[0] == 1 and time.monotonic() - t0 < 3.0
+
+
+def test_drive_that_swings_through_the_goal_is_not_settled(cell, start, plc):
+    """At the goal the last axis oscillates around it (amplitude 10 x the tolerance, a 10 s
+    period in the stand-in's robot time, about 1 s of wall time): it passes through the
+    tolerance for several polls at a time, but it never comes to rest there, so no report comes
+    back: a settle fault naming the joint, the robot stopped."""
+    plc.faults.oscillate = (0.002, 10.0)
+    config = replace(FAST, settle_timeout=1.0)
+    with _robot(cell, config) as robot, pytest.raises(RobotFault) as info:
+        robot.execute(_trajectory(cell, start))
+        assert False, "no fault: an oscillating axis was taken for settled"  # noqa: B011
+    text = info.value.one_line()
+    assert info.value.kind == "settle" and info.value.joint == "arm_joint_7" and info.value.stopped, text
+    assert "the robot did not settle at the goal within 1 s (" in text and "no scan was taken" in text, text
+    assert plc.get("stop", "B")[0] == 1

@@ -66,17 +66,17 @@ def test_station_check_refuses_bad_safety_values(key, value, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("mapping, message", [
-    ({"ams_net_id": "5.80.201.232.1"}, r"ams_net_id = '5.80.201.232.1' is not an AMS Net ID"),
+    ({"ams_net_id": "5.80.201.232.1"}, r"ams_net_id is not an AMS Net ID"),
     ({"ams_net_id": "5.80.201.232.1.256"}, r"is not an AMS Net ID; six numbers 0-255"),
-    ({"ams_net_id": 5.8}, r"ams_net_id = 5.8 is not an AMS Net ID"),
-    ({"ip": 192}, r"ip = 192 is not an address"),
-    ({"ip": ["192.168.0.1"]}, r"ip = \['192.168.0.1'\] is not an address"),
+    ({"ams_net_id": 5.8}, r"ams_net_id is not an AMS Net ID"),
+    ({"ip": 192}, r"ip is not an address"),
+    ({"ip": ["192.168.0.1"]}, r"ip is not an address"),
     ({"ip": "192.168.0.1; rm"}, r"is not an address"),
     ({"symbols": ["MAIN.recon"]}, r"symbols is not a mapping"),
-    ({"symbols": {"prefix": 5}}, r"symbols.prefix = 5 is not a symbol name"),
-    ({"symbols": {"stop": ["a"]}}, r"symbols.stop = \['a'\] is not a symbol name"),
+    ({"symbols": {"prefix": 5}}, r"symbols.prefix is not a symbol name"),
+    ({"symbols": {"stop": ["a"]}}, r"symbols.stop is not a symbol name"),
     ({"symbols": {5: "MAIN.x"}}, r"symbols.5 is not a symbol of the contract"),
-    ({"symbols": {"stop": "GVL stop"}}, r"symbols.stop = 'GVL stop' is not a symbol name"),
+    ({"symbols": {"stop": "GVL stop"}}, r"symbols.stop is not a symbol name \(1 to 255 characters, no spaces\)"),
     ({"axes": "arm_joint_1"}, r"axes is not a list of joint names"),
     ({"axes": [1, 2]}, r"axes is not a list of joint names"),
     ({"axes": ["a", "a"]}, r"axes names a joint twice"),
@@ -85,8 +85,13 @@ def test_station_check_refuses_bad_safety_values(key, value, tmp_path, capsys):
     ({"watchdog": 0.04}, r"poll = 0.02 s is more than watchdog / 5 = 0.008 s"),
     ({"settle_tolerance": [0.01, 0.001], "tracking_bound": [0.005, 0.005]},
      r"settle_tolerance\[0\] = 0.01 rad is more than tracking_bound\[0\] = 0.005 rad"),
+    ({"settle_tolerance": [1e-12, 5e-5]},
+     r"settle_tolerance\[0\] = 1e-12 rad is below 4 counts of the encoder resolution encoder_resolution\[0\] = "
+     r"1.46292e-09 rad: a drive at rest reads ±1 count, so no drive could ever settle within it"),
+    ({"settle_tolerance": [2e-4, 3e-6], "encoder_resolution": [1e-7, 1e-6]},
+     r"settle_tolerance\[1\] = 3e-06 m is below 4 counts of the encoder resolution encoder_resolution\[1\] = 1e-06 m"),
     ({"port": 851.5}, r"port = 851.5 is not a whole number"),
-    ({"port": True}, r"port = True is not a whole number"),
+    ({"port": True}, r"port is true, not a whole number"),
     ({"watchdog": NAN}, r"watchdog = nan is not a finite number"),
     ({"tracking_bound": [NAN, 0.005]}, r"tracking_bound\[0\] = nan is not a finite number"),
     ({"tracking_bound": [0.02, INF]}, r"tracking_bound\[1\] = inf is not a finite number"),
@@ -99,6 +104,10 @@ def test_wrong_types_and_values_are_one_line(mapping, message):
     with pytest.raises(InputError, match=message) as info:
         AdsConfig.from_mapping(mapping, "cell.yaml: robot.ads")
     assert "\n" not in info.value.one_line() and info.value.one_line().startswith("cell.yaml: robot.ads.")
+    texts = [v for value in mapping.values() for v in (value.values() if isinstance(value, dict) else
+                                                         value if isinstance(value, list) else [value])]
+    assert not [t for t in texts if isinstance(t, str) and len(t) > 3 and t in info.value.message], \
+        info.value.message  # not quoted
 
 
 def test_every_nonfinite_value_is_refused_also_when_built_in_code():
@@ -164,3 +173,21 @@ def test_the_documented_example_is_valid():
     example = yaml.safe_load(text.split("```yaml\n", 1)[1].split("```", 1)[0])
     cfg = AdsConfig.from_mapping(example["robot"]["ads"])
     assert sorted(cfg.axes) == sorted(Cell(CellConfig()).joint_names) and len(cfg.scale) == len(cfg.axes)
+
+
+@pytest.mark.parametrize("robot, message", [
+    ("  adapter: ads\n  ads: {ams_net_id: 127.0.0.1.1.1, settle_tolerance: [1.0e-12, 5.0e-5]}\n",
+     ":5: robot.ads.settle_tolerance[0] = 1e-12 rad is below 4 counts of the encoder resolution "
+     "encoder_resolution[0] = 1.46292e-09 rad"),
+    ("  adapter: franka\n  franka: {ip: 172.16.0.2, settle_tolerance: 1.0e-12}\n",
+     ":5: robot.franka.settle_tolerance = 1e-12 rad is below 4 counts of the finest joint encoder (resolution "
+     "1.46292e-09 rad"),
+])
+def test_a_settle_tolerance_no_drive_can_meet_is_refused(tmp_path, capsys, robot, message):
+    """1e-12 rad is inside (0, 0.01] rad but finer than any encoder counts: refused with the
+    encoder resolution, before anything connects."""
+    path = tmp_path / "station.yaml"
+    path.write_text("format: 1\nname: check\nrobot:\n" + robot + "camera:\n  adapter: sim\n")
+    assert main(["station", "check", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err and f"{path}{message}" in err, err

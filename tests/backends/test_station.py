@@ -154,7 +154,7 @@ def test_station_file_names_a_cell_file_beside_it(tmp_path, capsys):
 @pytest.mark.parametrize("text, message", [
     ("format: 1\nrobot: {adapter: ads}\n", "no camera section"),
     ("format: 1\nrobot: {adapter: kuka}\ncamera: {adapter: sim}\n",
-     "robot.adapter = 'kuka' is not one of ads, franka, sim"),
+     "robot.adapter is not one of ads, franka, sim"),
     ("format: 1\nrobot: {adapter: sim}\ncamera: {adapter: sim}\nspeed: 3\n", "speed is not a known key"),
     ("format: 1\nrobot: {adapter: ads, ads: {poll: -1}}\ncamera: {adapter: sim}\n", "robot.ads.poll = -1 s is outside"),
     ("format: 1\nrobot: [adapter\n", r"station.yaml:3: not valid YAML \(did not find expected ',' or ']'"),
@@ -211,6 +211,24 @@ def test_robot_that_never_settles_ends_the_run_before_its_scan(plc, files, tmp_p
     assert "the robot did not settle at the goal within 1 s (final error arm_joint_7 0.01 rad" in err
     assert "no scan was taken; the robot was stopped (confirmed by the PLC after" in err
     assert [json.loads(s.read_text())["name"] for s in (out / "scans").glob("scan_*/scan.json")] == ["a"]
+    report = json.loads((out / "run_report.json").read_text())
+    assert report["status"] == "aborted" and "did not settle" in report["aborted"]
+    assert plc.get("stop", "B")[0] == 1 and plc.started == 2
+
+
+def test_drive_that_keeps_swinging_ends_the_run_with_a_settle_fault(plc, files, tmp_path, capsys):
+    """At the end of the second move the last axis swings around its goal (10 x the settle
+    tolerance, passing through it twice a period) for longer than the settle timeout: the run
+    ends with the settle fault before that scan (exit 4), the robot stopped, the first scan
+    kept, the report aborted."""
+    station, script = files
+    plc.faults.oscillate, plc.faults.motion = (0.002, 10.0), 2
+    out = tmp_path / "run"
+    code = main(["run", str(script), "--out", str(out), "--station", str(station)])
+    err = capsys.readouterr().err
+    assert code == 4 and err.count("\n") == 1 and "Traceback" not in err, err
+    assert "the robot did not settle at the goal within 1 s (" in err and "no scan was taken" in err, err
+    assert [json.loads(s.read_text())["name"] for s in (out / "scans").glob("scan_*/scan.json")] == ["a"], err
     report = json.loads((out / "run_report.json").read_text())
     assert report["status"] == "aborted" and "did not settle" in report["aborted"]
     assert plc.get("stop", "B")[0] == 1 and plc.started == 2

@@ -60,7 +60,9 @@ from recon_cli.backends.hardware.ads_config import (  # noqa: F401 (the config i
     PAIRS,
     POLLS_PER_WATCHDOG,
     RANGES,
+    SETTLE_HOLD,
     SETTLE_POLLS,
+    SETTLE_SPREAD,
     SYMBOL_KEYS,
     AdsConfig,
     Range,
@@ -435,7 +437,7 @@ class AdsRobot:
         max_err = np.zeros(len(self.joint_names))
         t0 = time.monotonic()
         t_done = None
-        inside = 0  # consecutive polls within the settle tolerance
+        streak: list[tuple[float, np.ndarray]] = []  # (time, measured) of consecutive polls within the tolerance
         while True:
             try:
                 state, index, raw, error, error_id, taken = self._status()
@@ -477,25 +479,44 @@ class AdsRobot:
             if state == STATE_DONE:
                 t_done = t_done if t_done is not None else now
                 final = np.abs(measured - q[-1])
-                inside = inside + 1 if np.all(final <= settle) else 0
-                if inside >= SETTLE_POLLS:  # not an axis passing through the goal on its way elsewhere
+                streak = [*streak, (now, measured)] if np.all(final <= settle) else []
+                # at rest: not an axis swinging through the goal on its way elsewhere
+                positions = np.array([m for _, m in streak]) if streak else measured[None]
+                spread = positions.max(axis=0) - positions.min(axis=0)
+                resting = bool(np.all(spread <= SETTLE_SPREAD * settle))
+                if len(streak) >= SETTLE_POLLS and now - streak[0][0] >= SETTLE_HOLD and resting:
                     return ExecutionReport(duration=duration, settle_time=now - t_done, max_tracking_error=max_err,
                                            final_error=final, settled=True)
-                if now - t_done > cfg.settle_timeout and not inside:  # (inside: let the streak end)
-                    over = np.flatnonzero(final > settle)
-                    j = int(over[np.argmax(final[over] / settle[over])])
-                    errors = ", ".join(f"{self.joint_names[i]} {final[i]:.3g} {self._units[i]} "
-                                       f"(tolerance {settle[i]:g})" for i in over)
-                    raise self._fault(f"the robot did not settle at the goal within {cfg.settle_timeout:g} s "
-                                      f"(final error {errors}); no scan was taken", kind="settle",
-                                      joint=self.joint_names[j], value=float(final[j]), bound=float(settle[j]),
-                                      hint="check the drives' position control or robot.ads.settle_tolerance; "
-                                           "completed scans are kept")
+                if not resting:  # moving within the tolerance: the streak starts again from this poll
+                    streak = streak[-1:]
+                if now - t_done > cfg.settle_timeout and not (streak and resting):  # (resting: let the streak end)
+                    raise self._unsettled(final, spread, settle)
             elif now - t0 > duration + cfg.time_margin:
                 raise self._fault(f"the motion did not complete within {duration + cfg.time_margin:.1f} s "
                                   f"(PLC state {STATE_NAMES.get(state, state)}, setpoint {index} of {n_points})",
                                   kind="timeout", hint="check the PLC program and the drives; completed scans are kept")
             time.sleep(cfg.poll)
+
+    def _unsettled(self, final: np.ndarray, spread: np.ndarray, settle: np.ndarray) -> RobotFault:
+        """The settle fault: the joints outside the tolerance, else those still moving."""
+        cfg = self.config
+        over = np.flatnonzero(final > settle)
+        if over.size:
+            j = int(over[np.argmax(final[over] / settle[over])])
+            errors = ", ".join(f"{self.joint_names[i]} {final[i]:.3g} {self._units[i]} (tolerance {settle[i]:g})"
+                               for i in over)
+            what, value = f"final error {errors}", float(final[j])
+        else:  # within the tolerance, but moving
+            moving = np.flatnonzero(spread > SETTLE_SPREAD * settle)
+            j = int(moving[np.argmax(spread[moving] / settle[moving])])
+            errors = ", ".join(f"{self.joint_names[i]} moved {spread[i]:.3g} {self._units[i]} "
+                               f"(at rest: under {SETTLE_SPREAD * settle[i]:g})" for i in moving)
+            what, value = f"still moving: {errors}", float(spread[j])
+        return self._fault(f"the robot did not settle at the goal within {cfg.settle_timeout:g} s ({what}); "
+                           f"no scan was taken", kind="settle", joint=self.joint_names[j], value=value,
+                           bound=float(settle[j]),
+                           hint="check the drives' position control or robot.ads.settle_tolerance; "
+                                "completed scans are kept")
 
     # ------------------------------------------------------------------ stopping
     def stop(self) -> bool:

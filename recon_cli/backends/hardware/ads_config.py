@@ -5,19 +5,32 @@ same table), so that no value can switch a safety check off."""
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field, fields
 
 from recon_cli.errors import InputError
-from recon_cli.inputs.numbers import in_range, integer, range_text, real
+from recon_cli.inputs.numbers import described, in_range, integer, range_text, real
+from recon_cli.inputs.yamlfile import shown_key, unknown_key_text
 
 SYMBOL_KEYS = ("chunk", "chunk_offset", "chunk_count", "chunk_seq", "chunk_ack", "count", "period", "job",
                "job_ack", "stop", "heartbeat", "watchdog", "state", "index", "measured", "error", "error_id")
 
 #: poll is at most watchdog / POLLS_PER_WATCHDOG: the PLC sees several beats per watchdog window
 POLLS_PER_WATCHDOG = 5
-#: settled: every joint within settle_tolerance of the goal on this many consecutive polls
+#: settled: every joint within settle_tolerance of the goal on this many consecutive polls,
+#: spanning at least SETTLE_HOLD seconds, across which each joint moved less than
+#: SETTLE_SPREAD x its tolerance (at rest: an axis swinging through the goal is not settled)
 SETTLE_POLLS = 3
+SETTLE_HOLD = 0.05  # [s]
+SETTLE_SPREAD = 0.5
+#: [rad, m] one count of the finest joint encoders: a 32-bit count per turn of the joint
+#: (2π / 2^32 rad) and 1 nm on a linear axis; no drive reports its position finer. The default
+#: of ``encoder_resolution``
+ENCODER_FLOOR = (2 * math.pi / 2**32, 1e-9)
+#: a settle tolerance is at least this many encoder counts: a drive at rest reads ±1 count,
+#: and settling asks it to move less than SETTLE_SPREAD x the tolerance
+SETTLE_COUNTS = 4
 
 
 def default_symbols(prefix: str = "MAIN.recon") -> dict[str, str]:
@@ -65,13 +78,17 @@ RANGES: dict[str, tuple[tuple[Range, ...], str, str]] = {
     "tracking_bound": ((Range(0.0, 0.2, lo_open=True, unit="rad"), Range(0.0, 0.05, lo_open=True, unit="m")), "",
                        "largest \\|measured − setpoint\\| in a motion; widens the joint limits for measurements"),
     "settle_tolerance": ((Range(0.0, 0.01, lo_open=True, unit="rad"), Range(0.0, 0.005, lo_open=True, unit="m")),
-                         "at most `tracking_bound`", "\\|measured − goal\\| before a scan"),
+                         f"at most `tracking_bound`, at least {SETTLE_COUNTS} × `encoder_resolution`",
+                         "\\|measured − goal\\| before a scan"),
+    "encoder_resolution": ((Range(ENCODER_FLOOR[0], 0.001, unit="rad"), Range(ENCODER_FLOOR[1], 0.001, unit="m")),
+                           "", "one count of the drives' position encoders (default: the lower bounds, the finest "
+                               "any encoder resolves)"),
     "settle_timeout": ((Range(0.0, 60.0, lo_open=True, unit="s"),), "", "longest wait for settling"),
     "limit_tolerance": ((Range(0.0, 0.2),), "", "relative slack of the velocity re-check"),
     "scale": ((Range(1e-6, 1e6),), "one per axis; of \\|scale\\|, the sign is the axis direction",
               "PLC unit per recon unit"),
 }
-PAIRS = ("tracking_bound", "settle_tolerance")
+PAIRS = ("tracking_bound", "settle_tolerance", "encoder_resolution")
 
 
 def range_rows() -> list[str]:
@@ -103,7 +120,7 @@ def _number(key: str, value: object, where: str) -> float | int | tuple[float, .
     ranges, _, _ = RANGES[key]
     if key in PAIRS:
         if isinstance(value, str | bytes) or not isinstance(value, list | tuple) or len(value) != 2:
-            raise InputError(f"{where} is not a pair [rad, m]", hint=f"e.g. {key}: [0.02, 0.005]")
+            raise InputError(f"{where} is {described(value)}, not a pair [rad, m]", hint=f"e.g. {key}: [0.02, 0.005]")
         return tuple(float(ranges[i].check(v, f"{where}[{i}]")) for i, v in enumerate(value))
     if key == "scale":
         if isinstance(value, str | bytes) or not isinstance(value, list | tuple) or len(value) > 64:
@@ -126,16 +143,20 @@ def _symbols(value: object, where: str) -> dict[str, str]:
         raise InputError(f"{where} is not a mapping", hint="e.g. symbols: {prefix: MAIN.recon}")
     prefix = value.get("prefix", "MAIN.recon")
     if not isinstance(prefix, str) or not _SYMBOL.fullmatch(prefix):
-        raise InputError(f"{where}.prefix = {prefix!r} is not a symbol name", hint="e.g. prefix: MAIN.recon")
+        raise InputError(f"{where}.prefix is not a symbol name (1 to 255 characters, no spaces)",
+                         hint="e.g. prefix: MAIN.recon")
     merged = default_symbols(prefix)
     for key, name in value.items():
         if key == "prefix":
             continue
         if not isinstance(key, str) or key not in SYMBOL_KEYS:
-            raise InputError(f"{where}.{key} is not a symbol of the contract",
+            shown = shown_key(key)
+            raise InputError(f"{where}.{shown} is not a symbol of the contract" if shown
+                             else f"{where} has a key that is not a symbol of the contract",
                              hint=f"symbols: prefix, {', '.join(SYMBOL_KEYS)}")
         if not isinstance(name, str) or not _SYMBOL.fullmatch(name):
-            raise InputError(f"{where}.{key} = {name!r} is not a symbol name", hint="e.g. GVL.cell.stop")
+            raise InputError(f"{where}.{key} is not a symbol name (1 to 255 characters, no spaces)",
+                             hint="e.g. GVL.cell.stop")
         merged[key] = name
     return merged
 
@@ -145,12 +166,13 @@ def _field(key: str, value: object, where: str):
     if key == "ams_net_id":
         ok = isinstance(value, str) and _AMS_NET_ID.fullmatch(value) and all(int(p) <= 255 for p in value.split("."))
         if not ok:
-            raise InputError(f"{where} = {value!r} is not an AMS Net ID", hint="six numbers 0-255 with dots, "
+            raise InputError(f"{where} is not an AMS Net ID", hint="six numbers 0-255 with dots, "
                              "e.g. 5.80.201.232.1.1 (TwinCAT shows it under System > Routes)")
         return value
     if key == "ip":
         if not isinstance(value, str) or not _HOST.fullmatch(value):
-            raise InputError(f"{where} = {value!r} is not an address", hint="the PLC's IP address, e.g. 192.168.10.2")
+            raise InputError(f"{where} is not an address (a host name or an IP address)",
+                             hint="the PLC's IP address, e.g. 192.168.10.2")
         return value
     if key == "symbols":
         return _symbols(value, where)
@@ -176,6 +198,13 @@ def _together(values: dict, at) -> None:
             raise InputError(f"{at('settle_tolerance')}[{k}] = {values['settle_tolerance'][k]:g} {unit} is more "
                              f"than tracking_bound[{k}] = {values['tracking_bound'][k]:g} {unit}",
                              hint="settling is the tighter bound; lower settle_tolerance")
+        tolerance, count = values["settle_tolerance"][k], values["encoder_resolution"][k]
+        if tolerance < SETTLE_COUNTS * count * (1 - 1e-9):
+            raise InputError(f"{at('settle_tolerance')}[{k}] = {tolerance:g} {unit} is below {SETTLE_COUNTS} counts "
+                             f"of the encoder resolution encoder_resolution[{k}] = {count:g} {unit}: a drive at "
+                             f"rest reads ±1 count, so no drive could ever settle within it",
+                             hint=f"give a settle_tolerance of at least {SETTLE_COUNTS * count:g} {unit} "
+                                  f"(docs/hardware.md)")
     axes, scale = values["axes"], values["scale"]
     if axes and scale and len(axes) != len(scale):
         raise InputError(f"{at('scale')} has {len(scale)} numbers for {len(axes)} axes",
@@ -204,6 +233,7 @@ class AdsConfig:
     settle_tolerance: tuple[float, float] = (2e-4, 5e-5)  # [rad, m] at the goal
     settle_timeout: float = 3.0  # [s]
     limit_tolerance: float = 0.02  # relative slack of the velocity re-check (sampling)
+    encoder_resolution: tuple[float, float] = ENCODER_FLOOR  # [rad, m] one count of the drives' encoders
 
     def __post_init__(self) -> None:
         """Every value in its range, whoever built the config."""
@@ -226,7 +256,7 @@ class AdsConfig:
         known = [f.name for f in fields(cls)]
         for key in d:
             if key not in known:
-                raise InputError(f"{where}.{key} is not a known key", hint=f"known keys: {', '.join(sorted(known))}")
+                raise InputError(unknown_key_text(where, key), hint=f"known keys: {', '.join(sorted(known))}")
         kw = {key: _field(key, value, key_where(d, key, where)) for key, value in d.items()}
         values = {f.name: f.default_factory() if callable(f.default_factory) else f.default for f in fields(cls)}
         _together({**values, **kw}, lambda key: key_where(d, key, where))

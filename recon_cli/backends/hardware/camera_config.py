@@ -13,6 +13,8 @@ from typing import Any
 
 from recon_cli import install_hint
 from recon_cli.errors import HardwareUnavailable, InputError
+from recon_cli.inputs.numbers import described
+from recon_cli.inputs.yamlfile import unknown_key_text
 
 #: intrinsics keys a station file may give (width and height come from the images)
 INTRINSICS_KEYS = ("fx", "fy", "cx", "cy")
@@ -37,7 +39,7 @@ def check_keys(d: Any, where: str, cls) -> dict:
         raise InputError(f"{where} is not a mapping", hint="write 'key: value' lines under it")
     for key in d:
         if key not in known:
-            raise InputError(f"{where}.{key} is not a known key", hint=f"known keys: {', '.join(known)}")
+            raise InputError(unknown_key_text(where, key), hint=f"known keys: {', '.join(known)}")
     return dict(d)
 
 
@@ -49,7 +51,8 @@ def number(d: dict, key: str, where: str, default, *, integer: bool = False, min
         return None
     kind = "an integer" if integer else "a number"
     if isinstance(value, bool) or not isinstance(value, (int, float)) or (integer and not float(value).is_integer()):
-        raise InputError(f"{where}.{key} = {value!r} is not {kind}", hint=f"give {kind}")
+        shown = f"= {value:g} is" if isinstance(value, float) else f"is {described(value)},"
+        raise InputError(f"{where}.{key} {shown} not {kind}", hint=f"give {kind}")
     value = int(value) if integer else float(value)
     if positive and not value > 0:
         raise InputError(f"{where}.{key} = {value} is not positive", hint="give a positive number")
@@ -61,7 +64,7 @@ def number(d: dict, key: str, where: str, default, *, integer: bool = False, min
 def choice(d: dict, key: str, where: str, default: str, choices: tuple[str, ...]) -> str:
     value = d.get(key, default)
     if value not in choices:
-        raise InputError(f"{where}.{key} = {value!r} is not one of {', '.join(choices)}",
+        raise InputError(f"{where}.{key} is not one of {', '.join(choices)}",
                          hint=f"choose one of: {', '.join(choices)}")
     return str(value)
 
@@ -71,7 +74,7 @@ def text(d: dict, key: str, where: str, default: str | None) -> str | None:
     if value is None:
         return None
     if isinstance(value, (dict, list, bool)):
-        raise InputError(f"{where}.{key} = {value!r} is not a text", hint="give a name or a path")
+        raise InputError(f"{where}.{key} is {described(value)}, not a text", hint="give a name or a path")
     return str(value)
 
 
@@ -82,7 +85,7 @@ def intrinsics_values(value: Any, where: str) -> tuple[float, float, float, floa
                                                                              "cx: 325.5, cy: 253.5} [px]")
     for key in value:
         if key not in INTRINSICS_KEYS:
-            raise InputError(f"{where}.{key} is not a known key", hint=f"known keys: {', '.join(INTRINSICS_KEYS)}")
+            raise InputError(unknown_key_text(where, key), hint=f"known keys: {', '.join(INTRINSICS_KEYS)}")
     missing = [k for k in INTRINSICS_KEYS if k not in value]
     if missing:
         raise InputError(f"{where} lacks {', '.join(missing)}", hint="give fx, fy, cx, cy [px]")

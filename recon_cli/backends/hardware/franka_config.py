@@ -8,8 +8,9 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, fields
 
-from recon_cli.backends.hardware.ads_config import Range, key_where
+from recon_cli.backends.hardware.ads_config import ENCODER_FLOOR, SETTLE_COUNTS, Range, key_where
 from recon_cli.errors import InputError
+from recon_cli.inputs.yamlfile import unknown_key_text
 
 #: at rest: every joint moved less than REST_SPREAD over this many consecutive states (1 ms
 #: apart); settled: at rest within settle_tolerance of the goal
@@ -20,7 +21,9 @@ REST_SPREAD = 5e-4  # [rad]
 RANGES: dict[str, tuple[Range, str]] = {
     "tracking_bound": (Range(0.0, 0.2, lo_open=True, unit="rad"),
                        "largest \\|measured − commanded\\| in a motion; widens the joint limits for measurements"),
-    "settle_tolerance": (Range(0.0, 0.01, lo_open=True, unit="rad"), "\\|measured − goal\\| before a scan"),
+    "settle_tolerance": (Range(SETTLE_COUNTS * ENCODER_FLOOR[0], 0.01, unit="rad"),
+                         f"\\|measured − goal\\| before a scan; at least {SETTLE_COUNTS} counts of the finest joint "
+                         "encoder (2π/2³² rad)"),
     "settle_timeout": (Range(0.0, 60.0, lo_open=True, unit="s"), "longest wait for settling"),
     "time_margin": (Range(0.0, 600.0, lo_open=True, unit="s"), "beyond the duration before \"did not complete\""),
     "lost_cycles": (Range(0, 5, whole=True),
@@ -41,15 +44,27 @@ def range_rows() -> list[str]:
 def _field(key: str, value: object, where: str):
     if key == "ip":
         if not isinstance(value, str) or not _HOST.fullmatch(value):
-            raise InputError(f"{where} = {value!r} is not an address",
+            raise InputError(f"{where} is not an address (a host name or an IP address)",
                              hint="the controller's address (Franka's default is 172.16.0.2)")
         return value
     if key == "realtime":
         if value not in REALTIME:
-            raise InputError(f"{where} = {value!r} is not one of {', '.join(REALTIME)}",
+            raise InputError(f"{where} is not one of {', '.join(REALTIME)}",
                              hint="enforce on a real-time kernel (the robot); ignore for a simulated robot")
         return value
+    if key == "settle_tolerance":
+        _settle_floor(value, where)
     return RANGES[key][0].check(value, where)
+
+
+def _settle_floor(value: object, where: str) -> None:
+    """A settle tolerance below SETTLE_COUNTS counts of the finest encoder: no drive meets it."""
+    floor = SETTLE_COUNTS * ENCODER_FLOOR[0]
+    if isinstance(value, int | float) and not isinstance(value, bool) and 0 < value < floor:
+        raise InputError(f"{where} = {value:g} rad is below {SETTLE_COUNTS} counts of the finest joint encoder "
+                         f"(resolution {ENCODER_FLOOR[0]:g} rad: a 32-bit count per turn): a drive at rest reads "
+                         f"±1 count, so the arm could never settle within it",
+                         hint=f"give a settle_tolerance of at least {floor:g} rad (docs/hardware.md)")
 
 
 @dataclass(frozen=True)
@@ -79,7 +94,7 @@ class FrankaConfig:
         known = [f.name for f in fields(cls)]
         for key in d:
             if key not in known:
-                raise InputError(f"{where}.{key} is not a known key", hint=f"known keys: {', '.join(sorted(known))}")
+                raise InputError(unknown_key_text(where, key), hint=f"known keys: {', '.join(sorted(known))}")
         if "ip" not in d:
             raise InputError(f"{where} has no ip", hint="ip: the controller's address, e.g. 172.16.0.2")
         kw = {key: _field(key, value, key_where(d, key, where)) for key, value in d.items()}

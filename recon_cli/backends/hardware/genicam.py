@@ -52,6 +52,7 @@ from recon_cli.backends.hardware.camera_config import (
     text,
 )
 from recon_cli.errors import CameraFault, InputError
+from recon_cli.inputs.yamlfile import shown_key
 from recon_cli.perception.camera_model import Intrinsics
 
 log = logging.getLogger(__name__)
@@ -372,8 +373,9 @@ class GenICamCamera:
     def _apply_features(self) -> None:
         for name, value in self.cfg.features:
             if not write_node(self._nm, name, value):
-                raise InputError(f"{self.cfg.where}.features.{name}: the device has no writable node {name} "
-                                 f"that takes {value!r}", hint="check the name and value in the device's "
+                shown = shown_key(name) or "<key>"
+                raise InputError(f"{self.cfg.where}.features.{shown}: the device has no writable node {shown} "
+                                 f"that takes the value given", hint="check the name and value in the device's "
                                                                "feature list")
 
     def _select_components(self) -> None:

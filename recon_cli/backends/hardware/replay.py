@@ -94,7 +94,7 @@ class ReplayConfig:
             raise InputError(f"{where}.source is missing", hint="the recording's folder (a scan store or images)")
         loop = d.get("loop", False)
         if not isinstance(loop, bool):
-            raise InputError(f"{where}.loop = {loop!r} is not true or false", hint="loop: true or loop: false")
+            raise InputError(f"{where}.loop is not true or false", hint="loop: true or loop: false")
         return cls(
             source=source,
             kind=choice(d, "kind", where, "auto", ("auto", "store", "images")),

@@ -27,6 +27,7 @@ from lxml import etree
 
 from recon_cli.errors import InputError
 from recon_cli.geometry.transforms import invert, rpy_to_matrix
+from recon_cli.inputs.yamlfile import shown_key
 from recon_cli.lazy import lazy_module
 from recon_cli.realism import KinematicErrors, PoseError
 from recon_cli.robot.cell import Cell
@@ -80,7 +81,7 @@ def _joint_origin(urdf: str, link: str) -> np.ndarray:
     """The origin of the joint above ``link`` as a 4 x 4 transform (parent link -> link)."""
 
     root = etree.fromstring(urdf.encode())
-    joint = next(j for j in root.iter("joint") if child(j, "child").get("link") == link)
+    joint = next(j for j in root.iterfind("joint") if child(j, "child").get("link") == link)
     origin = child(joint, "origin")
     xyz = [float(v) for v in (origin.get("xyz") or "0 0 0").split()]
     rpy = [float(v) for v in (origin.get("rpy") or "0 0 0").split()]
@@ -106,7 +107,8 @@ def true_cell(cell: Cell, errors: KinematicErrors, rng: np.random.Generator, whe
     names = cell.joint_names
     for name, _ in errors.stiffness:
         if name not in _all_joint_names():
-            raise InputError(f"{where}: kinematics.joint_stiffness.{name} is not a joint of the cells",
+            raise InputError(f"{where}: kinematics.joint_stiffness.{shown_key(name) or '<key>'} is not a joint of "
+                             "the cells",
                              hint="joints: " + ", ".join(sorted(_all_joint_names())))
     prismatic = np.asarray(cell.kin.limits.prismatic, dtype=bool)
     std = np.where(prismatic, errors.axis_offset_std, errors.joint_offset_std)

@@ -51,6 +51,7 @@ from recon_cli.geometry.transforms import invert, rpy_to_matrix
 from recon_cli.inputs import files
 from recon_cli.inputs.images import native_output_captured, read_color
 from recon_cli.inputs.jsonfile import load_json
+from recon_cli.inputs.numbers import in_range
 from recon_cli.inputs.schema import check
 from recon_cli.inputs.yamlfile import LIMITS, line_of, read_yaml
 from recon_cli.perception.camera_model import Intrinsics
@@ -153,7 +154,7 @@ class PoseMapping:
     quaternion_order: QuaternionOrder = QuaternionOrder.XYZW
     rpy: tuple[str, ...] = ("roll", "pitch", "yaw")
     matrix: tuple[str, ...] = ("matrix",)
-    matrix_order: MatrixOrder = MatrixOrder.ROW
+    matrix_order: MatrixOrder | None = None  # None: told by where the numbers put [0, 0, 0, 1]
     joints: tuple[str, ...] = ("joints",)
     length_unit: LengthUnit = LengthUnit.M
     angle_unit: AngleUnit = AngleUnit.RAD
@@ -187,7 +188,7 @@ class PoseMapping:
         if self.pose_format is PoseFormat.XYZ_QUAT:
             out["quaternion_order"] = self.quaternion_order.value
         if self.pose_format is PoseFormat.MATRIX:
-            out["matrix_order"] = self.matrix_order.value
+            out["matrix_order"] = "told by the numbers" if self.matrix_order is None else self.matrix_order.value
         out["length_unit"], out["angle_unit"] = self.length_unit.value, self.angle_unit.value
         return out
 
@@ -218,6 +219,44 @@ class CameraNumbers:
 
 
 CameraSource = CameraCalibration | CameraNumbers
+#: how many numbers a camera given on the command line takes: fx, fy, cx, cy [+ k1, k2, p1, p2 [+ k3]]
+CAMERA_NUMBER_COUNTS = (4, 8, 9)
+CAMERA_NUMBERS_HINT = "give fx,fy,cx,cy in pixels, or fx,fy,cx,cy,k1,k2,p1,p2[,k3] with OpenCV's distortion"
+
+
+def parse_camera_numbers(text: str, what: str = "--intrinsics") -> tuple[float, ...]:
+    """The 4, 8 or 9 comma-separated numbers of a camera given as text (fx,fy,cx,cy[,k1,k2,p1,
+    p2[,k3]]), each finite; one line naming ``what`` (not the text) otherwise."""
+    parts = [p.strip() for p in str(text).replace(";", ",").split(",") if p.strip()]
+    if len(parts) not in CAMERA_NUMBER_COUNTS:
+        raise InputError(f"{what}: {len(parts)} numbers, {', '.join(map(str, CAMERA_NUMBER_COUNTS[:-1]))} or "
+                         f"{CAMERA_NUMBER_COUNTS[-1]} expected", hint=CAMERA_NUMBERS_HINT)
+    names = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+    values = []
+    for part, name in zip(parts, names, strict=False):
+        try:
+            x = float(part)
+        except ValueError:
+            raise InputError(f"{what}: {name} is not a number", hint=CAMERA_NUMBERS_HINT) from None
+        if not math.isfinite(x):
+            raise InputError(f"{what}: {name} is not a finite number", hint=CAMERA_NUMBERS_HINT)
+        values.append(x)
+    camera_numbers(values, what)  # ranges
+    return tuple(values)
+
+
+def camera_numbers(values: Any, what: str = "--intrinsics") -> CameraNumbers:
+    """A camera of 4, 8 or 9 numbers: fx, fy, cx, cy [px], then k1, k2, p1, p2[, k3]; each in
+    its range, one line naming ``what`` and the number otherwise."""
+    values = list(values)
+    if len(values) not in CAMERA_NUMBER_COUNTS:
+        raise InputError(f"{what}: {len(values)} numbers, {', '.join(map(str, CAMERA_NUMBER_COUNTS[:-1]))} or "
+                         f"{CAMERA_NUMBER_COUNTS[-1]} expected", hint=CAMERA_NUMBERS_HINT)
+    names = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+    out = [in_range(v, f"{what} {name}", *(FOCAL_RANGE if k < 2 else CENTRE_RANGE if k < 4 else DISTORTION_RANGE),
+                    unit="px" if k < 4 else "", hint=CAMERA_NUMBERS_HINT)
+           for k, (v, name) in enumerate(zip(values, names, strict=False))]
+    return CameraNumbers(out[0], out[1], out[2], out[3], tuple((out[4:] + [0.0] * 5)[:5]))
 
 
 @dataclass(frozen=True)
@@ -227,6 +266,8 @@ class DatasetSpec:
     images, poses, index: paths inside the data set folder (a folder of images; a folder of
         pose files or a CSV file; an index file)
     image_column: the CSV column that names the image
+    intrinsics_key, distortion_key: the keys (dotted paths) of each pose file that hold the
+        camera's intrinsics and distortion; None: the usual names (INTRINSICS_KEYS, DISTORTION_KEYS)
     """
 
     mapping: PoseMapping = field(default_factory=PoseMapping)
@@ -238,6 +279,8 @@ class DatasetSpec:
     board: BoardSpec | None = None
     camera: CameraNumbers | None = None
     source: Path | None = None  # the mapping file
+    intrinsics_key: str | None = None  # the key of each pose file holding the intrinsics
+    distortion_key: str | None = None  # the key of each pose file holding the distortion
 
 
 def _keys(value: Any) -> tuple[str, ...]:
@@ -289,7 +332,7 @@ def read_mapping(path: Path, dataset: Path | None = None) -> DatasetSpec:
                                tuple(dist + [0.0] * (5 - len(dist))))
     return DatasetSpec(PoseMapping(**values), Setup(doc["setup"]) if "setup" in doc else None,
                        doc.get("images"), doc.get("poses"), doc.get("index"), doc.get("image_column"), board, camera,
-                       path)
+                       path, doc.get("intrinsics_key"), doc.get("distortion_key"))
 
 
 def _board(b: dict, path: Path, where: str) -> BoardSpec:
@@ -548,17 +591,18 @@ def _matrix(values: np.ndarray, names: list[str], mapping: PoseMapping, where: s
             raise InputError(f"{where}: {name} = {v:.4g} is outside [-{bound:g}, {bound:g}] (no number of a pose "
                              f"matrix in {mapping.length_unit.value} is larger)",
                              hint="check the matrix keys and length_unit")
+    order = mapping.matrix_order or matrix_order_of(values, names[0].split("[")[0])
     M = values.reshape(4, 4)
-    if mapping.matrix_order is MatrixOrder.COLUMN:
+    if order is MatrixOrder.COLUMN:
         M = M.T
     bottom = np.array([0.0, 0.0, 0.0, 1.0])
     if not np.allclose(M[3], bottom, atol=1e-6):
-        other = "column" if mapping.matrix_order is MatrixOrder.ROW else "row"
-        if np.allclose(M[:, 3], bottom, atol=1e-6):
+        other = "column" if order is MatrixOrder.ROW else "row"
+        if mapping.matrix_order is not None and np.allclose(M[:, 3], bottom, atol=1e-6):
             raise InputError(f"{where}: the matrix's last row is {np.round(M[3], 6).tolist()}, not [0, 0, 0, 1]: it "
-                             f"looks {other}-major while the mapping says {mapping.matrix_order.value}-major",
+                             f"looks {other}-major while the mapping says {order.value}-major",
                              hint=f"set matrix_order: {other} in the mapping file (or --matrix-order {other})")
-        raise InputError(f"{where}: the matrix's last row is {np.round(M[3], 6).tolist()}, not [0, 0, 0, 1]",
+        raise InputError(f"{where}: the matrix's last row is not [0, 0, 0, 1], read row by row or column by column",
                          hint="give a 4x4 homogeneous transform")
     R = M[:3, :3]
     off = float(np.max(np.abs(R.T @ R - np.eye(3))))
@@ -569,9 +613,26 @@ def _matrix(values: np.ndarray, names: list[str], mapping: PoseMapping, where: s
     U, _, Vt = np.linalg.svd(R)
     out = np.eye(4)
     out[:3, :3] = U @ Vt
-    column = [names[4 * i + 3] if mapping.matrix_order is MatrixOrder.ROW else names[12 + i] for i in range(3)]
+    column = [names[4 * i + 3] if order is MatrixOrder.ROW else names[12 + i] for i in range(3)]
     out[:3, 3] = _translation(M[:3, 3], column, mapping, where)
     return out
+
+
+#: keys whose 16 numbers are column-major when the numbers read both ways (a pose at the base's origin)
+COLUMN_MAJOR_KEYS = ("O_T_EE", "O_T_EE_d", "O_T_EE_c", "F_T_EE", "EE_T_K")
+
+
+def matrix_order_of(values: np.ndarray, key: str) -> MatrixOrder:
+    """The order of a 4x4 matrix's 16 numbers: the one that puts [0, 0, 0, 1] in the last row
+    (row-major: the last four numbers; column-major: every fourth). When both do (no
+    translation), libfranka's keys (O_T_EE, ...) are column-major and others row-major; when
+    neither does, the one the key suggests (the matrix is then refused when read)."""
+    bottom = np.array([0.0, 0.0, 0.0, 1.0])
+    row = bool(np.allclose(values[12:16], bottom, atol=1e-6))
+    column = bool(np.allclose(values[3::4], bottom, atol=1e-6))
+    if row != column:
+        return MatrixOrder.ROW if row else MatrixOrder.COLUMN
+    return MatrixOrder.COLUMN if key.rsplit(".", 1)[-1] in COLUMN_MAJOR_KEYS else MatrixOrder.ROW
 
 
 def robot_pose(record: Any, where: str, mapping: PoseMapping, kin=None) -> np.ndarray:
@@ -628,8 +689,19 @@ def detect_format(record: Any, mapping: PoseMapping, where: str) -> PoseMapping:
     def has(*keys: str) -> bool:
         return all(_lookup(record, k)[1] for k in keys)
 
+    def order(key: str) -> MatrixOrder | None:
+        """The mapping's matrix order, else the one the first pose's numbers show."""
+        if mapping.matrix_order is not None:
+            return mapping.matrix_order
+        value, _ = _lookup(record, key)
+        items = _flat(value)
+        if len(items) != 16 or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in items):
+            return None  # the view says what is wrong when it is read
+        with np.errstate(all="ignore"):
+            return matrix_order_of(np.array(items, dtype=np.float64), key)
+
     if has("O_T_EE"):
-        return replace(mapping, pose_format=PoseFormat.MATRIX, matrix=("O_T_EE",), matrix_order=MatrixOrder.COLUMN)
+        return replace(mapping, pose_format=PoseFormat.MATRIX, matrix=("O_T_EE",), matrix_order=order("O_T_EE"))
     if has("x", "y", "z", "qx", "qy", "qz", "qw"):
         return replace(mapping, pose_format=PoseFormat.XYZ_QUAT, quaternion=("qx", "qy", "qz", "qw"),
                        quaternion_order=QuaternionOrder.XYZW)
@@ -642,7 +714,7 @@ def detect_format(record: Any, mapping: PoseMapping, where: str) -> PoseMapping:
         return replace(mapping, pose_format=PoseFormat.XYZ_RPY)
     for key in mapping.matrix if len(mapping.matrix) == 1 else ():
         if has(key):
-            return replace(mapping, pose_format=PoseFormat.MATRIX)
+            return replace(mapping, pose_format=PoseFormat.MATRIX, matrix_order=order(key))
     if len(mapping.joints) == 1 and has(mapping.joints[0]):
         return replace(mapping, pose_format=PoseFormat.JOINTS)
     raise InputError(f"{where}: the pose's form cannot be told from its keys ({_key_list(record)})",
@@ -661,6 +733,7 @@ class DatasetView:
     image: Path
     record: Any
     where: str
+    camera: CameraNumbers | str | None = None  # the intrinsics its pose file holds, why they cannot be read, or None
 
 
 @dataclass(frozen=True)
@@ -926,15 +999,16 @@ def _from_csv(path: Path, root: Path, images_dir: Path, column: str | None) -> D
     return Dataset(path.parent, f"CSV {path}", views, skipped)
 
 
-def _entries(folder: Path) -> list[Path]:
-    """The entries of a folder of the data set, refused beyond MAX_FOLDER_ENTRIES (counted
-    before any entry is looked at)."""
+def _entries(folder: Path, limit: int | None = None) -> list[Path]:
+    """The entries of a folder of the data set, refused beyond ``limit`` (MAX_FOLDER_ENTRIES;
+    counted before any entry is looked at)."""
+    limit = MAX_FOLDER_ENTRIES if limit is None else limit
     out: list[Path] = []
     try:
         with os.scandir(folder) as it:
             for entry in it:
-                if len(out) >= MAX_FOLDER_ENTRIES:
-                    raise InputError(f"{folder} holds more than {MAX_FOLDER_ENTRIES:,} entries",
+                if len(out) >= limit:
+                    raise InputError(f"{folder} holds more than {limit:,} entries",
                                      hint=f"a data set folder holds its images and poses (at most {MAX_VIEWS:,} "
                                           "views)")
                 out.append(folder / entry.name)
@@ -1028,12 +1102,203 @@ def _is_index(path: Path) -> bool:
     return isinstance(entries, list) and bool(entries) and all(isinstance(e, dict) and "image" in e for e in entries)
 
 
+#: names of the board image and of the pose file a view's folder is taken to hold when it holds several
+VIEW_IMAGE_STEMS = ("image", "color", "colour", "rgb", "img", "board")
+VIEW_POSE_STEMS = ("data", "pose", "robot_state", "robot", "state", "meta")
+#: entries of one view's folder (its image, its pose file, a depth image, ...)
+MAX_VIEW_ENTRIES = 100
+
+
+def _one_of(found: list[Path], stems: tuple[str, ...]) -> Path | list[Path]:
+    """The one file of a view's folder among ``found`` (the only one, or the only one named
+    like ``stems``, a depth image left aside), or all of them when that cannot be told."""
+    if len(found) <= 1:
+        return found[0] if found else []
+    kept = [p for p in found if "depth" not in p.stem.lower() and "mask" not in p.stem.lower()]
+    if len(kept) == 1:
+        return kept[0]
+    named = [p for p in found if p.stem.lower() in stems]
+    return named[0] if len(named) == 1 else sorted(found, key=lambda p: _natural(p.name))
+
+
+def _from_view_folders(folder: Path, root: Path, subs: list[Path]) -> Dataset:
+    """One folder per view (pose_00/{image.png, data.json}, ...), in natural order of the
+    folders' names: each holds one image and one pose file (a depth image beside them is
+    left aside)."""
+    if len(subs) > MAX_VIEWS:
+        raise InputError(f"{folder}: {len(subs):,} folders, more than the {MAX_VIEWS:,} views recon reads",
+                         hint=f"use at most {MAX_VIEWS:,} views (every second or third one of a larger set)")
+    views: list[DatasetView] = []
+    skipped: list[SkippedImage] = []
+    budget = _PoseBytes()
+    any_image = False
+    for sub in sorted(subs, key=lambda p: _natural(p.name)):
+        name = sub.name
+        if not sub.resolve().is_relative_to(root):
+            skipped.append(SkippedImage(name, f"{sub} is a link leading out of the data set folder; not read"))
+            continue
+        try:
+            entries = _entries(sub, MAX_VIEW_ENTRIES)
+        except ReconError:
+            skipped.append(SkippedImage(name, f"{sub} holds more than {MAX_VIEW_ENTRIES} entries; a view's folder "
+                                              "holds its image and its pose file"))
+            continue
+        image = _one_of(_files(entries, IMAGE_SUFFIXES), VIEW_IMAGE_STEMS)
+        pose = _one_of(_files(entries, POSE_SUFFIXES), VIEW_POSE_STEMS)
+        any_image = any_image or bool(image)
+        problem = None
+        if isinstance(image, list):
+            problem = (f"{len(image)} images in {sub} ({', '.join(p.name for p in image[:4])}); keep one, or name "
+                       "the board's image.png" if image else f"no image ({', '.join(IMAGE_SUFFIXES)}) in {sub}")
+        elif isinstance(pose, list):
+            problem = (f"{len(pose)} pose files in {sub} ({', '.join(p.name for p in pose[:4])}); keep one, or "
+                       "name the pose's data.json" if pose else f"no pose file (.yaml, .yml, .json) in {sub}; add "
+                                                                 "it or remove the folder")
+        if problem is not None:
+            skipped.append(SkippedImage(name, problem))
+            continue
+        assert isinstance(image, Path) and isinstance(pose, Path)
+        label = f"{name}/{image.name}"
+        try:
+            for p in (image, pose):
+                if not p.resolve().is_relative_to(root):
+                    raise InputError(f"{p} leads out of the data set folder (a link); not read",
+                                     hint="copy the file into the folder")
+            record = _read_record(pose, budget)
+        except _DatasetRefused:
+            raise
+        except ReconError as exc:
+            skipped.append(SkippedImage(label, exc.one_line()))
+            continue
+        views.append(DatasetView(label, image, record, str(pose)))
+    if not any_image:
+        raise FileError(f"{folder} holds no images ({', '.join(IMAGE_SUFFIXES)}), nor folders of one image and one "
+                        "pose file each", hint="pass the data set folder (images and pose files side by side, "
+                                               "images/ and poses/, or a folder per view)")
+    return Dataset(folder, f"a folder per view in {folder}", views, skipped)
+
+
+# --------------------------------------------------------------------- the camera of each view
+#: keys of a pose file that hold the camera's intrinsics: {fx, fy, cx, cy} (RealSense's ppx,
+#: ppy too), a 3x3 matrix (9 numbers, row by row) or [fx, fy, cx, cy]; and its distortion
+INTRINSICS_KEYS = ("K", "camera_matrix", "cameraMatrix", "intrinsics", "camera_intrinsics", "intrinsic_matrix",
+                   "camera_info.K", "camera_info.k")
+DISTORTION_KEYS = ("D", "dist", "distortion", "dist_coeffs", "distCoeffs", "distortion_coefficients", "coeffs",
+                   "camera_info.D", "camera_info.d")
+#: coefficients OpenCV takes (k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, ty]]]]); recon's model uses the first 5
+DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
+
+
+def _distortion(value: Any, key: str, where: str) -> tuple[float, ...]:
+    """k1, k2, p1, p2, k3 of a distortion key's list (OpenCV's order); more coefficients only
+    when they are zero (recon's camera model is OpenCV's five)."""
+    if not isinstance(value, list):
+        raise InputError(f"{where}: {key} is {_kind(value)}, not a list of distortion coefficients",
+                         hint="write [k1, k2, p1, p2, k3] (OpenCV's order)")
+    items = _flat(value)
+    if len(items) not in DISTORTION_LENGTHS:
+        raise InputError(f"{where}: {key} holds {len(items)} numbers; distortion coefficients are 4, 5, 8, 12 or 14 "
+                         "(OpenCV's order)", hint="write [k1, k2, p1, p2, k3]")
+    d = [_in_range(x, f"{key}[{i}]", where, *DISTORTION_RANGE) for i, x in enumerate(items)]
+    if any(d[5:]):
+        raise InputError(f"{where}: {key} holds {len(d)} coefficients, the 6th or later not zero; recon's camera "
+                         "model takes k1, k2, p1, p2, k3", hint="calibrate the camera with that model (recon "
+                                                                "calibrate intrinsics) and pass --camera-file")
+    return tuple((d + [0.0] * 5)[:5])
+
+
+def _pinhole(value: Any, key: str, where: str) -> tuple[tuple[float, float, float, float], tuple[float, ...] | None]:
+    """(fx, fy, cx, cy) [px] of an intrinsics key, and the distortion it holds itself ({fx, fy,
+    cx, cy, distortion} or RealSense's {fx, fy, ppx, ppy, coeffs}), or None."""
+    def ranged(v: Any, name: str, i: int) -> float:
+        return _in_range(v, name, where, *(FOCAL_RANGE if i < 2 else CENTRE_RANGE), unit="px")
+
+    if isinstance(value, dict):
+        names = [next((n for n in options if n in value), options[0])
+                 for options in (("fx",), ("fy",), ("cx", "ppx"), ("cy", "ppy"))]
+        missing = [n for n in names if n not in value]
+        if missing:
+            raise InputError(f"{where}: {key} lacks {', '.join(missing)}",
+                             hint=f"write {key}: {{fx, fy, cx, cy}} in pixels, or a 3x3 camera matrix")
+        pinhole = tuple(ranged(value[n], f"{key}.{n}", i) for i, n in enumerate(names))
+        inner = next((n for n in ("distortion", "dist", "coeffs", "D", "dist_coeffs") if n in value), None)
+        dist = _distortion(value[inner], f"{key}.{inner}", where) if inner is not None else None
+        return (pinhole[0], pinhole[1], pinhole[2], pinhole[3]), dist
+    if not isinstance(value, list):
+        raise InputError(f"{where}: {key} is {_kind(value)}, not intrinsics",
+                         hint=f"write {key}: {{fx, fy, cx, cy}} in pixels, or a 3x3 camera matrix")
+    items = _flat(value)
+    if len(items) == 4:
+        return (ranged(items[0], f"{key}[0]", 0), ranged(items[1], f"{key}[1]", 1), ranged(items[2], f"{key}[2]", 2),
+                ranged(items[3], f"{key}[3]", 3)), None
+    if len(items) != 9:
+        raise InputError(f"{where}: {key} holds {len(items)} numbers; intrinsics are a 3x3 camera matrix (9) or "
+                         "fx, fy, cx, cy (4)",
+                         hint=f"name the key that holds them with intrinsics_key ({MAPPING_HINT})")
+    M = np.array([_number(v, f"{key}[{i // 3}][{i % 3}]", where) for i, v in enumerate(items)]).reshape(3, 3)
+    if not (abs(M[1, 0]) < 1e-9 and abs(M[2, 0]) < 1e-9 and abs(M[2, 1]) < 1e-9 and abs(M[2, 2] - 1.0) < 1e-9
+            and abs(M[0, 1]) <= 1e-6 * max(abs(M[0, 0]), 1.0)):
+        transposed = abs(M[0, 2]) < 1e-9 and abs(M[1, 2]) < 1e-9 and abs(M[2, 2] - 1.0) < 1e-9
+        raise InputError(f"{where}: {key} is not a camera matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]"
+                         + (" (it looks written column by column)" if transposed else ""),
+                         hint="write the 3x3 matrix row by row, without skew")
+    return (ranged(M[0, 0], f"{key}[0][0]", 0), ranged(M[1, 1], f"{key}[1][1]", 1), ranged(M[0, 2], f"{key}[0][2]", 2),
+            ranged(M[1, 2], f"{key}[1][2]", 3)), None
+
+
+def view_camera(record: Any, where: str, intrinsics_key: str | None = None, distortion_key: str | None = None
+                ) -> CameraNumbers | str | None:
+    """The intrinsics and distortion a view's pose file holds (the keys named, else the usual
+    names: INTRINSICS_KEYS, DISTORTION_KEYS), one line saying why they cannot be read, or None
+    when it holds none (no distortion key: none)."""
+    if not isinstance(record, dict):
+        return None
+    k_keys = (intrinsics_key,) if intrinsics_key else INTRINSICS_KEYS
+    d_keys = (distortion_key,) if distortion_key else DISTORTION_KEYS
+    key = next((k for k in k_keys if _lookup(record, k)[1]), None)
+    if key is None:
+        return (f"{where}: no key {intrinsics_key!r} (the intrinsics the mapping names; keys: {_key_list(record)})"
+                if intrinsics_key else None)
+    try:
+        pinhole, inner = _pinhole(_lookup(record, key)[0], key, where)
+        d_key = next((k for k in d_keys if _lookup(record, k)[1]), None)
+        if d_key is not None:
+            dist = _distortion(_lookup(record, d_key)[0], d_key, where)
+        elif distortion_key:
+            raise InputError(f"{where}: no key {distortion_key!r} (the distortion the mapping names)",
+                             hint=MAPPING_HINT)
+        else:
+            dist = inner if inner is not None else (0.0,) * 5
+    except InputError as exc:
+        return exc.one_line()
+    return CameraNumbers(*pinhole, distortion=dist)
+
+
+def _with_cameras(dataset: Dataset, spec: DatasetSpec) -> Dataset:
+    """The data set with the camera each view's pose file holds; the first one read becomes
+    the data set's camera (unless an index file names one)."""
+    views = [replace(v, camera=view_camera(v.record, v.where, spec.intrinsics_key, spec.distortion_key))
+             for v in dataset.views]
+    first = next((v.camera for v in views if isinstance(v.camera, CameraNumbers)), None)
+    if first is None and not spec.intrinsics_key:
+        return dataset
+    hints = dataset.hints if dataset.hints.camera is not None else replace(dataset.hints, camera=first)
+    return replace(dataset, views=views, hints=hints)
+
+
 def read_dataset(source: Path, spec: DatasetSpec = DatasetSpec()) -> Dataset:  # noqa: B008 (frozen)
     """The (image, pose) pairs of a data set folder (or of an index or CSV file): the index
     the mapping names, else one found at the top of the folder, else the CSV file (the
     mapping's ``poses`` or the only one at the top), else one pose file per image by stem
     (``images``/``poses`` of the mapping, else images/ and poses/ when they exist, else the
-    folder itself)."""
+    folder itself: images and pose files side by side), else a folder per view (no image at
+    the top, folders of one image and one pose file each). The intrinsics and distortion
+    each pose file holds (:func:`view_camera`) come with its view; the first view's are the
+    data set's camera when no index file gives one."""
+    return _with_cameras(_pairs(Path(source), spec), spec)
+
+
+def _pairs(source: Path, spec: DatasetSpec) -> Dataset:
     source = Path(source)
     if source.is_file():
         folder = source.parent
@@ -1060,8 +1325,8 @@ def read_dataset(source: Path, spec: DatasetSpec = DatasetSpec()) -> Dataset:  #
         return _from_index(inside(spec.index, "index"), root)
     if spec.poses and spec.poses.lower().endswith(".csv"):
         return _from_csv(inside(spec.poses, "poses"), root, images_dir, spec.image_column)
+    top = _entries(folder)
     if not spec.poses:
-        top = _entries(folder)
         image_stems = {p.stem for p in top if p.suffix.lower() in IMAGE_SUFFIXES}
         mapping = spec.source.resolve() if spec.source is not None else None
         tops = sorted((p for p in _files(top, POSE_SUFFIXES) if p.stem not in image_stems and p.resolve() != mapping
@@ -1084,6 +1349,11 @@ def read_dataset(source: Path, spec: DatasetSpec = DatasetSpec()) -> Dataset:  #
             return _from_csv(csvs[0], root, images_dir, spec.image_column)
     poses_dir = inside(spec.poses, "poses") if spec.poses else (
         folder / "poses" if (folder / "poses").is_dir() else images_dir)
+    if not spec.images and not spec.poses and images_dir == folder == poses_dir \
+            and not _files(top, IMAGE_SUFFIXES):
+        subs = [p for p in top if p.is_dir()]
+        if subs:
+            return _from_view_folders(folder, root, subs)
     return _from_pose_files(folder, root, images_dir, poses_dir)
 
 
@@ -1129,13 +1399,19 @@ def dataset_views(dataset: Dataset, mapping: PoseMapping, board: BoardSpec, came
     """Every pair of the data set read: its pose through the mapping, its image, the board's
     corners in it; a pair that cannot be used is skipped with its reason. Every pose is read
     before any image: ``poses_read`` is then called with the robot poses read (base_T_flange)
-    and the views skipped so far, and may refuse the data set before an image is decoded."""
+    and the views skipped so far, and may refuse the data set before an image is decoded.
+    ``camera`` the data set's own (``dataset.hints.camera``): each view is seen with the
+    intrinsics its pose file holds, when it holds them."""
     import cv2
 
     order = {v.name: k for k, v in enumerate(dataset.views)}
     later: list[SkippedImage] = []
     posed: list[tuple[DatasetView, np.ndarray]] = []
+    own = camera is dataset.hints.camera
     for v in dataset.views:
+        if own and isinstance(v.camera, str):
+            later.append(SkippedImage(v.name, v.camera))
+            continue
         try:
             if mapping.pose_format is None:
                 mapping = detect_format(v.record, mapping, v.where)
@@ -1154,8 +1430,9 @@ def dataset_views(dataset: Dataset, mapping: PoseMapping, board: BoardSpec, came
         else:
             with native_output_captured((1, 2)):  # OpenCV's own diagnostics stay off the terminal
                 try:
+                    seen_by = v.camera if own and isinstance(v.camera, CameraNumbers) else camera
                     found = corner_view(v.name, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), base_T_flange, board,
-                                        camera, min_corners, v.where)
+                                        seen_by, min_corners, v.where)
                 except cv2.error as exc:
                     reason = (str(exc).strip().splitlines() or ["no reason given"])[-1][:160]
                     found = SkippedImage(v.name, f"{v.image}: the board cannot be found in it (OpenCV: {reason})")

@@ -9,7 +9,14 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from recon_cli.calibration.dataset import AngleUnit, LengthUnit, MatrixOrder, PoseFormat, QuaternionOrder
+from recon_cli.calibration.dataset import (
+    AngleUnit,
+    LengthUnit,
+    MatrixOrder,
+    PoseFormat,
+    QuaternionOrder,
+    parse_camera_numbers,
+)
 from recon_cli.calibration.handeye import HandEyeMethod
 from recon_cli.calibration.intrinsics import DistortionModel
 from recon_cli.calibration.setups import Setup
@@ -25,7 +32,6 @@ from recon_cli.cli.options import (
     SeedOpt,
     cell_config,
     output_folder,
-    parse_vector,
     realism_option,
     realism_profile,
 )
@@ -135,10 +141,12 @@ def handeye(
                                                      "fixed, the board on the flange: base_T_camera, "
                                                      "flange_T_board); default: the mapping's, the index file's "
                                                      "static_camera, else eye-in-hand.")] = None,
-    pinhole: Annotated[str | None, typer.Option("--intrinsics", help="With --dataset: pinhole intrinsics "
-                                                                     "fx,fy,cx,cy [px] of the images, without "
+    pinhole: Annotated[str | None, typer.Option("--intrinsics", help="With --dataset: the camera of the images "
+                                                                     "as they are: fx,fy,cx,cy [px], or "
+                                                                     "fx,fy,cx,cy,k1,k2,p1,p2[,k3] with OpenCV's "
                                                                      "distortion (else --camera-file, the "
-                                                                     "mapping's or the index file's).")] = None,
+                                                                     "mapping's, the index file's or the pose "
+                                                                     "files' own).")] = None,
     pose_format: Annotated[PoseFormat | None, typer.Option("--pose-format", metavar=_metavar(PoseFormat),
                                                            help="With --dataset: what a pose is: xyz + quaternion, "
                                                                 "xyz + roll-pitch-yaw, a 4x4 matrix or joint "
@@ -189,7 +197,7 @@ def handeye(
         if scans is not None or station is not None:
             raise InputError("--dataset is calibrated on its own, without --scan-store or --station",
                              hint="give one source of board views")
-        numbers = parse_vector(pinhole, 4, "--intrinsics", "pixels") if pinhole is not None else None
+        numbers = parse_camera_numbers(pinhole, "--intrinsics") if pinhole is not None else None
         folder = output_folder(out, "calibrate handeye", default="handeye", force=force,
                                inputs=(dataset, mapping, intrinsics)).path
         opts = DatasetHandEyeOptions(dataset, folder, mapping, setup, method, refine, intrinsics, numbers, spec,

@@ -307,7 +307,7 @@ def test_each_form_of_a_pose(record, mapping):
     ({"x": 0, "y": 0, "z": 0, "roll": 180, "pitch": 0, "yaw": 90}, PoseMapping(PoseFormat.XYZ_RPY),
      "looks like degrees while the mapping says radians; set angle_unit: deg"),
     ({"O_T_EE": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0.1, 0.2, 0.3, 1]},
-     PoseMapping(PoseFormat.MATRIX, matrix=("O_T_EE",)),
+     PoseMapping(PoseFormat.MATRIX, matrix=("O_T_EE",), matrix_order=MatrixOrder.ROW),
      "looks column-major while the mapping says row-major; set matrix_order: column"),
     ({"x": 0, "y": 0, "z": 0, "qx": 0, "qy": 0, "qw": 1}, PoseMapping(PoseFormat.XYZ_QUAT),
      "p.yaml: no key 'qz' (the quaternion; keys: x, y, z, qx, qy, qw)"),

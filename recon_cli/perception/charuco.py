@@ -4,6 +4,10 @@ OpenCV's board frame has its origin at the top-left corner of the board image, x
 right, y down the image and z into the board. recon's marker frame M (design notes) has
 its origin at the lower-left corner, x along the 11-square side, y up the image and z out
 of the board: ``opencv_board_T_marker`` converts between the two.
+
+OpenCV 4.6 changed the ChArUco pattern of boards with an even number of rows: the legacy
+pattern (before 4.6) starts with a marker where the new one starts with a black square.
+``legacy=True`` reads boards printed before 4.6 (``CharucoBoard.setLegacyPattern``).
 """
 
 from __future__ import annotations
@@ -21,6 +25,12 @@ from recon_cli.inputs.schema import check
 from recon_cli.inputs.yamlfile import line_of, read_yaml
 from recon_cli.lazy import lazy_module
 from recon_cli.paths import ROBOT_DIR
+from recon_cli.perception.board_pose import (  # noqa: F401 (CORNER_SIGMA_FLOOR_PX, _pose_sigmas: used from here)
+    CORNER_SIGMA_FLOOR_PX,
+    BoardPose,
+    _pose_sigmas,
+    solve_pose,
+)
 from recon_cli.perception.camera_model import Intrinsics
 from recon_cli.robot.cell_file import CellFile
 
@@ -37,6 +47,7 @@ class BoardSpec:
     square_length: float  # [m]
     marker_length: float  # [m]
     dictionary: str
+    legacy: bool = False  # OpenCV's pattern before 4.6 (differs for an even squares_y)
 
     def as_tuple(self) -> tuple[int, int, float, float, str]:
         return (self.squares_x, self.squares_y, self.square_length, self.marker_length, self.dictionary)
@@ -48,8 +59,22 @@ class BoardSpec:
 
     def board(self) -> cv2.aruco.CharucoBoard:
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
-        return cv2.aruco.CharucoBoard((self.squares_x, self.squares_y), self.square_length,
-                                      self.marker_length, dictionary)
+        board = cv2.aruco.CharucoBoard((self.squares_x, self.squares_y), self.square_length,
+                                       self.marker_length, dictionary)
+        board.setLegacyPattern(self.legacy)
+        return board
+
+    def match(self, detection: CharucoDetection) -> tuple[np.ndarray, np.ndarray]:
+        """The detected corners' positions in OpenCV's board frame (N, 3) [m] and in the image
+        (N, 2) [px] (``CharucoBoard.matchImagePoints``)."""
+        if detection.n_corners == 0:
+            return np.zeros((0, 3)), np.zeros((0, 2))
+        # OpenCV's stubs declare a sequence of corner arrays; the function takes one (N, 1, 2) array
+        obj, img = self.board().matchImagePoints(detection.corners.reshape(-1, 1, 2).astype(np.float32),  # type: ignore[call-overload]
+                                                 detection.ids.reshape(-1, 1).astype(np.int32))
+        if obj is None:
+            return np.zeros((0, 3)), np.zeros((0, 2))
+        return np.asarray(obj, np.float64).reshape(-1, 3), np.asarray(img, np.float64).reshape(-1, 2)
 
     def image(self, pixels_per_metre: float = 4000.0) -> np.ndarray:
         """Grey image of the printed area, row 0 at the board's top edge (marker y max)."""
@@ -131,79 +156,15 @@ def detect(image: np.ndarray, spec: BoardSpec) -> CharucoDetection:
                             markers, mids)
 
 
-@dataclass(frozen=True)
-class BoardPose:
-    """camera_T_marker [4x4], the RMS reprojection error [px] of the corners used, and how
-    well those corners fix the pose: the standard deviations of the camera's position [m]
-    and orientation [rad] in the board's frame (largest principal axis; see estimate_pose)."""
-
-    camera_T_marker: np.ndarray
-    reprojection_rms: float
-    n_corners: int
-    position_sigma: float = 0.0
-    rotation_sigma: float = 0.0
-
-
 def estimate_pose(detection: CharucoDetection, spec: BoardSpec, K: Intrinsics,
                   dist: np.ndarray | tuple[float, ...] | None = None, min_corners: int = 6) -> BoardPose | None:
     """Board pose from the interpolated corners with solvePnP; None when too few corners or
     when they do not fix a pose."""
     if detection.n_corners < min_corners:
         return None
-    board = spec.board()
-    # OpenCV's stubs declare a sequence of corner arrays; the function takes one (N, 1, 2) array
-    obj, img = board.matchImagePoints(detection.corners.reshape(-1, 1, 2).astype(np.float32),  # type: ignore[call-overload]
-                                      detection.ids.reshape(-1, 1).astype(np.int32))
-    if obj is None or len(obj) < min_corners:
+    obj, img = spec.match(detection)
+    if len(obj) < min_corners:
         return None
-    dist = np.zeros(5) if dist is None else np.asarray(dist, dtype=float)
-    ok, rvec, tvec = cv2.solvePnP(obj, img, K.matrix(), dist, flags=cv2.SOLVEPNP_IPPE)
-    if not ok:
-        return None
-    rvec, tvec = cv2.solvePnPRefineLM(obj, img, K.matrix(), dist, rvec, tvec)
-    if not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))):
-        return None  # a degenerate corner set (e.g. all on one line): no pose
-    proj, jacobian = cv2.projectPoints(obj, rvec, tvec, K.matrix(), dist)
-    residual = proj.reshape(-1, 2) - img.reshape(-1, 2)
-    rms = float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
-    sigma_p, sigma_r = _pose_sigmas(jacobian[:, :6], residual, rvec.reshape(3), tvec.reshape(3))
-    T = np.eye(4)
-    T[:3, :3] = cv2.Rodrigues(rvec)[0]
-    T[:3, 3] = tvec.reshape(3)
-    return BoardPose(T @ spec.opencv_board_T_marker(), rms, len(obj), sigma_p, sigma_r)
+    return solve_pose(obj, img, K, dist, spec.opencv_board_T_marker())
 
 
-#: [px] floor of the corner noise in the pose covariance (sub-pixel corners of a sharp image)
-CORNER_SIGMA_FLOOR_PX = 0.1
-
-
-def _pose_sigmas(J: np.ndarray, residual: np.ndarray, rvec: np.ndarray, tvec: np.ndarray) -> tuple[float, float]:
-    """Standard deviations [m, rad] of the camera position and orientation in the board
-    frame: the Gauss-Newton covariance s^2 (J^T J)^-1 of the pose (rvec, tvec), s^2 the
-    corners' residual variance (at least CORNER_SIGMA_FLOOR_PX), carried to the camera
-    centre -R^T t by its derivative; the largest principal axes. Few corners, bunched or
-    seen at a grazing angle give large values."""
-    m = residual.size
-    s2 = max(float(np.sum(residual**2)) / max(m - 6, 1), CORNER_SIGMA_FLOOR_PX**2)
-    try:
-        with np.errstate(all="ignore"):
-            C = s2 * np.linalg.inv(J.T @ J)
-    except np.linalg.LinAlgError:
-        return float("inf"), float("inf")
-    if not np.all(np.isfinite(C)):  # a singular fit: the pose is not fixed by these corners
-        return float("inf"), float("inf")
-
-    def centre(p: np.ndarray) -> np.ndarray:
-        return -cv2.Rodrigues(p[:3])[0].T @ p[3:]
-
-    p0, D = np.r_[rvec, tvec], np.zeros((3, 6))
-    for k in range(6):
-        h = np.zeros(6)
-        h[k] = 1e-6
-        D[:, k] = (centre(p0 + h) - centre(p0 - h)) / 2e-6
-    try:
-        position = float(np.sqrt(max(np.linalg.eigvalsh(D @ C @ D.T).max(), 0.0)))
-        rotation = float(np.sqrt(max(np.linalg.eigvalsh(C[:3, :3]).max(), 0.0)))
-    except np.linalg.LinAlgError:
-        return float("inf"), float("inf")
-    return position, rotation

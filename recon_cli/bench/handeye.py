@@ -35,7 +35,7 @@ from recon_cli.calibration.handeye import (
     solve_hand_eye,
     view_residuals,
 )
-from recon_cli.calibration.robust import PosePrior, _exp, refine_with_pose_errors
+from recon_cli.calibration.robust import PosePrior, _exp, estimate_joint_offsets, refine_with_pose_errors
 from recon_cli.errors import ReconError
 from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.robot.kinematics import Kinematics
@@ -44,6 +44,7 @@ from recon_cli.robot.kinematics import Kinematics
 CLOSED_FORM = (HandEyeMethod.TSAI, HandEyeMethod.PARK, HandEyeMethod.HORAUD, HandEyeMethod.ANDREFF,
                HandEyeMethod.DANIILIDIS)
 REFINED = "recon"  # the row of refine_with_pose_errors
+JOINTS = "recon+joints"  # the row of estimate_joint_offsets
 
 
 @dataclass(frozen=True)
@@ -205,7 +206,7 @@ class HandEyeStudy:
     rows: list[StudyRow]
     errors: dict[str, np.ndarray]  # method -> (seeds, 2) [mm, deg]
     stated_mm_deg: np.ndarray  # (seeds, 2) the refinement's std_mm_deg
-    ratio: tuple[float, float]  # recon's median over the best OpenCV method's median (mm, deg)
+    ratio: tuple[float, float]  # recon's (refine_with_pose_errors) median over the best OpenCV method's (mm, deg)
     best_opencv: tuple[str, str]  # the best method by mm and by deg
     seconds: float
     refine_seconds: float  # mean per refinement
@@ -239,14 +240,15 @@ class HandEyeStudy:
 
 def handeye_study(seeds: int = 20, views: int = 16, errors: RobotErrors = RobotErrors(),  # noqa: B008
                   cell_views: Views | None = None, first_seed: int = 0, prior: PosePrior | None = None,
-                  loss: str = "linear") -> HandEyeStudy:
+                  loss: str = "linear", joints: bool = True) -> HandEyeStudy:
     """The study of the module docstring over seeds ``first_seed`` ... ``first_seed + seeds - 1``.
     ``cell_views``: the FR3 views (:func:`fr3_views`) when already made; ``prior``: the
-    refinement's (default: the simulated pose errors, the detection std from the data)."""
+    refinement's (default: the simulated pose errors, the detection std from the data);
+    ``joints``: also estimate the joint zero offsets (row ``recon+joints``)."""
     t0 = time.perf_counter()
     cell_views = cell_views or fr3_views()
     prior = prior or PosePrior(errors.pose_translation, errors.pose_rotation)
-    names = [m.value for m in CLOSED_FORM] + [REFINED]
+    names = [m.value for m in CLOSED_FORM] + [REFINED] + ([JOINTS] if joints else [])
     errs: dict[str, list[tuple[float, float]]] = {k: [] for k in names}
     stated, t_refine = [], 0.0
     for seed in range(first_seed, first_seed + seeds):
@@ -263,12 +265,18 @@ def handeye_study(seeds: int = 20, views: int = 16, errors: RobotErrors = RobotE
         e = pose_error(refined.solution.flange_T_camera, sim.flange_T_camera)
         errs[REFINED].append((e[0] * 1e3, math.degrees(e[1])))
         stated.append(refined.std_mm_deg)
+        if joints:
+            assert cell_views.kin is not None
+            found = estimate_joint_offsets(list(sim.joints), [o.camera_T_marker for o in sim.observations],
+                                           cell_views.kin, best, prior)
+            e = pose_error(found.solution.flange_T_camera, sim.flange_T_camera)
+            errs[JOINTS].append((e[0] * 1e3, math.degrees(e[1])))
     arrays = {k: np.array(v) for k, v in errs.items()}
     rows = [StudyRow(k, *np.nanmedian(a, axis=0), *np.nanpercentile(a, 90, axis=0)) for k, a in arrays.items()]
-    opencv = [r for r in rows if r.method != REFINED]
+    opencv = [r for r in rows if r.method not in (REFINED, JOINTS)]
     best_mm = min(opencv, key=lambda r: r.median_mm)
     best_deg = min(opencv, key=lambda r: r.median_deg)
-    ours = rows[-1]
+    ours = next(r for r in rows if r.method == REFINED)
     return HandEyeStudy(seeds, views, rows, arrays, np.array(stated),
                         (ours.median_mm / best_mm.median_mm, ours.median_deg / best_deg.median_deg),
                         (best_mm.method, best_deg.method), time.perf_counter() - t0, t_refine / max(seeds, 1))

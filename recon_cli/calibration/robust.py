@@ -143,12 +143,12 @@ def _inv_many(T: np.ndarray) -> np.ndarray:
 
 def board_residuals(world_T_flange: np.ndarray, flange_T_camera: np.ndarray, world_T_marker: np.ndarray,
                     camera_T_marker: np.ndarray) -> np.ndarray:
-    """(n, 6): predicted minus measured board pose in the camera per view: the marker
+    """(..., n, 6): predicted minus measured board pose in the camera per view: the marker
     origin's position [m] and the rotation vector [rad] of predicted @ measured^-1 (camera axes)."""
     pred = _inv_many(world_T_flange @ flange_T_camera) @ world_T_marker
-    dt = pred[:, :3, 3] - camera_T_marker[:, :3, 3]
-    dr = _rotvec(pred[:, :3, :3] @ np.swapaxes(camera_T_marker[:, :3, :3], -1, -2))
-    return np.concatenate([dt, dr], axis=1)
+    dt = pred[..., :3, 3] - camera_T_marker[..., :3, 3]
+    dr = _rotvec(pred[..., :3, :3] @ np.swapaxes(camera_T_marker[..., :3, :3], -1, -2))
+    return np.concatenate([dt, dr], axis=-1)
 
 
 # --------------------------------------------------------------------- the problem
@@ -164,10 +164,23 @@ class _Problem:
     detection: np.ndarray  # (6,) board std per residual component
     k: int = 0  # number of estimated joint offsets
     loss: str = "linear"
+    bound: float = np.inf  # [rad] the offsets' bound: offset = bound tanh(u / bound) of the parameter u
+    _cache: tuple[bytes, np.ndarray] | None = None  # the last offsets and their flange poses
+
+    def flange_poses(self, offsets: np.ndarray) -> np.ndarray:
+        key = offsets.tobytes()
+        if self._cache is None or self._cache[0] != key:
+            self._cache = (key, self.flange(offsets))
+        return self._cache[1]
 
     @property
     def n(self) -> int:
         return len(self.B)
+
+    def offsets(self, x: np.ndarray) -> np.ndarray:
+        """The joint offsets [rad] of a parameter vector (within +-bound)."""
+        u = x[12 + 6 * self.n:]
+        return u if not np.isfinite(self.bound) else self.bound * np.tanh(u / self.bound)
 
     @property
     def size(self) -> int:
@@ -181,64 +194,107 @@ class _Problem:
 
     def raw(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Unweighted board residuals (n, 6) and corrections (n, 6)."""
-        X, W, c, offsets = self.unpack(x)
-        F = self.flange(offsets) @ _exp(c)
-        return board_residuals(F, X, W, self.B), c
+        board, c = self._raw_batch(x[None])
+        return board[0], c[0]
 
-    def residuals(self, x: np.ndarray) -> np.ndarray:
-        board, c = self.raw(x)
+    def _raw_batch(self, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`raw` of parameter vectors (b, size) that share their offsets: (b, n, 6) each."""
+        n = self.n
+        X = self.X0 @ _exp(xs[:, :6])  # (b, 4, 4)
+        W = self.W0 @ _exp(xs[:, 6:12])
+        c = xs[:, 12:12 + 6 * n].reshape(len(xs), n, 6)
+        F = self.flange_poses(self.offsets(xs[0])) @ _exp(c)  # (b, n, 4, 4)
+        return board_residuals(F, X[:, None], W[:, None], self.B), c
+
+    def _weighted(self, board: np.ndarray, c: np.ndarray) -> np.ndarray:
+        """(b, 12 n) weighted residuals of raw ones (b, n, 6)."""
         rb = board / self.detection
         if self.loss != "linear":  # per view: the square of the scaled residual is the loss
-            s = np.sum(rb * rb, axis=1) / ROBUST_SCALE ** 2
+            s = np.sum(rb * rb, axis=-1) / ROBUST_SCALE ** 2
             if self.loss == "soft_l1":
                 rho = 2.0 * (np.sqrt(1.0 + s) - 1.0)
             else:  # huber
                 rho = np.where(s <= 1.0, s, 2.0 * np.sqrt(s) - 1.0)
             scale = np.sqrt(np.where(s > 1e-12, rho / np.maximum(s, 1e-12), 1.0))
-            rb = rb * scale[:, None]
-        return np.concatenate([rb.ravel(), (c / self.prior).ravel()])
+            rb = rb * scale[..., None]
+        b = len(board)
+        return np.concatenate([rb.reshape(b, -1), (c / self.prior).reshape(b, -1)], axis=1)
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        return self._weighted(*self._raw_batch(np.asarray(x, dtype=float)[None]))[0]
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
-        """Dense Jacobian of :meth:`residuals` by central differences, the corrections of all
-        views perturbed at once per component (each view's rows see only its own)."""
-        n, m = self.n, 12 * self.n
-        J = np.zeros((m, self.size))
+        """Dense Jacobian of :meth:`residuals` by central differences: the mount's and the
+        board's columns and the corrections of all views at once per component (each view's
+        rows see only its own) in one batch; each offset's column apart (forward kinematics)."""
+        n, m, size = self.n, 12 * self.n, self.size
+        J = np.zeros((m, size))
         steps = np.concatenate([np.full(12, 1e-6), 1e-3 * np.tile(self.prior, n), np.full(self.k, 1e-6)])
-        dense = list(range(12)) + list(range(12 + 6 * n, self.size))
-        for j in dense:
-            e = np.zeros(self.size)
-            e[j] = steps[j]
-            J[:, j] = (self.residuals(x + e) - self.residuals(x - e)) / (2 * steps[j])
+        E = np.zeros((18, size))
+        for j in range(12):
+            E[j, j] = steps[j]
         for a in range(6):
             cols = 12 + 6 * np.arange(n) + a
-            e = np.zeros(self.size)
-            e[cols] = steps[cols]
-            d = (self.residuals(x + e) - self.residuals(x - e)) / (2 * steps[cols[0]])
-            for i in range(n):  # view i's board rows and its prior rows
-                J[6 * i:6 * i + 6, cols[i]] = d[6 * i:6 * i + 6]
-                J[6 * n + 6 * i:6 * n + 6 * i + 6, cols[i]] = d[6 * n + 6 * i:6 * n + 6 * i + 6]
+            E[12 + a, cols] = steps[cols]
+        R = self._weighted(*self._raw_batch(np.concatenate([x + E, x - E])))
+        D = (R[:18] - R[18:]) / (2.0 * np.concatenate([steps[:12], steps[12:18]]))[:, None]  # (18, m)
+        J[:, :12] = D[:12].T
+        rows = np.arange(n)[:, None] * 6 + np.arange(6)[None, :]  # (n, 6) view i's rows
+        for a in range(6):
+            cols = 12 + 6 * np.arange(n) + a
+            J[rows, cols[:, None]] = D[12 + a][rows]
+            J[6 * n + rows, cols[:, None]] = D[12 + a][6 * n + rows]
+        for j in range(12 + 6 * n, size):
+            e = np.zeros(size)
+            e[j] = steps[j]
+            J[:, j] = (self.residuals(x + e) - self.residuals(x - e)) / (2 * steps[j])
         return J
 
-    def solve(self, x0: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None = None):
+    def solve(self, x0: np.ndarray):
         from scipy.optimize import least_squares
 
         scale = np.concatenate([np.full(12, 1e-3), np.tile(self.prior, self.n), np.full(self.k, 1e-3)])
-        if bounds is None:
-            return least_squares(self.residuals, x0, jac=self.jacobian, method="lm", x_scale=scale,
-                                 xtol=1e-12, ftol=1e-12, gtol=1e-10, max_nfev=200)
-        return least_squares(self.residuals, x0, jac=self.jacobian, method="trf", tr_solver="exact",
-                             x_scale=scale, bounds=bounds, xtol=1e-12, ftol=1e-12, gtol=1e-10, max_nfev=200)
+        return least_squares(self.residuals, x0, jac=self.jacobian, method="lm", x_scale=scale,
+                             xtol=1e-12, ftol=1e-12, gtol=1e-10, max_nfev=200)
 
+    def inverse_blocks(self, J: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The inverse of the normal matrix J^T J by its block structure (the corrections'
+        6 x 6 blocks apart): S^-1 (p, p) of the p = 12 + k dense parameters (their covariance
+        with unit weights), G = D^-1 B^T per view (n, 6, p) and D^-1 (n, 6, 6)."""
+        S, G, D_inv = self.schur(J)
+        return _inverse(S), G, D_inv
+
+    def schur(self, J: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """S (p, p), the normal matrix of the dense parameters with the corrections
+        eliminated, G and D^-1 (see :meth:`inverse_blocks`)."""
+        n = self.n
+        Jd_board = J[:6 * n, self._dense()].reshape(n, 6, -1)  # (n, 6, p); dense columns have no prior rows
+        Jc = np.stack([np.concatenate([J[6 * i:6 * i + 6, 12 + 6 * i:18 + 6 * i],
+                                       J[6 * n + 6 * i:6 * n + 6 * i + 6, 12 + 6 * i:18 + 6 * i]]) for i in range(n)])
+        Jc_board = Jc[:, :6]
+        A = np.einsum("nra,nrb->ab", Jd_board, Jd_board)
+        Bm = np.einsum("nra,nrc->nac", Jd_board, Jc_board)  # (n, p, 6)
+        D_inv = np.linalg.inv(np.einsum("nrc,nrd->ncd", Jc, Jc))
+        G = np.einsum("ncd,nad->nca", D_inv, Bm)  # (n, 6, p)
+        S = A - np.einsum("nac,ncb->ab", Bm, G)
+        return S, G, D_inv
+
+    def _dense(self) -> list[int]:
+        return list(range(12)) + list(range(12 + 6 * self.n, self.size))
 
     def update_detection(self, fit, per_axis: tuple[bool, bool]) -> bool:
         """Variance component estimation of the board std, per camera axis (translation x, y,
         z, rotation about x, y, z) where ``per_axis`` says so (translation, rotation), else one
         for the three: True when it changed by less than 5 %."""
         J = np.asarray(fit.jac)
-        N_inv = _inverse(J.T @ J)
-        h = np.einsum("ij,jk,ik->i", J, N_inv, J)  # the hat matrix' diagonal
+        n = self.n
+        S_inv, G, D_inv = self.inverse_blocks(J)
+        a = J[:6 * n, self._dense()].reshape(n, 6, -1)
+        b = np.stack([J[6 * i:6 * i + 6, 12 + 6 * i:18 + 6 * i] for i in range(n)])  # (n, 6 rows, 6)
+        u = a - np.einsum("nrc,nca->nra", b, G)
+        h = np.einsum("nra,ab,nrb->nr", u, S_inv, u) + np.einsum("nrc,ncd,nrd->nr", b, D_inv, b)
         board, _ = self.raw(fit.x)
-        red = (1.0 - h[:6 * self.n]).reshape(self.n, 6)
+        red = 1.0 - h  # (n, 6) the board rows' redundancy numbers
         new = self.detection.copy()
         for part, floor, estimate in ((0, DETECTION_FLOOR[0], per_axis[0]), (3, DETECTION_FLOOR[1], per_axis[1])):
             groups = [[part], [part + 1], [part + 2]] if estimate else [[part, part + 1, part + 2]]
@@ -267,11 +323,10 @@ def _prior_vector(prior: PosePrior) -> np.ndarray:
 
 def _mount_covariance(problem: _Problem, fit) -> np.ndarray:
     """(6, 6) covariance of the mount's twist, scaled by the fit's variance factor."""
-    J = np.asarray(fit.jac)
     dof = max(len(fit.fun) - problem.size, 1)
     s2 = float(fit.fun @ fit.fun) / dof
-    cov = _inverse(J.T @ J)
-    return np.asarray(cov[:6, :6] * s2)
+    S_inv, _, _ = problem.inverse_blocks(np.asarray(fit.jac))
+    return np.asarray(S_inv[:6, :6] * s2)
 
 
 def _std_mm_deg(cov: np.ndarray) -> tuple[float, float]:
@@ -279,13 +334,12 @@ def _std_mm_deg(cov: np.ndarray) -> tuple[float, float]:
             float(np.degrees(np.sqrt(max(np.trace(cov[3:, 3:]), 0.0)))))
 
 
-def _run(problem: _Problem, estimate_detection: tuple[bool, bool], x0: np.ndarray,
-         bounds: tuple[np.ndarray, np.ndarray] | None = None):
-    fit = problem.solve(x0, bounds)
+def _run(problem: _Problem, estimate_detection: tuple[bool, bool], x0: np.ndarray):
+    fit = problem.solve(x0)
     if any(estimate_detection):
         for _ in range(VARIANCE_ROUNDS):
             settled = problem.update_detection(fit, estimate_detection)
-            fit = problem.solve(fit.x, bounds)
+            fit = problem.solve(fit.x)
             if settled:
                 break
     return fit
@@ -340,55 +394,74 @@ def estimate_joint_offsets(joints: list[np.ndarray], camera_T_marker: list[np.nd
     F0 = flange_at(np.zeros(nj))
     observations = [BoardObservation(str(i), F0[i], B[i]) for i in range(len(Q))]
     base = refine_with_pose_errors(observations, start, prior)
-    detection = base.detection_axes
-
-    # the data's information on every offset, at the refined solution
-    full = _Problem(flange_at, B, base.solution.flange_T_camera, base.solution.world_T_marker,
-                    _prior_vector(prior), detection)
-    full_k = _Problem(lambda d: flange_at(d), B, full.X0, full.W0, full.prior, detection, k=nj)
-    x0 = np.concatenate([np.zeros(12), base.flange_corrections.ravel(), np.zeros(nj)])
-    J = _numeric_jacobian(full_k.residuals, x0)
-    core = list(range(12 + 6 * len(Q)))
+    estimate = (prior.detection_translation is None, prior.detection_rotation is None)
+    pose_std = _prior_vector(prior)
+    # the board poses' std found without offsets holds the offsets' effect too: choose, solve
+    # (which estimates the std again), choose again until the choice stays
+    X, W, c, detection = base.solution.flange_T_camera, base.solution.world_T_marker, base.flange_corrections, \
+        base.detection_axes
+    current = np.zeros(nj)
     chosen: list[int] = []
-    threshold = bound / 3.0
-    while True:
-        best, best_std = -1, np.inf
-        for j in range(nj):
-            if j in chosen:
-                continue
-            cols = core + [12 + 6 * len(Q) + m for m in [*chosen, j]]
-            Js = J[:, cols]
-            cov = _inverse(Js.T @ Js)
-            sd = np.inf if _rank_deficient(Js) else float(np.sqrt(max(cov[-1, -1], 0.0)))
-            if sd < best_std:
-                best, best_std = j, sd
-        if best < 0 or best_std >= threshold:
+    result: JointOffsets | None = None
+    for _ in range(3):
+        def flange_near(d: np.ndarray, at: np.ndarray = current) -> np.ndarray:
+            return flange_at(at + d)
+
+        full = _Problem(flange_near, B, X, W, pose_std, detection, k=nj)
+        S, _, _ = full.schur(full.jacobian(np.concatenate([np.zeros(12), c.ravel(), np.zeros(nj)])))
+        choice = _observable_offsets(S, bound / 3.0)
+        if result is not None and choice == chosen:
+            break
+        chosen = choice
+        observable = np.zeros(nj, dtype=bool)
+        observable[chosen] = True
+        if not chosen:
+            return JointOffsets(np.zeros(nj), np.full(nj, np.inf), base.solution, observable, base)
+
+        def flange_chosen(d: np.ndarray, chosen: list[int] = chosen) -> np.ndarray:
+            all_offsets = np.zeros(nj)
+            all_offsets[chosen] = d
+            return flange_at(all_offsets)
+
+        problem = _Problem(flange_chosen, B, X, W, pose_std, detection, k=len(chosen), bound=bound)
+        u0 = bound * np.arctanh(np.clip(current[chosen] / bound, -0.99, 0.99))
+        fit = _run(problem, estimate, np.concatenate([np.zeros(12), c.ravel(), u0]))
+        S_inv, _, _ = problem.inverse_blocks(np.asarray(fit.jac))
+        dof = max(len(fit.fun) - problem.size, 1)
+        std_u = np.sqrt(np.diag(S_inv)[12:] * float(fit.fun @ fit.fun) / dof)
+        offsets = np.zeros(nj)
+        std = np.full(nj, np.inf)
+        offsets[chosen] = problem.offsets(fit.x)
+        std[chosen] = std_u * (1.0 - (offsets[chosen] / bound) ** 2)  # d offset / d u
+        refined = _result(problem, fit, start)
+        result = JointOffsets(offsets, std, refined.solution, observable, refined)
+        X, W, c, detection = refined.solution.flange_T_camera, refined.solution.world_T_marker, \
+            refined.flange_corrections, refined.detection_axes
+        current = offsets
+    assert result is not None
+    return result
+
+
+def _observable_offsets(S: np.ndarray, threshold: float) -> list[int]:
+    """The offsets (the parameters 12 ... of the normal matrix S, the corrections eliminated)
+    whose std from the data, given the mount, the board and the other chosen offsets, is below
+    ``threshold``. Greedy, the best determined first."""
+    nj = len(S) - 12
+    chosen: list[int] = []
+    while len(chosen) < nj:
+        stds = np.full(nj, np.inf)
+        for j in set(range(nj)) - set(chosen):
+            idx = list(range(12)) + [12 + m for m in (*chosen, j)]
+            sub = S[np.ix_(idx, idx)]
+            d = np.sqrt(np.maximum(np.diag(sub), 1e-300))
+            w = np.linalg.eigvalsh(sub / np.outer(d, d))
+            if w[0] > 1e-12 * w[-1]:  # else: a combination of the columns is not determined at all
+                stds[j] = float(np.sqrt(max(np.linalg.inv(sub)[-1, -1], 0.0)))
+        best = int(np.argmin(stds))
+        if not stds[best] < threshold:
             break
         chosen.append(best)
-    chosen.sort()
-    observable = np.zeros(nj, dtype=bool)
-    observable[chosen] = True
-    offsets: np.ndarray = np.zeros(nj)
-    std: np.ndarray = np.full(nj, np.inf)
-    if not chosen:
-        return JointOffsets(offsets, std, base.solution, observable, base)
-
-    def flange_chosen(d: np.ndarray) -> np.ndarray:
-        all_offsets = np.zeros(nj)
-        all_offsets[chosen] = d
-        return flange_at(all_offsets)
-
-    problem = _Problem(flange_chosen, B, full.X0, full.W0, full.prior, detection, k=len(chosen))
-    lo = np.concatenate([np.full(12 + 6 * len(Q), -np.inf), np.full(len(chosen), -bound)])
-    fit = _run(problem, (False, False), np.concatenate([np.zeros(12), base.flange_corrections.ravel(),
-                                               np.zeros(len(chosen))]), (lo, -lo))
-    J_fit = np.asarray(fit.jac)
-    dof = max(len(fit.fun) - problem.size, 1)
-    cov_all = _inverse(J_fit.T @ J_fit) * float(fit.fun @ fit.fun) / dof
-    offsets[chosen] = fit.x[-len(chosen):]
-    std[chosen] = np.sqrt(np.diag(cov_all)[-len(chosen):])
-    refined = _result(problem, fit, start)
-    return JointOffsets(offsets, std, refined.solution, observable, refined)
+    return sorted(chosen)
 
 
 def _inverse(N: np.ndarray) -> np.ndarray:
@@ -403,25 +476,6 @@ def _inverse(N: np.ndarray) -> np.ndarray:
     except LinAlgError:
         inv = np.linalg.pinv(Ns, hermitian=True)
     return np.asarray(inv / np.outer(d, d))
-
-
-def _rank_deficient(J: np.ndarray) -> bool:
-    """True when the columns of J (scaled to unit length) are nearly dependent."""
-    norms = np.linalg.norm(J, axis=0)
-    if np.any(norms == 0):
-        return True
-    s = np.linalg.svd(J / norms, compute_uv=False)
-    return bool(s[-1] < 1e-6 * s[0])
-
-
-def _numeric_jacobian(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, step: float = 1e-7) -> np.ndarray:
-    """Central differences; fine for the information estimate (the fit uses scipy's own)."""
-    cols = []
-    for j in range(len(x)):
-        e = np.zeros_like(x)
-        e[j] = step
-        cols.append((f(x + e) - f(x - e)) / (2 * step))
-    return np.stack(cols, axis=1)
 
 
 # --------------------------------------------------------------------- bootstrap

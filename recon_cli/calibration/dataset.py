@@ -55,7 +55,8 @@ from recon_cli.inputs.numbers import in_range
 from recon_cli.inputs.schema import check
 from recon_cli.inputs.yamlfile import LIMITS, line_of, read_yaml
 from recon_cli.perception.camera_model import Intrinsics
-from recon_cli.perception.charuco import BoardSpec, detect, estimate_pose
+from recon_cli.perception.boards import BOARD_KINDS, Board, BoardMissing, find_pose, parse_board
+from recon_cli.perception.charuco import BoardSpec
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 POSE_SUFFIXES = (".yaml", ".yml", ".json")
@@ -276,7 +277,7 @@ class DatasetSpec:
     poses: str | None = None
     index: str | None = None
     image_column: str | None = None
-    board: BoardSpec | None = None
+    board: Board | None = None
     camera: CameraNumbers | None = None
     source: Path | None = None  # the mapping file
     intrinsics_key: str | None = None  # the key of each pose file holding the intrinsics
@@ -310,7 +311,9 @@ def read_mapping(path: Path, dataset: Path | None = None) -> DatasetSpec:
     if "board" in doc:
         b = doc["board"]
         where = f"{path}:{line_of(doc, 'board') or 1}"
-        if isinstance(b, str):
+        if isinstance(b, str) and b.partition(":")[0].strip().lower() in BOARD_KINDS:
+            board = parse_board(b, f"{where}: board")  # the --board syntax, e.g. chessboard:9x6,0.025
+        elif isinstance(b, str):
             if dataset is None:
                 root = path.parent.resolve()
             else:
@@ -741,7 +744,7 @@ class IndexHints:
     """What an index file of ros-industrial's industrial_calibration says beside the pairs."""
 
     camera: CameraNumbers | None = None
-    board: BoardSpec | None = None
+    board: Board | None = None
     setup: Setup | None = None
 
 
@@ -1358,28 +1361,18 @@ def _pairs(source: Path, spec: DatasetSpec) -> Dataset:
 
 
 # --------------------------------------------------------------------- views of the board
-def _board_reason(det, min_corners: int) -> str:
-    if det.n_corners == 0 and det.marker_count >= 4:
-        return (f"board not found ({det.marker_count} markers but no chessboard corners: squares_x and squares_y "
-                "swapped, or a board of OpenCV's legacy pattern, made before 4.6 with an even number of rows?)")
-    return f"board not found ({det.n_corners} corners, {min_corners} needed)"
-
-
-def corner_view(name: str, rgb: np.ndarray, base_T_flange: np.ndarray, board: BoardSpec, camera: CameraSource,
+def corner_view(name: str, rgb: np.ndarray, base_T_flange: np.ndarray, board: Board, camera: CameraSource,
                 min_corners: int = MIN_CORNERS, where: str = "") -> CornerView | SkippedImage:
-    """The board's corners and pose in one image (RGB), or why the image cannot be used."""
+    """The board's points and pose in one image (RGB), or why the image cannot be used."""
     h, w = rgb.shape[:2]
     cam = camera.at_size(w, h)
-    det = detect(rgb, board)
-    pose = estimate_pose(det, board, cam.intrinsics, cam.distortion_array, min_corners=min_corners)
-    if pose is None:
-        return SkippedImage(name, _board_reason(det, min_corners))
-    obj, img = board.board().matchImagePoints(det.corners.reshape(-1, 1, 2).astype(np.float32),  # type: ignore[call-overload]
-                                              det.ids.reshape(-1, 1).astype(np.int32))
+    found = find_pose(rgb, board, cam.intrinsics, cam.distortion_array, min_corners)
+    if isinstance(found, BoardMissing):
+        return SkippedImage(name, found.reason)
     marker_T_cv = invert(board.opencv_board_T_marker())
-    pts = np.asarray(obj, dtype=np.float64).reshape(-1, 3) @ marker_T_cv[:3, :3].T + marker_T_cv[:3, 3]
-    return CornerView(name, np.asarray(base_T_flange, dtype=np.float64), pose.camera_T_marker, pts,
-                      np.asarray(img, dtype=np.float64).reshape(-1, 2), cam, pose.reprojection_rms, where)
+    pts = found.points.object_points @ marker_T_cv[:3, :3].T + marker_T_cv[:3, 3]
+    return CornerView(name, np.asarray(base_T_flange, dtype=np.float64), found.pose.camera_T_marker, pts,
+                      found.points.image_points, cam, found.pose.reprojection_rms, where)
 
 
 @dataclass(frozen=True)
@@ -1392,7 +1385,7 @@ class DatasetViews:
     mapping: PoseMapping
 
 
-def dataset_views(dataset: Dataset, mapping: PoseMapping, board: BoardSpec, camera: CameraSource, kin=None,
+def dataset_views(dataset: Dataset, mapping: PoseMapping, board: Board, camera: CameraSource, kin=None,
                   min_corners: int = MIN_CORNERS, progress: Callable[[str, int, int], None] | None = None,
                   poses_read: Callable[[list[np.ndarray], list[SkippedImage]], None] | None = None
                   ) -> DatasetViews:

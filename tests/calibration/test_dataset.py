@@ -406,7 +406,7 @@ def test_the_command_line(eye_in_hand, tmp_path, capsys):
     (["--setup", "eye-to-hand"], "--setup is read with --dataset only"),
     (["--dataset", "{tmp}", "--scan-store", "{tmp}"], "--dataset is calibrated on its own"),
     (["--dataset", "{tmp}/none", "--intrinsics", "1,1,1,1"], "data set {tmp}/none does not exist"),
-    (["--dataset", "{tmp}", "--intrinsics", "1,2"], "--intrinsics '1,2' is not 4 numbers"),
+    (["--dataset", "{tmp}", "--intrinsics", "1,2"], "--intrinsics: 2 numbers, 4, 8 or 9 expected"),
     (["--dataset", "{tmp}"], "the camera's intrinsics are not known for the data set"),
     (["--dataset", "{tmp}", "--setup", "eye-on-base"], "Invalid value for '--setup': 'eye-on-base' is not one of"),
 ])

@@ -1,0 +1,314 @@
+"""Hand-eye data sets as labs write them, read without an index file: a folder per view
+(pose_NN/{image.png, data.json}, as Franka capture scripts write them) and images beside
+their pose files (0001.png + 0001.json); the camera's intrinsics and distortion read from
+each pose file by key; a 4x4 matrix's order told by its numbers (libfranka's column-major
+O_T_EE, or the same key written row by row); a camera with distortion on the command line.
+Each mistake is one line; a real Franka set (when present) is read as it is published."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from recon_cli.calibration import dataset as ds
+from recon_cli.calibration.dataset import (
+    CameraNumbers,
+    DatasetSpec,
+    MatrixOrder,
+    PoseFormat,
+    PoseMapping,
+    camera_numbers,
+    detect_format,
+    matrix_order_of,
+    parse_camera_numbers,
+    read_dataset,
+    read_mapping,
+    robot_pose,
+    view_camera,
+)
+from recon_cli.cli import main
+from recon_cli.errors import InputError, ReconError
+from recon_cli.geometry.transforms import pose_error
+from recon_cli.workflows.handeye_dataset import DatasetHandEyeOptions, run_handeye_dataset
+
+from .test_dataset import _T, BOARD, FLANGE_T_CAMERA, N_VIEWS, K, _camera_T_marker, _eye_in_hand_flange, _render
+
+#: the camera matrix of the rendered views, as a pose file holds it
+K3 = [[K.fx, 0.0, K.cx], [0.0, K.fy, K.cy], [0.0, 0.0, 1.0]]
+#: a real Franka eye-in-hand set: github.com/kvasios/franka-handeye (MIT), data/captured-data at 0b9fe29
+FRANKA = Path(os.environ.get("RECON_FRANKA_HANDEYE", "/work/shared_extra/franka-handeye-kvasios"))
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory) -> tuple[Path, list[np.ndarray]]:
+    folder = tmp_path_factory.mktemp("rendered")
+    poses = [_camera_T_marker(k) for k in range(N_VIEWS)]
+    for k, C in enumerate(poses):
+        cv2.imwrite(str(folder / f"{k}.png"), _render(C))
+    return folder, poses
+
+
+def _view_folders(rendered, folder: Path, pose: callable) -> Path:
+    """pose_0 ... pose_9/{image.png, data.json, depth.png}: ``pose(k, base_T_flange)`` the JSON."""
+    images, poses = rendered
+    for k, C in enumerate(poses):
+        sub = folder / f"pose_{k}"
+        sub.mkdir(parents=True)
+        shutil.copy(images / f"{k}.png", sub / "image.png")
+        cv2.imwrite(str(sub / "depth.png"), np.zeros((8, 8), np.uint16))
+        (sub / "data.json").write_text(json.dumps(pose(k, _eye_in_hand_flange(C))))
+    return folder
+
+
+def _franka(k: int, F: np.ndarray) -> dict:
+    """What a Franka capture script writes: joints, O_T_EE (libfranka's column-major), the camera."""
+    return {"joint_pose": [0.1 * k] * 7, "O_T_EE": F.T.ravel().tolist(), "camera_intrinsics": K3,
+            "dist_coeffs": [0.0] * 5, "charuco_detected": True}
+
+
+# ----------------------------------------------------------------------------- layouts
+def test_a_folder_per_view_is_found_in_natural_order(rendered, tmp_path):
+    data = _view_folders(rendered, tmp_path / "data", _franka)
+    found = read_dataset(data)
+    assert found.layout == f"a folder per view in {data}" and not found.skipped
+    assert [v.name for v in found.views] == [f"pose_{k}/image.png" for k in range(N_VIEWS)]  # pose_2 before pose_10
+    assert all(v.where.endswith("data.json") for v in found.views)
+    assert found.hints.camera == CameraNumbers(K.fx, K.fy, K.cx, K.cy, (0.0,) * 5)
+
+
+def test_a_folder_per_view_calibrates_without_index_camera_or_mapping(rendered, tmp_path):
+    data = _view_folders(rendered, tmp_path / "data", _franka)
+    r = run_handeye_dataset(DatasetHandEyeOptions(data, tmp_path / "out", board=BOARD))
+    assert len(r.used) == N_VIEWS and not r.skipped
+    assert r.mapping.pose_format is PoseFormat.MATRIX and r.mapping.matrix_order is MatrixOrder.COLUMN
+    dt, dr = pose_error(r.solution.named()["flange_T_camera"], FLANGE_T_CAMERA)
+    assert dt < 1e-3 and np.degrees(dr) < 0.1, (dt, np.degrees(dr))
+
+
+def test_o_t_ee_written_row_by_row_is_read_as_such(rendered, tmp_path):
+    """Some capture scripts write the O_T_EE key row by row (franky's Affine.matrix): the
+    numbers say which, every view reads to the same calibration."""
+    data = _view_folders(rendered, tmp_path / "data", lambda k, F: {**_franka(k, F), "O_T_EE": F.ravel().tolist()})
+    r = run_handeye_dataset(DatasetHandEyeOptions(data, tmp_path / "out", board=BOARD))
+    assert r.mapping.matrix_order is MatrixOrder.ROW and len(r.used) == N_VIEWS
+    dt, dr = pose_error(r.solution.named()["flange_T_camera"], FLANGE_T_CAMERA)
+    assert dt < 1e-3 and np.degrees(dr) < 0.1
+
+
+def test_images_and_pose_files_side_by_side(rendered, tmp_path):
+    """0001.png beside 0001.json, RealSense's intrinsics ({fx, fy, ppx, ppy, coeffs}) in each."""
+    images, poses = rendered
+    data = tmp_path / "data"
+    data.mkdir()
+    for k, C in enumerate(poses):
+        shutil.copy(images / f"{k}.png", data / f"{k + 1:04d}.png")
+        F = _eye_in_hand_flange(C)
+        (data / f"{k + 1:04d}.json").write_text(json.dumps({
+            "matrix": F.tolist(), "intrinsics": {"width": K.width, "height": K.height, "fx": K.fx, "fy": K.fy,
+                                                 "ppx": K.cx, "ppy": K.cy, "model": "brown_conrady",
+                                                 "coeffs": [0.0] * 5}}))
+    found = read_dataset(data)
+    assert len(found.views) == N_VIEWS and not found.skipped and found.hints.camera is not None
+    assert found.views[0].name == "0001.png" and found.views[0].where.endswith("0001.json")
+    r = run_handeye_dataset(DatasetHandEyeOptions(data, tmp_path / "out", board=BOARD))
+    assert len(r.used) == N_VIEWS and r.mapping.matrix_order is MatrixOrder.ROW
+    dt, dr = pose_error(r.solution.named()["flange_T_camera"], FLANGE_T_CAMERA)
+    assert dt < 1e-3 and np.degrees(dr) < 0.1
+
+
+def test_the_mapping_names_the_camera_keys(rendered, tmp_path):
+    data = _view_folders(rendered, tmp_path / "data", lambda k, F: {
+        "pose": {"T": F.T.ravel().tolist()}, "cam": {"M": K3, "dc": [0.01, -0.02, 0.0, 0.0, 0.003]}})
+    mapping = tmp_path / "data" / "mapping.yaml"
+    mapping.write_text("pose_format: matrix\nmatrix: pose.T\nmatrix_order: column\nintrinsics_key: cam.M\n"
+                       "distortion_key: cam.dc\n")
+    spec = read_mapping(mapping, data)
+    assert (spec.intrinsics_key, spec.distortion_key) == ("cam.M", "cam.dc")
+    found = read_dataset(data, spec)
+    assert found.hints.camera == CameraNumbers(K.fx, K.fy, K.cx, K.cy, (0.01, -0.02, 0.0, 0.0, 0.003))
+    assert all(v.camera == found.hints.camera for v in found.views)
+
+
+# ----------------------------------------------------------------------------- the camera by key
+@pytest.mark.parametrize(("record", "want"), [
+    ({"K": K3, "D": [0.1, -0.2, 0.001, 0.002]}, (0.1, -0.2, 0.001, 0.002, 0.0)),
+    ({"camera_matrix": sum(K3, []), "dist_coeffs": [[0.1, -0.2, 0.001, 0.002, 0.03]]},
+     (0.1, -0.2, 0.001, 0.002, 0.03)),
+    ({"intrinsics": {"fx": K.fx, "fy": K.fy, "cx": K.cx, "cy": K.cy, "distortion": [0.1, 0, 0, 0, 0]}},
+     (0.1, 0.0, 0.0, 0.0, 0.0)),
+    ({"intrinsics": {"fx": K.fx, "fy": K.fy, "ppx": K.cx, "ppy": K.cy, "coeffs": [0.1, 0, 0, 0, 0]}},
+     (0.1, 0.0, 0.0, 0.0, 0.0)),
+    ({"camera_intrinsics": [K.fx, K.fy, K.cx, K.cy], "distortion": [0.1, -0.2, 0, 0, 0, 0, 0, 0]},
+     (0.1, -0.2, 0.0, 0.0, 0.0)),
+    ({"camera_info": {"K": sum(K3, []), "D": [0.1, 0, 0, 0, 0]}}, (0.1, 0.0, 0.0, 0.0, 0.0)),
+    ({"K": K3}, (0.0,) * 5),
+], ids=["K-D", "flat-9-nested-dist", "dict", "realsense", "four-and-eight", "ros-camera-info", "no-distortion"])
+def test_the_camera_of_a_pose_file_by_key(record, want):
+    assert view_camera(record, "p.json") == CameraNumbers(K.fx, K.fy, K.cx, K.cy, want)
+
+
+@pytest.mark.parametrize(("record", "keys", "message"), [
+    ({"K": [[K.fx, 0, 0], [0, K.fy, 0], [K.cx, K.cy, 1]]}, {},
+     "p.json: K is not a camera matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (it looks written column by column)"),
+    ({"K": [1, 2, 3]}, {}, "p.json: K holds 3 numbers; intrinsics are a 3x3 camera matrix (9) or fx, fy, cx, cy (4)"),
+    ({"K": "secret_text"}, {}, "p.json: K is a text, not intrinsics"),
+    ({"intrinsics": {"fx": 1.0, "fy": 1.0}}, {}, "p.json: intrinsics lacks cx, cy"),
+    ({"K": K3, "D": [0.1, 0, 0, 0, 0, 0.5, 0, 0]}, {}, "D holds 8 coefficients, the 6th or later not zero"),
+    ({"K": K3, "D": [0.1, 0, 0]}, {}, "p.json: D holds 3 numbers; distortion coefficients are 4, 5, 8, 12 or 14"),
+    ({"K": [[0.0, 0, 1], [0, 1, 1], [0, 0, 1]]}, {}, "p.json: K[0][0] = 0 px is outside [1, 100000] px"),
+    ({"K": K3, "D": [float("nan")] * 5}, {}, "p.json: D[0] is not a finite number"),
+    ({"K": K3}, {"intrinsics_key": "cam"}, "p.json: no key 'cam' (the intrinsics the mapping names; keys: K)"),
+    ({"K": K3}, {"distortion_key": "dc"}, "p.json: no key 'dc' (the distortion the mapping names)"),
+])
+def test_a_camera_that_cannot_be_read_is_one_line(record, keys, message):
+    got = view_camera(record, "p.json", **keys)
+    assert isinstance(got, str) and message in got and "\n" not in got, got
+    assert "secret_text" not in got
+
+
+def test_a_view_whose_camera_cannot_be_read_is_skipped_the_others_calibrate(rendered, tmp_path):
+    data = _view_folders(rendered, tmp_path / "data", lambda k, F: {
+        **_franka(k, F), **({"camera_intrinsics": [1, 2, 3]} if k == 4 else {})})
+    r = run_handeye_dataset(DatasetHandEyeOptions(data, tmp_path / "out", board=BOARD))
+    assert [s.name for s in r.skipped] == ["pose_4/image.png"]
+    assert "camera_intrinsics holds 3 numbers" in r.skipped[0].reason and len(r.used) == N_VIEWS - 1
+
+
+# ----------------------------------------------------------------------------- the order of a matrix
+def test_the_order_of_a_matrix_is_told_by_its_numbers():
+    F = _T([0.1, -0.2, 0.3], [0.4, -0.1, 0.5])
+    assert matrix_order_of(F.ravel(), "matrix") is MatrixOrder.ROW
+    assert matrix_order_of(F.T.ravel(), "matrix") is MatrixOrder.COLUMN
+    R = _T([0.1, -0.2, 0.3], [0, 0, 0])  # no translation: both read; the key decides
+    assert matrix_order_of(R.T.ravel(), "O_T_EE") is MatrixOrder.COLUMN
+    assert matrix_order_of(R.T.ravel(), "state.O_T_EE") is MatrixOrder.COLUMN
+    assert matrix_order_of(R.ravel(), "pose") is MatrixOrder.ROW
+    for values in (F.T.ravel(), F.ravel()):
+        mapping = detect_format({"O_T_EE": values.tolist()}, PoseMapping(), "p.json")
+        assert np.allclose(robot_pose({"O_T_EE": values.tolist()}, "p.json", mapping), F)
+    assert detect_format({"O_T_EE": F.T.ravel().tolist()}, PoseMapping(), "p").matrix_order is MatrixOrder.COLUMN
+    # an order the mapping states is kept, and a matrix in the other order refused in one line
+    said = detect_format({"O_T_EE": F.ravel().tolist()}, PoseMapping(matrix_order=MatrixOrder.COLUMN), "p")
+    assert said.matrix_order is MatrixOrder.COLUMN
+    with pytest.raises(InputError, match="looks row-major while the mapping says column-major"):
+        robot_pose({"O_T_EE": F.ravel().tolist()}, "p.json", said)
+    with pytest.raises(InputError, match=r"p.json: the matrix's last row is not \[0, 0, 0, 1\], read row by row or "):
+        robot_pose({"matrix": [1.0] * 16}, "p.json", PoseMapping(PoseFormat.MATRIX))
+
+
+# ----------------------------------------------------------------------------- mistakes of a layout
+def test_view_folders_that_cannot_be_used_are_one_line_each(rendered, tmp_path):
+    data = _view_folders(rendered, tmp_path / "data", _franka)
+    (data / "pose_1" / "image.png").rename(data / "pose_1" / "left.png")
+    cv2.imwrite(str(data / "pose_1" / "right.png"), np.zeros((8, 8, 3), np.uint8))
+    (data / "pose_2" / "data.json").unlink()
+    (data / "pose_3" / "robot.yaml").write_text("x: 1\n")
+    (data / "pose_3" / "extra.yaml").write_text("x: 1\n")
+    (data / "pose_5" / "data.json").write_text("{not json")
+    (data / "notes").mkdir()
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "data.json").write_text(json.dumps({"secret_word": 1}))
+    shutil.copy(data / "pose_6" / "image.png", outside / "image.png")
+    os.symlink(outside, data / "pose_99")
+    found = read_dataset(data)
+    reasons = {s.name: s.reason for s in found.skipped}
+    assert reasons["pose_1"].startswith(f"2 images in {data / 'pose_1'} (left.png, right.png); keep one")
+    assert reasons["pose_2"] == f"no pose file (.yaml, .yml, .json) in {data / 'pose_2'}; add it or remove the folder"
+    assert reasons["pose_3"].startswith(f"3 pose files in {data / 'pose_3'}")
+    assert reasons["pose_5/image.png"].startswith(f"{data / 'pose_5' / 'data.json'}")
+    assert reasons["notes"] == f"no image (.png, .jpg, .jpeg, .bmp, .tif, .tiff) in {data / 'notes'}"
+    assert reasons["pose_99"] == f"{data / 'pose_99'} is a link leading out of the data set folder; not read"
+    assert all("\n" not in r and "secret_word" not in r for r in reasons.values())
+    assert len(found.views) == N_VIEWS - 4
+
+
+def test_view_folders_are_bounded_before_they_are_read(rendered, tmp_path, monkeypatch):
+    data = _view_folders(rendered, tmp_path / "data", _franka)
+    for k in range(ds.MAX_VIEW_ENTRIES):
+        (data / "pose_7" / f"x{k}.txt").write_bytes(b"")
+    found = read_dataset(data)
+    assert {s.name: s.reason for s in found.skipped}["pose_7"] == (
+        f"{data / 'pose_7'} holds more than {ds.MAX_VIEW_ENTRIES} entries; a view's folder holds its image and its "
+        "pose file")
+    monkeypatch.setattr(ds, "MAX_VIEWS", 5)
+    with pytest.raises(InputError, match=rf"{data}: 10 folders, more than the 5 views recon reads"):
+        read_dataset(data)
+
+
+def test_a_folder_without_images_or_view_folders_is_one_line(tmp_path):
+    (tmp_path / "data" / "a").mkdir(parents=True)
+    (tmp_path / "data" / "a" / "pose.json").write_text("{}")
+    with pytest.raises(ReconError, match="holds no images .*, nor folders of one image and one pose file each"):
+        read_dataset(tmp_path / "data")
+
+
+# ----------------------------------------------------------------------------- the command line
+@pytest.mark.parametrize(("text", "want"), [
+    ("900,900,479.5,359.5", (900.0, 900.0, 479.5, 359.5)),
+    ("900,900,479.5,359.5,0.1,-0.2,0.001,0.002", (900.0, 900.0, 479.5, 359.5, 0.1, -0.2, 0.001, 0.002)),
+    ("900, 900, 479.5, 359.5, 0.1, -0.2, 0.001, 0.002, 0.05", (900.0, 900.0, 479.5, 359.5, 0.1, -0.2, 0.001,
+                                                                 0.002, 0.05)),
+])
+def test_intrinsics_with_distortion_on_the_command_line(text, want):
+    assert parse_camera_numbers(text) == want
+    cam = camera_numbers(want)
+    assert (cam.fx, cam.fy, cam.cx, cam.cy) == want[:4] and cam.distortion == (tuple(want[4:]) + (0.0,) * 5)[:5]
+
+
+def test_the_command_line_passes_every_number_of_the_camera(tmp_path, monkeypatch):
+    from recon_cli.cli import calibrate
+
+    seen = {}
+
+    def fake(opts, progress=None):
+        seen["intrinsics"] = opts.intrinsics
+        raise InputError("stop here", hint="a test")
+
+    monkeypatch.setattr(calibrate, "run_handeye_dataset", fake)
+    code = main(["calibrate", "handeye", "--dataset", str(tmp_path), "--intrinsics",
+                 "900,900,479.5,359.5,0.1,-0.2,0.001,0.002", "--out", str(tmp_path / "o")])
+    assert code == 1 and seen["intrinsics"] == (900.0, 900.0, 479.5, 359.5, 0.1, -0.2, 0.001, 0.002)
+
+
+@pytest.mark.parametrize(("value", "message"), [
+    ("1,2,3", "--intrinsics: 3 numbers, 4, 8 or 9 expected"),
+    ("900,900,480,360,0.1,0.2,0.3", "--intrinsics: 7 numbers, 4, 8 or 9 expected"),
+    ("900,900,480,360,0.1,0.2,0.3,500", "--intrinsics p2 = 500 is outside [-100, 100]"),
+    ("900,900,secret_text,360", "--intrinsics: cx is not a number"),
+    ("900,900,480,nan", "--intrinsics: cy is not a finite number"),
+])
+def test_intrinsics_mistakes_are_one_line(tmp_path, capsys, value, message):
+    code = main(["calibrate", "handeye", "--dataset", str(tmp_path), "--intrinsics", value, "--out",
+                 str(tmp_path / "o")])
+    out, err = capsys.readouterr()
+    text = out + err
+    assert code == 1 and message in text and len(text.strip().splitlines()) == 1, text
+    assert "secret_text" not in text and "Traceback" not in text
+
+
+# ----------------------------------------------------------------------------- a real set
+needs_franka = pytest.mark.skipif(not (FRANKA / "pose_00" / "data.json").exists(),
+                                  reason=f"the Franka eye-in-hand set is not at {FRANKA} (docs/benchmarks.md)")
+
+
+@needs_franka
+def test_a_real_franka_set_is_read_as_published(tmp_path):
+    """12 views of a 5 x 7 ChArUco board from a wrist RealSense on a Franka: a folder per view,
+    O_T_EE written row by row, the camera matrix and distortion in each view's JSON."""
+    found = read_dataset(FRANKA, DatasetSpec())
+    assert len(found.views) == 12 and not found.skipped
+    assert found.hints.camera is not None and found.hints.camera.fx == pytest.approx(634.58, abs=0.01)
+    assert any(found.hints.camera.distortion)
+    board = ds.BoardSpec(5, 7, 0.034, 0.028, "DICT_6X6_250")
+    r = run_handeye_dataset(DatasetHandEyeOptions(FRANKA, tmp_path / "out", board=board, refine=False))
+    assert r.mapping.matrix_order is MatrixOrder.ROW and len(r.used) == 12
+    dt, _ = pose_error(r.solution.X, r.methods[r.solution.method].solution.X)
+    assert dt < 1e-9
+    assert np.linalg.norm(r.solution.X[:3, 3]) < 0.15  # a wrist camera, a few centimetres from the flange

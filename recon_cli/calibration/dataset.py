@@ -1120,8 +1120,8 @@ def _one_of(found: list[Path], stems: tuple[str, ...]) -> Path | list[Path]:
     kept = [p for p in found if "depth" not in p.stem.lower() and "mask" not in p.stem.lower()]
     if len(kept) == 1:
         return kept[0]
-    named = [p for p in found if p.stem.lower() in stems]
-    return named[0] if len(named) == 1 else sorted(found, key=lambda p: _natural(p.name))
+    named = [p for p in kept if p.stem.lower() in stems]
+    return named[0] if len(named) == 1 else sorted(kept or found, key=lambda p: _natural(p.name))
 
 
 def _from_view_folders(folder: Path, root: Path, subs: list[Path]) -> Dataset:

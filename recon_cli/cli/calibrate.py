@@ -113,10 +113,11 @@ def handeye(
     views: Annotated[int, typer.Option("--board-views", min=3, max=200, help="Generated board views to record "
                                                                              "(tilted up to 48 deg, rolled up to "
                                                                              "35 deg, around the board).")] = 20,
-    method: Annotated[HandEyeMethod, typer.Option(help="OpenCV solver: tsai, park, horaud, andreff, daniilidis "
-                                                       "(calibrateHandEye) or shah, li (calibrateRobotWorldHandEye); "
-                                                       "all are computed and compared, this one is written.")]
-    = HandEyeMethod.TSAI,
+    method: Annotated[HandEyeMethod | None, typer.Option(
+        metavar=_metavar(HandEyeMethod),
+        help="OpenCV solver to write (refined when that predicts held-out views better): tsai, park, horaud, "
+             "andreff, daniilidis (calibrateHandEye) or shah, li (calibrateRobotWorldHandEye); default: the "
+             "candidate with the smallest held-out error. All are computed and judged on held-out views.")] = None,
     refine: Annotated[bool, typer.Option("--refine/--no-refine", help="Refine the solution: together with the "
                                                                       "robot base's error (recorded views, "
                                                                       "--scan-store), by the board corners' "
@@ -176,6 +177,9 @@ def handeye(
     = True,
     force_write: Annotated[bool, typer.Option("--force-write", help="Write into the station file even when the "
                                                                     "views are poorly posed (warnings).")] = False,
+    accept: Annotated[bool, typer.Option("--accept", help="Write the result (station file, hand_eye.yaml) and exit "
+                                                          "0 also when the verdict is 'not trusted' (otherwise "
+                                                          "exit code 5, only the report written).")] = False,
     board: BoardOpt = None,
     resolution: ResolutionOpt = D.sensor.resolution,
     noise: Annotated[bool, typer.Option("--noise/--no-noise", help="Sensor noise of the simulation.")]
@@ -202,7 +206,7 @@ def handeye(
                                inputs=(dataset, mapping, intrinsics)).path
         opts = DatasetHandEyeOptions(dataset, folder, mapping, setup, method, refine, intrinsics, numbers, spec,
                                      config.cell, pose_format, length_unit, angle_unit, quaternion_order,
-                                     matrix_order, drop_outliers)
+                                     matrix_order, drop_outliers, accept=accept)
         with progress_bar() as update:
             _print_dataset(run_handeye_dataset(opts, update))
         return
@@ -216,7 +220,7 @@ def handeye(
     folder = output_folder(out, "calibrate handeye", default="handeye", force=force,
                            inputs=(scans, intrinsics, station, Path(realism))).path
     options = HandEyeOptions(folder, config, scans, BoardViewOptions(n=views), method, refine,
-                             intrinsics, station, write, force_write, spec)
+                             intrinsics, station, write, force_write, spec, accept)
     with progress_bar() as update:
         r = run_handeye(options, update)
     if r.recorded is not None:
@@ -261,6 +265,22 @@ def handeye(
                   f"figure: {r.folder / 'handeye_residuals.png'}")
 
 
+def print_held_out(candidates, chosen: str) -> None:
+    """Every candidate's leave-one-view-out error (the board pose of a view predicted by the
+    calibration of the others against the image's own), smallest score first."""
+    console.print("held-out views (each predicted by the calibration of the others): candidate, score [mm], "
+                  "median, RMS, max [mm / deg]")
+    for c in candidates:
+        h = c.held_out
+        mark = "  <- written" if c.name == chosen else ""
+        if not h.complete:
+            console.print(f"{c.name:26s} no calibration without {', '.join(h.failed[:2])}{mark}")
+            continue
+        (mt, mr), (qt, qr), (xt, xr) = h.median, h.rms, h.max
+        console.print(f"{c.name:26s} {h.score * 1e3:7.2f}  {mt * 1e3:7.2f} / {np.degrees(mr):5.2f}  "
+                      f"{qt * 1e3:7.2f} / {np.degrees(qr):5.2f}  {xt * 1e3:7.2f} / {np.degrees(xr):5.2f}{mark}")
+
+
 def _print_dataset(r: DatasetHandEyeResult) -> None:
     """The terminal summary of a calibration from a data set."""
     console.print(f"data set: {r.layout}; set-up {r.setup.value} ({r.sources['setup']}); board "
@@ -295,14 +315,20 @@ def _print_dataset(r: DatasetHandEyeResult) -> None:
                       f"{np.degrees(row.vs_written[1]):6.3f}")
     for m, why in r.method_failures.items():
         console.print(f"{m.value:11s} no solution ({why})")
-    label = r.solution.method.value + (" refined" if r.solution.refined else "")
+    print_held_out(r.candidates, r.chosen)
+    if r.mount_std is not None:
+        console.print(f"mount uncertainty (refinement with pose errors, 1-sigma): {r.mount_std[0]:.2f} mm, "
+                      f"{r.mount_std[1]:.3f}°")
     for name, T in r.solution.named().items():
-        console.print(f"{name} ({label}):")
+        console.print(f"{name} ({r.chosen}):")
         for row in T[:3]:
             console.print("  [" + ", ".join(f"{v: .6f}" for v in row) + "]")
     for _, message in r.diversity.issues:
         console.print(styled("warning:", "yellow", f" {message}"))
-    names = ["handeye.json"] + (["hand_eye.yaml"] if r.setup is Setup.EYE_IN_HAND else []) + ["handeye_residuals.png"]
+    if r.verdict is not None:
+        console.print(styled("verdict:", "green" if r.verdict.trusted else "red", f" {r.verdict.line()}"))
+    yaml_written = r.setup is Setup.EYE_IN_HAND and (r.folder / "hand_eye.yaml").exists()
+    names = ["handeye.json"] + (["hand_eye.yaml"] if yaml_written else []) + ["handeye_residuals.png"]
     console.print("written: " + ", ".join(str(r.folder / n) for n in names))
 
 

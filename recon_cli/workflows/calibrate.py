@@ -43,6 +43,7 @@ from recon_cli.calibration.handeye import (
     solve_hand_eye,
     view_residuals,
 )
+from recon_cli.calibration.holdout import LEVER, HeldOut, best, leave_one_out, predicted_board
 from recon_cli.calibration.intrinsics import (
     DistortionModel,
     IntrinsicsResult,
@@ -54,6 +55,7 @@ from recon_cli.calibration.intrinsics import (
 from recon_cli.calibration.observations import scan_observations
 from recon_cli.calibration.refine import corrected, refine_hand_eye
 from recon_cli.calibration.station_update import hand_eye_block, write_station_hand_eye
+from recon_cli.calibration.verdict import NotTrusted, Verdict, check_observations, judge
 from recon_cli.calibration.views import BoardViewOptions, board_views
 from recon_cli.config import DEFAULTS, Config
 from recon_cli.console import write_json
@@ -136,19 +138,24 @@ class HandEyeOptions:
     station: station file: adapters and cell of the recording, and where the result goes
     write: put the result into the station file (when there is one)
     force: write even when the views are poorly posed
+    accept: write into the station file also when the verdict is "not trusted"
+    method: None: the candidate with the smallest held-out error (OpenCV's methods, the
+        refinements from the best of them); a method: it or its refinement, whichever
+        predicts held-out views better
     """
 
     out: Path
     config: Config = DEFAULTS
     scans: Path | None = None
     views: BoardViewOptions = field(default_factory=BoardViewOptions)
-    method: HandEyeMethod = HandEyeMethod.TSAI
+    method: HandEyeMethod | None = None
     refine: bool = True
     camera: Path | None = None
     station: Path | None = None
     write: bool = True
     force: bool = False
     board: BoardSpec | None = None
+    accept: bool = False
 
 
 @dataclass(frozen=True)
@@ -173,6 +180,9 @@ class HandEyeResult:
     seconds: float
     station_backup: Path | None = None  # the station file as it was (beside the file a link points to)
     method_failures: dict[HandEyeMethod, str] = field(default_factory=dict)  # OpenCV methods without a solution
+    candidates: list[tuple[str, HeldOut]] = field(default_factory=list)  # every candidate's held-out errors
+    chosen: str = ""  # the candidate written
+    verdict: Verdict | None = None
 
     @property
     def views(self) -> int:
@@ -198,6 +208,9 @@ class HandEyeResult:
         truth = self.truth_error
         return {
             "status": self.status.value, "method": self.solution.method.value, "scans": str(self.scans),
+            "candidate": self.chosen, "verdict": None if self.verdict is None else self.verdict.to_dict(),
+            "selection": f"smallest held-out score: RMS over the views of sqrt(t^2 + ({LEVER:g} m x r)^2)",
+            "held_out": [h.to_dict() for _, h in self.candidates],
             "refined": self.refined, "views_used": self.views,
             "flange_T_camera": self.solution.flange_T_camera, "world_T_marker": self.solution.world_T_marker,
             "base_rotation_rad": self.base_rotation,
@@ -288,11 +301,7 @@ def run_handeye(opt: HandEyeOptions, progress: Progress | None = None) -> HandEy
                          f"or more" + (f" ({'; '.join(why)})" if why else ""),
                          hint="record views the robot reaches with the whole board in sight (your own script's "
                               "scans with --scan-store; docs/calibration.md)")
-    degenerate = diversity.degenerate
-    if degenerate is not None:  # before any solver runs
-        raise InputError(f"the {len(obs)} usable views of {scans} cannot determine the hand-eye calibration: "
-                         f"{degenerate}", hint="record views with the camera tilted and rolled about two or more "
-                                               "different axes, by 20° or more (docs/calibration.md)")
+    check_observations(obs, diversity, str(scans))  # before any solver runs
     methods: dict[HandEyeMethod, HandEyeSolution] = {}
     failures: dict[HandEyeMethod, str] = {}
     for m in HandEyeMethod:
@@ -300,34 +309,89 @@ def run_handeye(opt: HandEyeOptions, progress: Progress | None = None) -> HandEy
             methods[m] = solve_hand_eye(obs, m)
         except SolverFailed as exc:
             failures[m] = exc.reason
-            if m is opt.method:  # no solution from the method to write: refused
+            if m is opt.method:  # no solution from the method asked for: refused
                 refusal = exc
     if opt.method in failures:
         solved = ", ".join(m.value for m in methods)
         raise InputError(refusal.message, hint=(f"choose --method {next(iter(methods)).value} ({solved} found a "
                                                 "solution), or record views" if methods else "record views")
                          + " turned by 20° or more about other axes")
-    solution, base_rotation, chain = methods[opt.method], None, obs
-    if opt.refine:
-        refined = refine_hand_eye(obs, solution)
-        solution, base_rotation, chain = refined.solution, refined.base_rotation, corrected(obs, refined)
+    candidates, chosen, refined = _judged_candidates(obs, methods, opt.method, opt.refine, progress)
+    solution, base_rotation, chain = chosen[1], None, obs
+    if refined is not None and chosen[0].endswith("+ base error"):
+        base_rotation, chain = refined.base_rotation, corrected(obs, refined)
     residuals = view_residuals(chain, solution.flange_T_camera, solution.world_T_marker)
     status = HandEyeStatus.OK if diversity.ok else HandEyeStatus.WARNINGS
     truth = _truth_flange_T_camera(scans, model_X)
-    comment = (f"recon calibrate handeye, {time.strftime('%Y-%m-%d %H:%M')}, {opt.method.value}"
-               f"{' refined' if opt.refine else ''}, {len(obs)} views, "
-               f"residual RMS {1e3 * np.sqrt(np.mean([r.translation**2 for r in residuals])):.3f} mm")
-    atomic_write_text(out / "hand_eye.yaml", hand_eye_block(solution.flange_T_camera, comment))
+    held = dict(candidates)[chosen[0]]
+    verdict = judge(obs, solution, held, diversity, eye_in_hand=True, model_mount=model_X)
+    comment = (f"recon calibrate handeye, {time.strftime('%Y-%m-%d %H:%M')}, {chosen[0]}, {len(obs)} views, "
+               f"held-out error {held.rms[0] * 1e3:.3f} mm RMS, "
+               f"{'trusted' if verdict.trusted else 'NOT trusted (accepted)'}")
     written = backup = None
-    if opt.station is not None and opt.write and (status is HandEyeStatus.OK or opt.force):
-        backup = write_station_hand_eye(opt.station, solution.flange_T_camera, comment)
-        written = Path(opt.station)
-    result = HandEyeResult(out, Path(scans), status, solution, residuals, opt.refine, base_rotation, methods,
-                           diversity, found.skipped, model_X, kin.world_T_marker(), truth, recorded, written,
-                           time.perf_counter() - t0, backup, failures)
+    if verdict.trusted or opt.accept:
+        atomic_write_text(out / "hand_eye.yaml", hand_eye_block(solution.flange_T_camera, comment))
+        if opt.station is not None and opt.write and (status is HandEyeStatus.OK or opt.force):
+            backup = write_station_hand_eye(opt.station, solution.flange_T_camera, comment)
+            written = Path(opt.station)
+    result = HandEyeResult(out, Path(scans), status, solution, residuals, chosen[0] != solution.method.value,
+                           base_rotation, methods, diversity, found.skipped, model_X, kin.world_T_marker(), truth,
+                           recorded, written, time.perf_counter() - t0, backup, failures, candidates, chosen[0],
+                           verdict)
     write_json(out / "handeye.json", result.to_dict())
     atomic_write(out / "handeye_residuals.png", lambda tmp: plot_handeye_residuals(result, tmp))
+    if not verdict.trusted and not opt.accept:
+        raise NotTrusted(verdict, hint=f"nothing written but the report {out / 'handeye.json'}; --accept writes it "
+                                       "anyway (docs/calibration.md)")
     return result
+
+
+def _judged_candidates(obs: list, methods: dict[HandEyeMethod, HandEyeSolution], start: HandEyeMethod | None,
+                       refine_too: bool, progress: Progress | None = None):
+    """Every OpenCV method's held-out errors and, with ``refine_too``, those of the
+    refinement with the base error (recon_cli.calibration.refine) and of the refinement with
+    flange pose errors (recon_cli.calibration.robust), both from ``start`` (None: the
+    closed-form method with the smallest held-out score). Returns [(name, HeldOut)] by score,
+    (name, solution) of the candidate written, and the base-error refinement on every view."""
+    from recon_cli.calibration.robust import PosePrior, refine_with_pose_errors
+
+    held: dict[str, HeldOut] = {}
+    solutions: dict[str, HandEyeSolution] = {}
+    total, done = len(methods) + (2 if refine_too else 0), 0
+    def closed_form(m: HandEyeMethod):
+        return lambda o: solve_hand_eye(o, m)
+
+    for m, s in methods.items():
+        held[m.value] = leave_one_out(obs, closed_form(m), m.value)
+        solutions[m.value] = s
+        done += 1
+        if progress:
+            progress("held-out views", done, total)
+    first = start or HandEyeMethod(best(list(held.values())).candidate)
+    pool = [m.value for m in methods if start is None or m is start]
+    refined = None
+    if refine_too:
+        def base_error(o):
+            return refine_hand_eye(o, solve_hand_eye(o, first))
+
+        def through_base(r, o) -> np.ndarray:
+            return predicted_board(r.solution, corrected([o], r)[0].world_T_flange)
+
+        refined = refine_hand_eye(obs, methods[first])
+        name = f"{first.value} + base error"
+        held[name], solutions[name] = leave_one_out(obs, base_error, name, through_base), refined.solution
+        robust = refine_with_pose_errors(obs, methods[first])
+        prior = PosePrior(detection_translation=robust.detection_std[0], detection_rotation=robust.detection_std[1])
+        rname = f"{first.value} + pose errors"
+        held[rname] = leave_one_out(obs, lambda o: refine_with_pose_errors(o, solve_hand_eye(o, first),
+                                                                           prior).solution, rname)
+        solutions[rname] = robust.solution
+        pool += [name, rname]
+        if progress:
+            progress("held-out views", total, total)
+    chosen = min(pool, key=lambda n: held[n].score)
+    ranked = sorted(held.items(), key=lambda item: item[1].score)
+    return ranked, (chosen, solutions[chosen]), refined
 
 
 def plot_handeye_residuals(result: HandEyeResult, path: Path) -> None:

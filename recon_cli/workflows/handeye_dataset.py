@@ -4,11 +4,22 @@ or eye-to-hand (recon_cli.calibration.setups).
 
 Writes into the run folder::
 
-    <out>/handeye.json            the calibration, every view (reprojection, chain residual,
-                                  agreement with its own board pose, outlier), every OpenCV
-                                  method, the mapping and the sources of board and camera
+    <out>/handeye.json            the calibration, the verdict, every candidate's held-out
+                                  errors (per view and summarised), every view (reprojection,
+                                  chain residual, agreement with its own board pose, outlier),
+                                  the mapping and the sources of board and camera
     <out>/hand_eye.yaml           eye-in-hand: flange_T_camera as a station file's hand_eye block
-    <out>/handeye_residuals.png   per view: reprojection RMS, chain residual [mm], [deg]
+                                  (only when the verdict is "trusted", or with accept)
+    <out>/handeye_residuals.png   per view: reprojection RMS, chain residual [mm], [deg], and the
+                                  held-out error of the written candidate [mm], [deg]
+
+The candidates are every OpenCV method, the reprojection refinement and the refinement with
+flange pose errors (recon_cli.calibration.robust), both from the closed-form method with the
+smallest held-out error (or from ``method`` when given); the one written has the smallest
+held-out error (recon_cli.calibration.holdout), not the smallest in-sample residual. The
+verdict (recon_cli.calibration.verdict) is computed on it; a calibration that is not trusted
+raises :class:`~recon_cli.calibration.verdict.NotTrusted` after the report is written,
+unless ``accept``.
 
 Nothing is written when fewer than 3 views are usable, or when their robot poses cannot
 determine the calibration (every view at nearly one orientation, or every rotation between
@@ -47,18 +58,23 @@ from recon_cli.calibration.dataset import (
 )
 from recon_cli.calibration.handeye import (
     MIN_VIEWS,
+    BoardObservation,
     Diversity,
     HandEyeMethod,
+    HandEyeSolution,
     SolverFailed,
     ViewResidual,
     pose_diversity,
+    solve_hand_eye,
 )
+from recon_cli.calibration.holdout import LEVER, HeldOut, best, leave_one_out
 from recon_cli.calibration.intrinsics import SkippedImage
 from recon_cli.calibration.setups import (
     CornerView,
     Refinement,
     Setup,
     SetupSolution,
+    chain_observations,
     chain_residuals,
     outlier_views,
     pnp_agreement,
@@ -68,6 +84,7 @@ from recon_cli.calibration.setups import (
     solve,
 )
 from recon_cli.calibration.station_update import hand_eye_block
+from recon_cli.calibration.verdict import NotTrusted, Verdict, check_observations, detection_precision, judge
 from recon_cli.config import CellConfig
 from recon_cli.console import write_json
 from recon_cli.errors import InputError, ReconError
@@ -92,13 +109,16 @@ class DatasetHandEyeOptions:
     board: None: the mapping's, else the index file's, else the cell's
     cell: the cell whose kinematics turn joint positions into flange poses
     drop_outliers: calibrate again without the views flagged as outliers
+    method: None: the candidate with the smallest held-out error; a method: it, or its
+        refinement when that predicts held-out views better (refine)
+    accept: write hand_eye.yaml and return normally also when the verdict is "not trusted"
     """
 
     dataset: Path
     out: Path
     mapping: Path | None = None
     setup: Setup | None = None
-    method: HandEyeMethod = HandEyeMethod.TSAI
+    method: HandEyeMethod | None = None
     refine: bool = True
     camera_file: Path | None = None
     intrinsics: tuple[float, ...] | None = None  # fx, fy, cx, cy
@@ -111,6 +131,7 @@ class DatasetHandEyeOptions:
     matrix_order: MatrixOrder | None = None
     drop_outliers: bool = False
     min_corners: int = 8
+    accept: bool = False
 
 
 @dataclass(frozen=True)
@@ -142,6 +163,16 @@ class MethodReport:
 
 
 @dataclass(frozen=True)
+class Candidate:
+    """A calibration judged on held-out views: its solution on every view used and its
+    leave-one-view-out errors (recon_cli.calibration.holdout)."""
+
+    name: str
+    solution: SetupSolution
+    held_out: HeldOut
+
+
+@dataclass(frozen=True)
 class DatasetHandEyeResult:
     folder: Path
     dataset: Path
@@ -158,6 +189,14 @@ class DatasetHandEyeResult:
     sources: dict[str, str]  # where the set-up, board and camera came from
     seconds: float
     method_failures: dict[HandEyeMethod, str] = field(default_factory=dict)  # OpenCV methods without a solution
+    candidates: list[Candidate] = field(default_factory=list)  # every candidate, by held-out error
+    chosen: str = ""  # the candidate written
+    verdict: Verdict | None = None
+    mount_std: tuple[float, float] | None = None  # [mm, deg] of the pose-error refinement, when it ran
+
+    @property
+    def written(self) -> Candidate:
+        return next(c for c in self.candidates if c.name == self.chosen)
 
     @property
     def used(self) -> list[ViewReport]:
@@ -171,10 +210,12 @@ class DatasetHandEyeResult:
     def outliers(self) -> dict[str, str]:
         return {v.name: v.outlier for v in self.views if v.outlier is not None}
 
+    written_converged: bool = True  # the written candidate's solver stopped on its tolerances
+
     @property
     def converged(self) -> bool:
-        """The refinement stopped on its tolerances (without refinement: True)."""
-        return self.refinement is None or self.refinement.converged
+        """The written candidate's refinement stopped on its tolerances (a closed form: True)."""
+        return self.written_converged
 
     @property
     def reprojection_rms(self) -> float:
@@ -213,6 +254,11 @@ class DatasetHandEyeResult:
         pt, pr = self.pnp_mean
         return {
             "setup": self.setup.value, "method": self.solution.method.value, "refined": self.solution.refined,
+            "candidate": self.chosen, "verdict": None if self.verdict is None else self.verdict.to_dict(),
+            "selection": f"smallest held-out score: RMS over the views of sqrt(t^2 + ({LEVER:g} m x r)^2), t and r "
+                         "the board pose predicted by the calibration of the other views against the image's own",
+            "held_out": [c.held_out.to_dict() for c in self.candidates],
+            "mount_std_mm_deg": None if self.mount_std is None else list(self.mount_std),
             "dataset": str(self.dataset), "layout": self.layout, "sources": self.sources,
             **{name: T for name, T in self.solution.named().items()},
             "views_used": len(self.used), "dropped": self.dropped,
@@ -303,7 +349,7 @@ def check_solvable(base_T_flange: list[np.ndarray], views: int, skipped: list[Sk
                               "(docs/calibration.md)")
 
 
-def solve_methods(views: list[CornerView], setup: Setup, chosen: HandEyeMethod
+def solve_methods(views: list[CornerView], setup: Setup, chosen: HandEyeMethod | None
                   ) -> tuple[dict[HandEyeMethod, SetupSolution], dict[HandEyeMethod, str]]:
     """Every OpenCV method's solution, and the methods that find none with OpenCV's reason;
     when the chosen one finds none, one line naming those that did."""
@@ -364,10 +410,13 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
     found = dataset_views(dataset, mapping, board, camera, kin, opt.min_corners, progress, poses_read)
     views = found.views
     check_solvable([v.base_T_flange for v in views], total, found.skipped, setup, opt.dataset)
+    observations = chain_observations(views, setup)
+    check_observations(observations, pose_diversity([o.world_T_flange for o in observations]), str(opt.dataset))
     # outliers by the closed chains of OpenCV's solution: the refinement would spread one bad
     # view's error over all of them
     methods, failures = solve_methods(views, setup, opt.method)
-    outliers = outlier_views(chain_residuals(views, methods[opt.method]))
+    reference = opt.method or (HandEyeMethod.TSAI if HandEyeMethod.TSAI in methods else next(iter(methods)))
+    outliers = outlier_views(chain_residuals(views, methods[reference]))
     kept = views
     if opt.drop_outliers and outliers:
         kept = [v for v in views if v.name not in outliers]
@@ -381,25 +430,110 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
                              f"determine the hand-eye calibration: {reason}",
                              hint="calibrate without --drop-outliers, or add views")
         methods, failures = solve_methods(kept, setup, opt.method)
-    refinement = refine(kept, methods[opt.method]) if opt.refine else None
-    solution = refinement.solution if refinement is not None else methods[opt.method]
+    kept_observations = chain_observations(kept, setup)
+    judged = judge_candidates(kept, setup, methods, opt.method, opt.refine, progress)
+    chosen = judged.chosen
+    solution = chosen.solution
     used = {v.name for v in kept}
     reports = _views_report(views, solution, used, outliers)
     method_reports = {m: _method_report(kept, s, solution) for m, s in methods.items()}
     diversity = pose_diversity([setup.chain_pose(v.base_T_flange) for v in kept])
-    result = DatasetHandEyeResult(Path(opt.out), Path(opt.dataset), dataset.layout, setup, solution, refinement,
-                                  reports, method_reports, diversity, found.skipped, found.mapping, board, sources,
-                                  time.perf_counter() - t0, failures)
+    verdict = judge(kept_observations, HandEyeSolution(solution.method, solution.X, solution.W), chosen.held_out,
+                    diversity, eye_in_hand=setup is Setup.EYE_IN_HAND, precision=detection_precision(kept))
+    result = DatasetHandEyeResult(Path(opt.out), Path(opt.dataset), dataset.layout, setup, solution,
+                                  judged.refinement, reports, method_reports, diversity, found.skipped, found.mapping,
+                                  board, sources, time.perf_counter() - t0, failures, judged.candidates, chosen.name,
+                                  verdict, judged.mount_std, judged.converged[chosen.name])
     out = Path(opt.out)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "handeye.json", result.to_dict())
-    if setup is Setup.EYE_IN_HAND:
-        comment = (f"recon calibrate handeye --dataset, {time.strftime('%Y-%m-%d %H:%M')}, {opt.method.value}"
-                   f"{' refined' if solution.refined else ''}, {len(kept)} views, reprojection RMS "
-                   f"{result.reprojection_rms:.2f} px")
+    if setup is Setup.EYE_IN_HAND and (verdict.trusted or opt.accept):
+        comment = (f"recon calibrate handeye --dataset, {time.strftime('%Y-%m-%d %H:%M')}, {chosen.name}, "
+                   f"{len(kept)} views, held-out error {chosen.held_out.rms[0] * 1e3:.2f} mm RMS, "
+                   f"{'trusted' if verdict.trusted else 'NOT trusted (accepted)'}")
         atomic_write_text(out / "hand_eye.yaml", hand_eye_block(solution.X, comment))
     atomic_write(out / "handeye_residuals.png", lambda tmp: plot_dataset_residuals(result, tmp))
+    if not verdict.trusted and not opt.accept:
+        raise NotTrusted(verdict, hint=f"nothing written but the report {out / 'handeye.json'}; --accept writes it "
+                                       "anyway (docs/calibration.md)")
     return result
+
+
+@dataclass(frozen=True)
+class JudgedCandidates:
+    """Every candidate with its held-out errors, the one with the smallest held-out score,
+    the reprojection refinement on every view (when it ran), whether each candidate's
+    solver converged, and the pose-error refinement's mount std [mm, deg]."""
+
+    candidates: list[Candidate]
+    chosen: Candidate
+    refinement: Refinement | None
+    converged: dict[str, bool]
+    mount_std: tuple[float, float] | None
+
+
+def judge_candidates(views: list[CornerView], setup: Setup, methods: dict[HandEyeMethod, SetupSolution],
+                     start: HandEyeMethod | None, refine_too: bool, progress: Progress | None = None
+                     ) -> JudgedCandidates:
+    """Leave-one-view-out errors of every OpenCV method that solved the views and, with
+    ``refine_too``, of the reprojection refinement and the refinement with flange pose errors
+    from ``start`` (None: the closed-form method with the smallest held-out score). With
+    ``start`` given, the candidate written is ``start`` or one of its refinements; else any."""
+    from recon_cli.calibration.robust import PosePrior, refine_with_pose_errors
+
+    observations = chain_observations(views, setup)
+    by_name = {v.name: v for v in views}
+    total = len(methods) + (2 if refine_too else 0)
+    done = 0
+
+    def step() -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress("held-out views", done, total)
+
+    def closed_form(m: HandEyeMethod):
+        return lambda o: solve_hand_eye(o, m)
+
+    candidates = []
+    for m, s in methods.items():
+        candidates.append(Candidate(m.value, s, leave_one_out(observations, closed_form(m), m.value)))
+        step()
+    converged = {c.name: True for c in candidates}
+    first = start or HandEyeMethod(best([c.held_out for c in candidates]).candidate)
+    pool = [c for c in candidates if start is None or c.name == start.value]
+    refinement, mount_std = None, None
+    if refine_too:
+        def reprojection(o: list[BoardObservation]) -> HandEyeSolution:
+            vs = [by_name[x.name] for x in o]
+            r = refine(vs, solve(vs, setup, first)).solution
+            return HandEyeSolution(first, r.X, r.W)
+
+        refinement = refine(views, methods[first])
+        name = f"{first.value} + reprojection"
+        pool.append(Candidate(name, refinement.solution, leave_one_out(observations, reprojection, name)))
+        converged[name] = refinement.converged
+        step()
+        s0 = methods[first]
+        robust = refine_with_pose_errors(observations, HandEyeSolution(first, s0.X, s0.W))
+        # the folds keep the board poses' std found on every view (its estimate is the costly part)
+        prior = PosePrior(detection_translation=robust.detection_std[0], detection_rotation=robust.detection_std[1])
+
+        def pose_errors(o: list[BoardObservation]) -> HandEyeSolution:
+            return refine_with_pose_errors(o, solve_hand_eye(o, first), prior).solution
+
+        name = f"{first.value} + pose errors"
+        pool.append(Candidate(name, SetupSolution(setup, first, robust.solution.flange_T_camera,
+                                                  robust.solution.world_T_marker, refined=True),
+                              leave_one_out(observations, pose_errors, name)))
+        converged[name] = robust.converged
+        mount_std = robust.std_mm_deg
+        step()
+        candidates += pool[-2:]
+    chosen_held = best([c.held_out for c in pool])
+    chosen = next(c for c in pool if c.held_out is chosen_held)
+    candidates.sort(key=lambda c: c.held_out.score)
+    return JudgedCandidates(candidates, chosen, refinement, converged, mount_std)
 
 
 def plot_dataset_residuals(result: DatasetHandEyeResult, path: Path) -> None:
@@ -414,10 +548,14 @@ def plot_dataset_residuals(result: DatasetHandEyeResult, path: Path) -> None:
     x = range(len(views))
     colours = ["tab:red" if v.outlier else "tab:blue" for v in views]
     hatches = ["" if v.used else "//" for v in views]
-    fig, axes = plt.subplots(3, 1, figsize=(max(6.0, 0.35 * len(views) + 2), 6.5), sharex=True)
+    held = {h.name: h for h in result.written.held_out.views} if result.candidates else {}
+    nan = float("nan")
+    fig, axes = plt.subplots(5, 1, figsize=(max(6.0, 0.35 * len(views) + 2), 9.5), sharex=True)
     panels = [([v.reprojection_rms for v in views], "reprojection RMS [px]"),
               ([v.chain.translation * 1e3 for v in views], f"{result.setup.fixed} in base [mm]"),
-              ([np.degrees(v.chain.rotation) for v in views], f"{result.setup.fixed} in base [deg]")]
+              ([np.degrees(v.chain.rotation) for v in views], f"{result.setup.fixed} in base [deg]"),
+              ([held[v.name].translation * 1e3 if v.name in held else nan for v in views], "held-out [mm]"),
+              ([np.degrees(held[v.name].rotation) if v.name in held else nan for v in views], "held-out [deg]")]
     for ax, (values, label) in zip(axes, panels, strict=True):
         bars = ax.bar(x, values, color=colours, edgecolor="black", linewidth=0.3)
         for bar, hatch in zip(bars, hatches, strict=True):
@@ -427,7 +565,7 @@ def plot_dataset_residuals(result: DatasetHandEyeResult, path: Path) -> None:
     axes[-1].set_xticklabels([v.name for v in views], rotation=60, ha="right", fontsize=7)
     axes[-1].set_xlabel("view (red: outlier; hatched: left out)")
     t, r = result.chain_rms
-    label = result.solution.method.value + (" refined" if result.solution.refined else "")
+    label = result.chosen or result.solution.method.value
     fig.suptitle(f"hand-eye {result.setup.value} ({label}, {len(result.used)} views)\nreprojection RMS "
                  f"{result.reprojection_rms:.2f} px; {result.setup.fixed} in the base frame: RMS {t * 1e3:.2f} mm / "
                  f"{np.degrees(r):.3f}°", fontsize=9)

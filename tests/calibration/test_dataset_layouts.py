@@ -312,3 +312,52 @@ def test_a_real_franka_set_is_read_as_published(tmp_path):
     dt, _ = pose_error(r.solution.X, r.methods[r.solution.method].solution.X)
     assert dt < 1e-9
     assert np.linalg.norm(r.solution.X[:3, 3]) < 0.15  # a wrist camera, a few centimetres from the flange
+
+
+# ----------------------------------------------------------------------------- the documented one-line mappings
+#: docs/calibration.md, "Calibrating from your own data": each real layout's mapping in one line
+ONE_LINE = {
+    "kvasios": "{pose_format: matrix, matrix: O_T_EE, matrix_order: row, intrinsics_key: camera_intrinsics, "
+               "distortion_key: dist_coeffs, board: {squares_x: 5, squares_y: 7, square_length: 0.034, "
+               "marker_length: 0.028, dictionary: DICT_6X6_250}}",
+    "libfranka": "{pose_format: matrix, matrix: O_T_EE, matrix_order: column, intrinsics_key: K, distortion_key: D}",
+    "industrial_calibration": "{index: cal_data.yaml, setup: eye-to-hand, pose_format: xyz-quat, "
+                              "quaternion_order: xyzw}",
+}
+
+
+def test_the_documented_one_line_mappings_are_in_the_docs():
+    text = (Path(__file__).resolve().parents[2] / "docs" / "calibration.md").read_text()
+    for line in ONE_LINE.values():
+        assert f"`{line}`" in text, line
+
+
+@pytest.mark.parametrize(("name", "pose"), [
+    ("kvasios", lambda k, F: {"joint_pose": [0.0] * 7, "O_T_EE": F.ravel().tolist(), "camera_intrinsics": K3,
+                              "dist_coeffs": [0.0] * 5}),
+    ("libfranka", lambda k, F: {"q": [0.0] * 7, "O_T_EE": F.T.ravel().tolist(), "K": K3, "D": [0.0] * 5}),
+])
+def test_a_one_line_mapping_reads_its_layout(rendered, tmp_path, name, pose):
+    data = _view_folders(rendered, tmp_path / "data", pose)
+    mapping = tmp_path / "mapping.yaml"
+    mapping.write_text(ONE_LINE[name] + "\n")
+    r = run_handeye_dataset(DatasetHandEyeOptions(data, tmp_path / "out", mapping=mapping, board=BOARD))
+    assert len(r.used) == N_VIEWS and not r.skipped
+    dt, dr = pose_error(r.solution.named()["flange_T_camera"], FLANGE_T_CAMERA)
+    assert dt < 1e-3 and np.degrees(dr) < 0.1
+
+
+@pytest.mark.parametrize(("name", "folder"), [
+    ("industrial_calibration", Path(__file__).resolve().parents[2].parent / "shared" / "data" / "handeye_real"),
+    ("kvasios", FRANKA),
+])
+def test_a_one_line_mapping_reads_a_real_set(tmp_path, name, folder):
+    if not folder.is_dir():
+        pytest.skip(f"{folder} is not here")
+    mapping = tmp_path / "mapping.yaml"
+    mapping.write_text(ONE_LINE[name] + "\n")
+    spec = read_mapping(mapping, folder)
+    found = read_dataset(folder, spec)
+    assert len(found.views) in (12, 16) and found.hints.camera is not None
+    poses = [robot_pose(v.record, v.where, spec.mapping) for v in found.views]
+    assert all(abs(np.linalg.det(T[:3, :3]) - 1) < 1e-6 and np.linalg.norm(T[:3, 3]) < 2 for T in poses)

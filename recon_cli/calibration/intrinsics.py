@@ -1,12 +1,12 @@
-"""Camera calibration from images of the ChArUco board: intrinsics and lens distortion.
+"""Camera calibration from images of a board: intrinsics and lens distortion.
 
-Every image is searched for the board (``cv2.aruco.CharucoDetector``: markers, then the
-chessboard corners interpolated between them and refined to sub-pixel); the board's own
-``matchImagePoints`` pairs each corner found with its position on the board, and
-``cv2.calibrateCameraExtended`` fits fx, fy, cx, cy and the distortion coefficients of the
-chosen model to all views at once. The result says how well the model explains each view
-(RMS reprojection error per view [px]) and how well the data pins each parameter (standard
-deviations from the fit's covariance).
+Every image is searched for the board (recon_cli.perception.boards: a ChArUco board's
+markers, then the chessboard corners interpolated between them and refined to sub-pixel; a
+chessboard's corners; an asymmetric circle grid's centres), each point paired with its
+position in OpenCV's board frame, and ``cv2.calibrateCameraExtended`` fits fx, fy, cx, cy
+and the distortion coefficients of the chosen model to all views at once. The result says how
+well the model explains each view (RMS reprojection error per view [px]) and how well the
+data pins each parameter (standard deviations from the fit's covariance).
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ import numpy as np
 
 from recon_cli.calibration.camera_file import CameraCalibration
 from recon_cli.errors import InputError, UnknownNameError
+from recon_cli.perception.boards import Board, BoardMissing, find_points
 from recon_cli.perception.camera_model import Intrinsics
-from recon_cli.perception.charuco import BoardSpec, detect
 
 #: corners a view needs to take part (fewer make a poorly conditioned homography)
 MIN_CORNERS = 8
@@ -59,7 +59,8 @@ class DistortionModel(StrEnum):
 @dataclass(frozen=True)
 class BoardView:
     """The board's corners found in one image: object_points (N, 3) on the board [m] (OpenCV's
-    board frame), image_points (N, 2) [px], ids (N,) chessboard corner ids."""
+    board frame), image_points (N, 2) [px], ids (N,) the points' indices on the board (ChArUco
+    corner ids, else row by row), markers: ArUco markers found (0 for boards without)."""
 
     name: str
     image_size: tuple[int, int]  # (width, height) [px]
@@ -79,22 +80,17 @@ class SkippedImage:
     reason: str
 
 
-def find_board(name: str, image: np.ndarray, board: BoardSpec, min_corners: int = MIN_CORNERS
+def find_board(name: str, image: np.ndarray, board: Board, min_corners: int = MIN_CORNERS
                ) -> BoardView | SkippedImage:
-    """The board's corners in one RGB (or grey) image, or why the image cannot be used."""
-    det = detect(image, board)
-    if det.n_corners < min_corners:
-        return SkippedImage(name, f"{det.n_corners} board corners found ({det.marker_count} markers), "
-                                  f"{min_corners} needed")
-    # OpenCV's stubs declare a sequence of corner arrays; the function takes one (N, 1, 2) array
-    obj, img = board.board().matchImagePoints(det.corners.reshape(-1, 1, 2).astype(np.float32),  # type: ignore[call-overload]
-                                              det.ids.reshape(-1, 1).astype(np.int32))
+    """The board's points in one RGB (or grey) image, or why the image cannot be used."""
+    found = find_points(image, board, min_corners)
+    if isinstance(found, BoardMissing):
+        return SkippedImage(name, found.reason)
     h, w = image.shape[:2]
-    return BoardView(name, (w, h), det.ids.copy(), np.asarray(obj, np.float64).reshape(-1, 3),
-                     np.asarray(img, np.float64).reshape(-1, 2), det.marker_count)
+    return BoardView(name, (w, h), found.ids.copy(), found.object_points, found.image_points, found.markers)
 
 
-def find_boards(images: Iterable[tuple[str, np.ndarray]], board: BoardSpec, min_corners: int = MIN_CORNERS
+def find_boards(images: Iterable[tuple[str, np.ndarray]], board: Board, min_corners: int = MIN_CORNERS
                 ) -> tuple[list[BoardView], list[SkippedImage]]:
     views: list[BoardView] = []
     skipped: list[SkippedImage] = []
@@ -168,7 +164,7 @@ def calibrate_intrinsics(views: list[BoardView], model: DistortionModel = Distor
         raise InputError(f"camera calibration needs the board in at least {MIN_VIEWS} images, found it in "
                          f"{len(views)}" + (f" ({why}{', ...' if len(skipped) > 3 else ''})" if why else ""),
                          hint="record more views of the whole board, tilted by 20-45 degrees in different directions "
-                              "and placed across the image (check --board-spec for other boards)")
+                              "and placed across the image (check --board for other boards)")
     sizes = {v.image_size for v in views}
     if len(sizes) > 1:
         listed = ", ".join(f"{w} x {h}" for w, h in sorted(sizes))

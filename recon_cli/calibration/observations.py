@@ -18,7 +18,7 @@ from recon_cli.calibration.camera_file import CameraCalibration
 from recon_cli.calibration.handeye import BoardObservation
 from recon_cli.calibration.intrinsics import SkippedImage
 from recon_cli.errors import FileError, InputError, MetadataError
-from recon_cli.perception.charuco import BoardSpec, detect, estimate_pose
+from recon_cli.perception.boards import Board, BoardMissing, find_pose
 from recon_cli.reconstruction.scan_store import ScanStore, read_scan
 
 MIN_CORNERS = 8
@@ -43,17 +43,16 @@ def scan_camera(scan, camera: CameraCalibration | None) -> CameraCalibration:
 
 
 def observe(name: str, color: np.ndarray, camera: CameraCalibration, world_T_flange: np.ndarray,
-            board: BoardSpec, min_corners: int = MIN_CORNERS) -> BoardObservation | SkippedImage:
+            board: Board, min_corners: int = MIN_CORNERS) -> BoardObservation | SkippedImage:
     """One view: the board pose in the colour image, paired with the flange pose."""
-    det = detect(color, board)
-    pose = estimate_pose(det, board, camera.intrinsics, camera.distortion_array, min_corners=min_corners)
-    if pose is None:
-        return SkippedImage(name, f"board not found ({det.n_corners} corners, {min_corners} needed)")
-    return BoardObservation(name, np.asarray(world_T_flange, dtype=float), pose.camera_T_marker, pose.n_corners,
-                            pose.reprojection_rms)
+    found = find_pose(color, board, camera.intrinsics, camera.distortion_array, min_corners)
+    if isinstance(found, BoardMissing):
+        return SkippedImage(name, found.reason)
+    return BoardObservation(name, np.asarray(world_T_flange, dtype=float), found.pose.camera_T_marker,
+                            found.pose.n_corners, found.pose.reprojection_rms)
 
 
-def scan_observations(folder: Path, board: BoardSpec, kin, camera: CameraCalibration | None = None,
+def scan_observations(folder: Path, board: Board, kin, camera: CameraCalibration | None = None,
                       min_corners: int = MIN_CORNERS) -> ScanObservations:
     """Board observations of every scan in a scan store (broken scans skipped with their
     reason). ``kin``: the model's Kinematics (recon_cli.robot.kinematics)."""

@@ -45,6 +45,8 @@ else:
 #: circles of a circle grid's row or column) and the largest square or spacing [m]
 BOARD_COUNTS = (2, 100)
 BOARD_LENGTH = 1.0
+#: the kinds of the ``--board`` syntax (kind:...)
+BOARD_KINDS = ("charuco", "chessboard", "circles")
 
 
 def _marker_frame(height: float) -> np.ndarray:
@@ -144,6 +146,12 @@ def board_pose_in_opencv_frame(board: Board, world_T_marker: np.ndarray) -> np.n
     return np.asarray(world_T_marker, dtype=float) @ np.linalg.inv(board.opencv_board_T_marker())
 
 
+def opencv_frame_fields(board: Board, parent_T_marker: np.ndarray, name: str = "world_T_board_opencv") -> dict:
+    """The fields a report adds beside a board pose in recon's marker frame: the same pose in
+    OpenCV's board frame under ``name`` and ``board_frame``, the frame in words."""
+    return {name: board_pose_in_opencv_frame(board, parent_T_marker), "board_frame": frame_text(board)}
+
+
 def board_dict(board: Board) -> dict:
     """The board for a JSON report: its kind, ``--board`` text, dimensions and OpenCV frame."""
     return {"kind": board_kind(board), "text": board_text(board), **asdict(board), "board_frame": frame_text(board),
@@ -203,7 +211,7 @@ def find_points(image: np.ndarray, board: Board, min_points: int = 8) -> BoardPo
             return BoardMissing(f"board not found ({det.marker_count} markers but no chessboard corners: squares_x "
                                 f"and squares_y swapped, or a board of the other ChArUco pattern (try --board "
                                 f"{other}: OpenCV before 4.6 drew boards of an even squares_y differently)?)")
-        return BoardMissing(f"board not found ({len(obj)} corners, {min_points} needed; {det.marker_count} markers)")
+        return BoardMissing(f"board not found ({len(obj)} corners, {min_points} needed)")
     return BoardPoints(img, obj, det.ids.copy()[: len(obj)], det.marker_count)
 
 
@@ -289,14 +297,14 @@ def parse_board(text: str, what: str = "--board") -> Board:
     kind = kind.strip().lower()
     if not sep:
         kind, rest = "charuco-plain", raw
-    elif kind not in ("charuco", "chessboard", "circles"):
-        raise UnknownNameError("board kind", kind, ["charuco", "chessboard", "circles"])
+    elif kind not in BOARD_KINDS:
+        raise UnknownNameError("board kind", kind, BOARD_KINDS)
     parts = [p.strip() for p in rest.split(",")]
 
     def bad(why: str, hint: str = EXAMPLES) -> InputError:
         return InputError(f"{what} '{raw}': {why}", hint=hint)
 
-    def counts(field: str) -> tuple[int, int]:
+    def counts(field: str, unit: str) -> tuple[int, int]:
         a, x, b = field.lower().partition("x")
         try:
             if not x:
@@ -306,7 +314,7 @@ def parse_board(text: str, what: str = "--board") -> Board:
             raise bad(f"'{field}' is not COLSxROWS") from None
         lo, hi = BOARD_COUNTS
         if not (lo <= c <= hi and lo <= r <= hi):
-            raise bad(f"{c} x {r} is outside {lo} ... {hi} per side")
+            raise bad(f"{c} x {r} {unit} is outside {lo} ... {hi} per side")
         return c, r
 
     def length(field: str, name: str) -> float:
@@ -321,7 +329,7 @@ def parse_board(text: str, what: str = "--board") -> Board:
     if kind == "chessboard":
         if len(parts) != 2:
             raise bad("is not chessboard:COLSxROWS,SQUARE", hint="e.g. chessboard:9x6,0.025 (inner corners, metres)")
-        c, r = counts(parts[0])
+        c, r = counts(parts[0], "inner corners")
         if (c + r) % 2 == 0:
             raise bad(f"{c} x {r} inner corners look the same turned by 180 degrees, so the board's origin is "
                       "ambiguous", hint="use a board of one even and one odd inner-corner count, e.g. 9x6")
@@ -330,7 +338,7 @@ def parse_board(text: str, what: str = "--board") -> Board:
         if len(parts) != 2:
             raise bad("is not circles:COLSxROWS,SPACING", hint="e.g. circles:4x11,0.02 (circles per row x rows, "
                                                                "metres)")
-        c, r = counts(parts[0])
+        c, r = counts(parts[0], "circles")
         if r % 2 == 0 or r < 3:
             raise bad(f"an asymmetric grid of {r} rows looks the same turned by 180 degrees, so its origin is "
                       "ambiguous", hint="use an odd number of rows, e.g. circles:4x11,0.02")
@@ -342,7 +350,7 @@ def parse_board(text: str, what: str = "--board") -> Board:
         if len(parts) != 4:
             raise bad("is not charuco:COLSxROWS,SQUARE,MARKER,DICTIONARY[,legacy]",
                       hint="e.g. charuco:5x7,0.04,0.02,DICT_6X6_250 (squares, metres)")
-        sx, sy = counts(parts[0])
+        sx, sy = counts(parts[0], "squares")
         rest_parts = parts[1:]
     else:
         if len(parts) != 5:
@@ -352,7 +360,7 @@ def parse_board(text: str, what: str = "--board") -> Board:
             sx, sy = int(parts[0]), int(parts[1])
         except ValueError:
             raise bad(f"'{parts[0]},{parts[1]}' are not squares_x,squares_y") from None
-        sx, sy = counts(f"{sx}x{sy}")
+        sx, sy = counts(f"{sx}x{sy}", "squares")
         rest_parts = parts[2:]
     square, marker = length(rest_parts[0], "the square"), length(rest_parts[1], "the marker")
     name = rest_parts[2].upper()

@@ -173,7 +173,7 @@ def test_parse_board() -> None:
     ("charuco:5x7,0.04,0.02,DICT_NOPE", "unknown ArUco dictionary"),
     ("charuco:20x20,0.04,0.02,DICT_4X4_50", "more than the 50"),
     ("5,7,0.04,0.02", "is not one of"),
-    ("charuco:1x7,0.04,0.02,DICT_6X6_250", "outside 2 ... 100"),
+    ("charuco:1x7,0.04,0.02,DICT_6X6_250", "1 x 7 squares is outside 2 ... 100"),
 ])
 def test_parse_board_refusals(text: str, words: str) -> None:
     with pytest.raises(InputError) as info:

@@ -7,16 +7,29 @@ correction twist c_i of the flange pose, with a Gaussian prior of the robot's st
 (:class:`PosePrior`), and the maximum a posteriori estimate of the mount X
 (``flange_T_camera``), the board W (``world_T_marker``) and the corrections minimizes::
 
-    sum_i | log(camera_T_marker[i]^-1 ... ) / detection std |^2 + | c_i / pose std |^2
+    sum_i | r_i / detection std |^2 + | c_i / pose std |^2
 
-where the board residual of view i compares the measured board pose in the camera with the
-one the chain predicts, ``inv(world_T_flange[i] exp(c_i) X) W``: the marker origin's position
-[m] and the rotation vector [rad] between the two, both in camera axes. The board poses'
-own precision (the detection std) is estimated from the data when it is not given: variance
-component estimation (Förstner), which divides the board residuals' sum of squares by their
-share of the redundancy, repeated until it settles. Twists here are (translation [m],
-rotation vector [rad]) applied on the right: ``X = X_est exp(xi)``, so the position part of
-the mount's covariance is the camera origin's in camera axes.
+    r_i = board(inv(world_T_flange[i] exp(c_i) X) W, camera_T_marker[i])
+
+where ``board(P, M)`` compares the predicted board pose P in the camera with the measured M:
+the marker origin's position difference [m] and the rotation vector of ``P_R M_R^T`` [rad],
+both in camera axes (:func:`board_residuals`). The board poses' own precision (the detection
+std, one per camera axis) is estimated from the data when it is not given: variance component
+estimation (Förstner), which divides the board residuals' sum of squares by their share of
+the redundancy, repeated until it settles. Twists here are (translation [m], rotation vector
+[rad]) applied on the right: ``X = X_est exp(xi)``, so the position part of the mount's
+covariance is the camera origin's in camera axes.
+
+Levenberg-Marquardt (scipy's least_squares) from an OpenCV solution. The Jacobian's sparsity
+(view i's rows see X, W, the offsets and c_i only) makes it cheap: central differences of X's
+and W's twists and of every view's correction, one component of all views at once, in one
+batch; the covariance and the redundancy numbers eliminate the corrections' 6 x 6 blocks
+(Schur complement), so 50 views cost about as much linear algebra as 12 unknowns.
+
+The eye-to-hand chain (:func:`recon_cli.calibration.setups.chain_observations`) puts the
+inverse robot pose where ``world_T_flange`` stands: its correction is then in the base frame,
+and a rotation error there moves the flange by the rotation times its distance from the base;
+give that set-up a translation prior grown by that lever.
 
 :func:`estimate_joint_offsets` adds the joints' zero offsets when the joint positions and the
 cell's kinematics are known: the flange poses are then forward kinematics of the measured

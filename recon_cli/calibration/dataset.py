@@ -54,8 +54,8 @@ from recon_cli.inputs.jsonfile import load_json
 from recon_cli.inputs.numbers import in_range
 from recon_cli.inputs.schema import check
 from recon_cli.inputs.yamlfile import LIMITS, line_of, read_yaml
-from recon_cli.perception.camera_model import Intrinsics
 from recon_cli.perception.boards import BOARD_KINDS, Board, BoardMissing, find_pose, parse_board
+from recon_cli.perception.camera_model import Intrinsics
 from recon_cli.perception.charuco import BoardSpec
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")

@@ -37,8 +37,9 @@ from recon_cli.cli.options import (
 )
 from recon_cli.config import SensorConfig
 from recon_cli.console import console, progress_bar, styled
-from recon_cli.errors import InputError, UnknownNameError
-from recon_cli.perception.charuco import BoardSpec
+from recon_cli.errors import InputError
+from recon_cli.perception.boards import Board, board_text
+from recon_cli.perception.boards import parse_board as parse_board_text
 from recon_cli.workflows.calibrate import HandEyeOptions, IntrinsicsOptions, check_pattern, run_handeye, run_intrinsics
 from recon_cli.workflows.handeye_dataset import DatasetHandEyeOptions, DatasetHandEyeResult, run_handeye_dataset
 
@@ -47,10 +48,13 @@ calibrate_app = typer.Typer(help="Calibration from views of the ChArUco board: c
 app.add_typer(calibrate_app, name="calibrate")
 
 BoardOpt = Annotated[str | None, typer.Option(
-    "--board-spec", help="Another board than the cell's (robot/board.yaml): squares_x,squares_y,square,marker,"
-                         "DICTIONARY, e.g. 5,7,0.04,0.02,DICT_6X6_250 (lengths in metres): 2 ... 100 squares per "
-                         "side, no more markers (squares_x * squares_y // 2) than the dictionary holds, lengths in "
-                         "(0, 1] m, the marker smaller than the square.")]
+    "--board", "--board-spec",
+    help="Another board than the cell's (robot/board.yaml): charuco:COLSxROWS,SQUARE,MARKER,DICTIONARY[,legacy] "
+         "(squares; legacy: printed by OpenCV before 4.6), chessboard:COLSxROWS,SQUARE (inner corners, one count "
+         "even and one odd), circles:COLSxROWS,SPACING (asymmetric grid: circles per row x rows, an odd number "
+         "of rows; OpenCV's spacing s: rows s apart, circles of a row 2 s), lengths in metres, e.g. "
+         "charuco:5x7,0.04,0.02,DICT_6X6_250, chessboard:9x6,0.025, circles:4x11,0.02; the ChArUco form "
+         "5,7,0.04,0.02,DICT_6X6_250 too (docs/calibration.md, Boards).")]
 
 
 def _metavar(enum) -> str:
@@ -58,48 +62,10 @@ def _metavar(enum) -> str:
     return "<" + "|".join(m.value for m in enum) + ">"
 
 
-#: squares per side of a --board-spec, and the range of its square and marker lengths [m]
-BOARD_SQUARES = (2, 100)
-BOARD_LENGTH = 1.0
-
-
-def parse_board(text: str | None):
-    """The BoardSpec of ``--board-spec`` (None: the cell's board): 2 ... 100 squares per side, at
-    most as many markers (squares_x * squares_y // 2) as the dictionary holds, lengths in
-    (0, 1] m and the marker smaller than the square; anything else is a one-line error."""
-    if text is None:
-        return None
-    import cv2
-
-
-    parts = [p.strip() for p in text.split(",")]
-    try:
-        if len(parts) != 5:
-            raise ValueError
-        sx, sy, square, marker = int(parts[0]), int(parts[1]), float(parts[2]), float(parts[3])
-        name = parts[4].upper()
-    except ValueError:
-        raise InputError(f"--board-spec '{text}' is not squares_x,squares_y,square,marker,DICTIONARY",
-                         hint="e.g. 5,7,0.04,0.02,DICT_6X6_250 (lengths in metres)") from None
-    dictionaries = sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_") and not n.endswith("_SIZE"))
-    if name not in dictionaries:
-        raise UnknownNameError("ArUco dictionary", name, dictionaries)
-    lo, hi = BOARD_SQUARES
-    if not (lo <= sx <= hi and lo <= sy <= hi):
-        raise InputError(f"--board-spec '{text}': {sx} x {sy} squares is outside {lo} ... {hi} per side",
-                         hint="e.g. 5,7,0.04,0.02,DICT_6X6_250")
-    if not (0 < square <= BOARD_LENGTH and 0 < marker <= BOARD_LENGTH):  # NaN too
-        raise InputError(f"--board-spec '{text}': square and marker lengths must lie in (0, {BOARD_LENGTH:g}] m",
-                         hint="give them in metres, e.g. 5,7,0.04,0.02,DICT_6X6_250")
-    if marker >= square:
-        raise InputError(f"--board-spec '{text}': the marker ({marker:g} m) must be smaller than the square "
-                         f"({square:g} m)", hint="e.g. 5,7,0.04,0.02,DICT_6X6_250")
-    markers = sx * sy // 2
-    size = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name)).bytesList.shape[0]
-    if markers > size:
-        raise InputError(f"--board-spec '{text}': {sx} x {sy} squares hold {markers} markers, more than the "
-                         f"{size} of {name}", hint="use fewer squares or a larger dictionary, e.g. DICT_6X6_1000")
-    return BoardSpec(sx, sy, square, marker, name)
+def parse_board(text: str | None) -> Board | None:
+    """The board of ``--board`` (None: the cell's board); a malformed one is a one-line error
+    (recon_cli.perception.boards.parse_board)."""
+    return None if text is None else parse_board_text(text, "--board")
 
 
 @calibrate_app.command("handeye")
@@ -284,7 +250,7 @@ def print_held_out(candidates, chosen: str) -> None:
 def _print_dataset(r: DatasetHandEyeResult) -> None:
     """The terminal summary of a calibration from a data set."""
     console.print(f"data set: {r.layout}; set-up {r.setup.value} ({r.sources['setup']}); board "
-                  f"{','.join(map(str, r.board.as_tuple()))} ({r.sources['board']}); camera: {r.sources['camera']}")
+                  f"{board_text(r.board)} ({r.sources['board']}); camera: {r.sources['camera']}")
     console.print("poses read as " + ", ".join(f"{k}: {v}" for k, v in r.mapping.to_dict().items()))
     for s in r.skipped:
         console.print(styled(f"{s.name} not used:", "yellow", f" {s.reason}"))

@@ -19,7 +19,6 @@ run with ``--station`` plans and computes forward kinematics with it.
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -64,6 +63,7 @@ from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.inputs.images import read_color
 from recon_cli.inputs.jsonfile import load_json
 from recon_cli.outputs import atomic_write, atomic_write_text
+from recon_cli.perception.boards import Board, board_dict, board_text, frame_text, opencv_frame_fields
 from recon_cli.perception.charuco import BoardSpec, cell_board, recorded_board
 from recon_cli.perception.sensor import cell_sensor
 from recon_cli.reconstruction.metadata import read_session
@@ -154,7 +154,7 @@ class HandEyeOptions:
     station: Path | None = None
     write: bool = True
     force: bool = False
-    board: BoardSpec | None = None
+    board: Board | None = None
     accept: bool = False
 
 
@@ -284,6 +284,9 @@ def run_handeye(opt: HandEyeOptions, progress: Progress | None = None) -> HandEy
     recorded = None
     scans = opt.scans
     if scans is None:
+        if not isinstance(board, BoardSpec):
+            raise InputError(f"the simulation shows a ChArUco board, not the {board_text(board)} of --board",
+                             hint="calibrate views of that board recorded on a cell with --scan-store or --dataset")
         scans = out / "scans"
         recorded = record_board_views(scans, opt.config, opt.views, opt.station, board, progress)
     kin = _model_kinematics(scans, station_file, opt.config)
@@ -338,7 +341,7 @@ def run_handeye(opt: HandEyeOptions, progress: Progress | None = None) -> HandEy
                            base_rotation, methods, diversity, found.skipped, model_X, kin.world_T_marker(), truth,
                            recorded, written, time.perf_counter() - t0, backup, failures, candidates, chosen[0],
                            verdict)
-    write_json(out / "handeye.json", result.to_dict())
+    write_json(out / "handeye.json", {**result.to_dict(), **opencv_frame_fields(board, solution.world_T_marker)})
     atomic_write(out / "handeye_residuals.png", lambda tmp: plot_handeye_residuals(result, tmp))
     if not verdict.trusted and not opt.accept:
         raise NotTrusted(verdict, hint=f"nothing written but the report {out / 'handeye.json'}; --accept writes it "
@@ -433,7 +436,7 @@ class IntrinsicsOptions:
 
     source: Path
     out: Path
-    board: BoardSpec | None = None
+    board: Board | None = None
     pattern: str = "*"
     model: DistortionModel = DistortionModel.FULL
     min_corners: int = 8
@@ -535,7 +538,8 @@ def run_intrinsics(opt: IntrinsicsOptions) -> IntrinsicsRun:
                                             "distortion;\nuse with recon calibrate handeye --camera-file, or as a "
                                             "realism profile's camera.assumed")
     report = out / "intrinsics.json"
-    write_json(report, {**result.to_dict(), "source": str(opt.source), "board": dataclasses.asdict(board),
+    write_json(report, {**result.to_dict(), "source": str(opt.source), "board": board_dict(board),
+                        "board_frame": frame_text(board),
                         "images": len(images)})
     figure = atomic_write(out / "intrinsics_reprojection.png", lambda tmp: plot_reprojection(result, tmp))
     profile = None

@@ -91,7 +91,8 @@ from recon_cli.errors import InputError, ReconError
 from recon_cli.geometry.transforms import pose_error
 from recon_cli.inputs.numbers import in_range
 from recon_cli.outputs import atomic_write, atomic_write_text
-from recon_cli.perception.charuco import BoardSpec, cell_board
+from recon_cli.perception.boards import Board
+from recon_cli.perception.charuco import cell_board
 from recon_cli.robot.description import expand_urdf
 from recon_cli.robot.kinematics import Kinematics
 
@@ -122,7 +123,7 @@ class DatasetHandEyeOptions:
     refine: bool = True
     camera_file: Path | None = None
     intrinsics: tuple[float, ...] | None = None  # fx, fy, cx, cy
-    board: BoardSpec | None = None
+    board: Board | None = None
     cell: CellConfig = field(default_factory=CellConfig)
     pose_format: PoseFormat | None = None
     length_unit: LengthUnit | None = None
@@ -185,7 +186,7 @@ class DatasetHandEyeResult:
     diversity: Diversity
     skipped: list[SkippedImage]
     mapping: PoseMapping
-    board: BoardSpec
+    board: Board
     sources: dict[str, str]  # where the set-up, board and camera came from
     seconds: float
     method_failures: dict[HandEyeMethod, str] = field(default_factory=dict)  # OpenCV methods without a solution

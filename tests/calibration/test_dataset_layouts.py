@@ -15,6 +15,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from recon_cli.calibration import dataset as ds
 from recon_cli.calibration.dataset import (
@@ -361,3 +363,41 @@ def test_a_one_line_mapping_reads_a_real_set(tmp_path, name, folder):
     assert len(found.views) in (12, 16) and found.hints.camera is not None
     poses = [robot_pose(v.record, v.where, spec.mapping) for v in found.views]
     assert all(abs(np.linalg.det(T[:3, :3]) - 1) < 1e-6 and np.linalg.norm(T[:3, 3]) < 2 for T in poses)
+
+
+# ----------------------------------------------------------------------------- fuzzed view folders
+_scalar = (st.none() | st.booleans() | st.integers(-10**30, 10**30) | st.floats()
+           | st.sampled_from(["secret_text", "", "K", "O_T_EE", "0"]))
+_camera_value = st.recursive(_scalar, lambda c: st.lists(c, max_size=10) | st.dictionaries(
+    st.sampled_from(["fx", "fy", "cx", "cy", "ppx", "ppy", "coeffs", "distortion", "K", "D"]), c, max_size=6),
+    max_leaves=20)
+_record = st.dictionaries(st.sampled_from(["K", "D", "camera_matrix", "dist_coeffs", "intrinsics", "camera_intrinsics",
+                                           "coeffs", "O_T_EE", "matrix", "camera_info"]), _camera_value, max_size=5)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                  HealthCheck.function_scoped_fixture])
+@given(records=st.lists(_record | _scalar, min_size=1, max_size=4), keys=st.sampled_from([
+    {}, {"intrinsics_key": "K"}, {"distortion_key": "D"}, {"intrinsics_key": "camera_info.K"}]))
+def test_fuzzed_view_folders_are_read_or_refused_in_one_line(tmp_path_factory, records, keys):
+    data = tmp_path_factory.mktemp("fuzz")
+    for k, record in enumerate(records):
+        sub = data / f"pose_{k}"
+        sub.mkdir()
+        (sub / "image.png").write_bytes(b"")
+        (sub / "data.json").write_text(json.dumps(record))
+    try:
+        found = read_dataset(data, DatasetSpec(**keys))
+    except ReconError as exc:
+        assert "\n" not in exc.one_line() and "secret_text" not in exc.one_line()
+        return
+    for v in found.views:
+        assert v.camera is None or isinstance(v.camera, CameraNumbers) or (
+            "\n" not in v.camera and "secret_text" not in v.camera), v.camera
+        if isinstance(v.camera, CameraNumbers):
+            assert len(v.camera.distortion) == 5 and all(np.isfinite([v.camera.fx, v.camera.fy, v.camera.cx,
+                                                                      v.camera.cy, *v.camera.distortion]))
+        try:
+            robot_pose(v.record, v.where, detect_format(v.record, PoseMapping(), v.where))
+        except ReconError as exc:
+            assert "\n" not in exc.one_line() and "secret_text" not in exc.one_line()

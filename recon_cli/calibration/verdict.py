@@ -203,10 +203,12 @@ def _quick_error(observations: list[BoardObservation]) -> float:
     return best
 
 
-def likely_cause(observations: list[BoardObservation]) -> str | None:
+def likely_cause(observations: list[BoardObservation], eye_in_hand: bool = True) -> str | None:
     """The usual mistake that makes the views agree (their in-sample error CAUSE_GAIN times
     smaller), or None: every robot rotation transposed (a quaternion conjugated, a rotation
-    matrix written by columns), every robot pose inverted (flange_T_base logged)."""
+    matrix written by columns), every robot pose inverted (flange_T_base logged). The
+    observations are in chain form: eye-to-hand, their poses are the robot poses' inverses,
+    and the mistake is undone on the robot poses."""
     from dataclasses import replace
 
     from recon_cli.geometry.transforms import invert
@@ -215,10 +217,13 @@ def likely_cause(observations: list[BoardObservation]) -> str | None:
     if not np.isfinite(now):
         return None
 
-    def transposed(T: np.ndarray) -> np.ndarray:
+    def transposed_robot(T: np.ndarray) -> np.ndarray:
         U = T.copy()
         U[:3, :3] = T[:3, :3].T
         return U
+
+    def transposed(G: np.ndarray) -> np.ndarray:
+        return transposed_robot(G) if eye_in_hand else invert(transposed_robot(invert(G)))
 
     tries = (("the robot poses' rotations look transposed (a quaternion conjugated, or a rotation matrix read by "
               "columns)", transposed),
@@ -278,7 +283,7 @@ def judge(observations: list[BoardObservation], solution: HandEyeSolution, held_
     for issue, message in diversity.issues:
         if issue is DiversityIssue.ONE_AXIS:
             reasons.append(message)
-    cause = likely_cause(observations) if mis_fit else None
+    cause = likely_cause(observations, eye_in_hand) if mis_fit else None
     if cause is not None:
         reasons.insert(0, cause)
     return Verdict(not reasons, tuple(reasons), held, ins, prec, source, distance, bound, reference,

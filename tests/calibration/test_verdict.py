@@ -1,0 +1,87 @@
+"""The verdict and the held-out table on real data made by others (../shared/data/handeye_real,
+ros-industrial/industrial_calibration, Apache-2.0): 15 usable photos of a board on a robot's
+wrist seen by a fixed camera. Every usable view kept: the held-out table lists every
+candidate, the one written has the smallest held-out score, the verdict is "trusted". The
+same photos with every robot rotation transposed (the quaternions conjugated) are judged
+"not trusted", naming the transposition, exit code 5, nothing but the report written."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import yaml
+
+from recon_cli.calibration.verdict import NotTrusted
+from recon_cli.cli import main
+from recon_cli.workflows.handeye_dataset import DatasetHandEyeOptions, run_handeye_dataset
+
+from ..conftest import SHARED_DATA
+
+DATA = SHARED_DATA / "handeye_real"
+
+pytestmark = pytest.mark.skipif(not DATA.exists(), reason="../shared/data/handeye_real is not here")
+
+
+@pytest.fixture(scope="module")
+def calibration(tmp_path_factory):
+    return run_handeye_dataset(DatasetHandEyeOptions(DATA, tmp_path_factory.mktemp("real") / "out"))
+
+
+def test_every_usable_view_is_kept_and_judged(calibration):
+    r = calibration
+    assert len(r.used) == 15 and not r.dropped
+    names = {c.name for c in r.candidates}
+    assert {"tsai", "park", "horaud", "andreff", "daniilidis", "shah", "li"} <= names
+    assert any(n.endswith("+ reprojection") for n in names) and any(n.endswith("+ pose errors") for n in names)
+    scores = [c.held_out.score for c in r.candidates]
+    assert r.written.held_out.score == min(scores) and scores == sorted(scores)
+    assert all(len(c.held_out.views) == 15 and c.held_out.complete for c in r.candidates)
+
+
+def test_measured_numbers(calibration):
+    """The numbers of docs/benchmarks.md, "Hand-eye on real data"."""
+    r = calibration
+    held_t, held_r = r.written.held_out.rms
+    assert held_t < 0.0100 and np.degrees(held_r) < 1.35, (held_t, np.degrees(held_r))
+    tsai = next(c for c in r.candidates if c.name == "tsai").held_out
+    assert r.written.held_out.score < tsai.score  # better than OpenCV's Tsai on views it did not use
+    dt, dr = r.pnp_mean
+    assert dt < 0.0057 and np.degrees(dr) < 1.04, (dt, np.degrees(dr))
+
+
+def test_the_verdict_is_trusted(calibration):
+    v = calibration.verdict
+    assert v is not None and v.trusted, v.reasons
+    assert v.precision_source == "PnP" and 0.3e-3 < v.precision[0] < 2e-3
+    assert v.mount_distance < 0.3  # the board 0.24 m from the flange
+
+
+def test_the_report_holds_the_table_and_the_per_view_errors(calibration):
+    d = json.loads((calibration.folder / "handeye.json").read_text())
+    assert d["verdict"]["trusted"] and d["verdict"]["line"].startswith("trusted (held-out error")
+    assert d["candidate"] == calibration.chosen and len(d["held_out"]) == len(calibration.candidates)
+    assert len(d["held_out"][0]["views"]) == 15 and "smallest held-out score" in d["selection"]
+    assert (calibration.folder / "handeye_residuals.png").stat().st_size > 10_000
+
+
+def test_transposed_rotations_are_not_trusted(tmp_path, capsys):
+    data = tmp_path / "data"
+    shutil.copytree(DATA, data)
+    for f in (data / "poses").glob("*.yaml"):
+        f.chmod(0o644)
+        p = yaml.safe_load(f.read_text())
+        for k in ("qx", "qy", "qz"):
+            p[k] = -p[k]  # the conjugate: the rotation transposed
+        f.write_text(yaml.safe_dump(p))
+    with pytest.raises(NotTrusted) as e:
+        run_handeye_dataset(DatasetHandEyeOptions(data, tmp_path / "lib"))
+    assert "rotations look transposed" in e.value.one_line()
+    code = main(["calibrate", "handeye", "--dataset", str(data), "--out", str(tmp_path / "cli")])
+    err = capsys.readouterr().err.strip()
+    assert code == 5 and len(err.splitlines()) == 1 and err.startswith("not trusted: the robot poses' rotations "
+                                                                       "look transposed"), err
+    assert json.loads((tmp_path / "cli" / "handeye.json").read_text())["verdict"]["trusted"] is False
+    assert not (tmp_path / "cli" / "hand_eye.yaml").exists()

@@ -144,8 +144,8 @@ class IntrinsicsResult:
     def to_dict(self) -> dict:
         return {"camera": self.camera.to_mapping(), "model": self.model.value, "rms_px": self.rms,
                 "corners": self.corners, "std": self.std,
-                "views": [{"name": v.name, "rms_px": v.rms, "max_px": v.max, "corners": len(v.residuals)}
-                          for v in self.views],
+                "views": [{"name": v.name, "rms_px": v.rms, "max_px": v.max, "corners": len(v.residuals),
+                           "camera_T_board_opencv": v.camera_T_board} for v in self.views],
                 "skipped": [{"name": s.name, "reason": s.reason} for s in self.skipped]}
 
 

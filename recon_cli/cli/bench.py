@@ -349,3 +349,28 @@ def bench_planners(
         console.print(item)
     console.print(f"results: {folder / 'bench_planners.json'}, {folder / 'requests.csv'}, "
                   f"plot: {folder / 'plan_times.png'}")
+
+
+@bench_app.command("handeye")
+def bench_handeye(
+    seeds: Annotated[int, typer.Option("--seeds", min=1, max=1000, help="Simulated calibrations (seeds "
+                                                                        "--seed ... --seed + N - 1).")] = 20,
+    views: Annotated[int, typer.Option("--board-views", min=5, max=28, help="Board views per calibration, drawn "
+                                                                           "from the FR3 cell's reachable ones.")]
+    = 16,
+    joints: Annotated[bool, typer.Option("--joints/--no-joints", help="Also estimate the joint zero offsets "
+                                                                      "(row recon+joints).")] = True,
+    seed: SeedOpt = D.seed,
+    out: OutOpt = None,
+    force: ForceOpt = False,
+) -> None:
+    """Hand-eye calibration with imperfect robot poses on the FR3 cell (simulation with a known truth): OpenCV's
+    methods against recon's refinement with flange pose errors, the mount error over the seeds."""
+    from recon_cli.bench.handeye import handeye_study
+
+    folder = output_folder(out, "bench handeye", force=force).path
+    with console.status(f"{seeds} simulated calibrations of {views} views"):
+        study = handeye_study(seeds=seeds, views=views, first_seed=seed, joints=joints)
+    write_json(folder / "bench_handeye.json", study.to_dict())
+    console.print(study.table())
+    console.print(f"{study.seconds:.1f} s; results: {folder / 'bench_handeye.json'}")

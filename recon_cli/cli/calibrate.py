@@ -143,6 +143,11 @@ def handeye(
     = True,
     force_write: Annotated[bool, typer.Option("--force-write", help="Write into the station file even when the "
                                                                     "views are poorly posed (warnings).")] = False,
+    camera_from_views: Annotated[bool | None, typer.Option(
+        "--camera-from-views/--no-camera-from-views",
+        help="With --dataset: calibrate the camera (intrinsics, distortion k1 k2 p1 p2) from the same photos "
+             "first, the given intrinsics as the start, and report its reprojection; default: when no camera is "
+             "given (8 or more views needed).")] = None,
     accept: Annotated[bool, typer.Option("--accept", help="Write the result (station file, hand_eye.yaml) and exit "
                                                           "0 also when the verdict is 'not trusted' (otherwise "
                                                           "exit code 5, only the report written).")] = False,
@@ -172,13 +177,15 @@ def handeye(
                                inputs=(dataset, mapping, intrinsics)).path
         opts = DatasetHandEyeOptions(dataset, folder, mapping, setup, method, refine, intrinsics, numbers, spec,
                                      config.cell, pose_format, length_unit, angle_unit, quaternion_order,
-                                     matrix_order, drop_outliers, accept=accept)
+                                     matrix_order, drop_outliers, accept=accept,
+                                     camera_from_views=camera_from_views)
         with progress_bar() as update:
             _print_dataset(run_handeye_dataset(opts, update))
         return
     dataset_only = {"--mapping": mapping, "--setup": setup, "--intrinsics": pinhole, "--pose-format": pose_format,
                     "--length-unit": length_unit, "--angle-unit": angle_unit, "--quaternion-order": quaternion_order,
-                    "--matrix-order": matrix_order, "--drop-outliers": drop_outliers or None}
+                    "--matrix-order": matrix_order, "--drop-outliers": drop_outliers or None,
+                    "--camera-from-views": camera_from_views}
     given = [name for name, value in dataset_only.items() if value is not None]
     if given:
         raise InputError(f"{', '.join(given)} {'is' if len(given) == 1 else 'are'} read with --dataset only",
@@ -254,6 +261,11 @@ def _print_dataset(r: DatasetHandEyeResult) -> None:
     console.print("poses read as " + ", ".join(f"{k}: {v}" for k, v in r.mapping.to_dict().items()))
     for s in r.skipped:
         console.print(styled(f"{s.name} not used:", "yellow", f" {s.reason}"))
+    if r.camera_fit is not None:
+        K, fit = r.camera_fit.camera.intrinsics, r.camera_fit
+        console.print(f"camera from the {len(fit.views)} views: reprojection RMS {fit.rms:.3f} px; fx {K.fx:.2f}, "
+                      f"fy {K.fy:.2f}, cx {K.cx:.2f}, cy {K.cy:.2f} px; k1, k2, p1, p2 "
+                      + ", ".join(f"{v:.5g}" for v in fit.camera.distortion[:4]))
     for name, why in r.outliers.items():
         what = "left out" if name in r.dropped else "kept (--drop-outliers leaves it out)"
         console.print(styled(f"{name} outlier:", "yellow", f" {why}; {what}"))

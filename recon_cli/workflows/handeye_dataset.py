@@ -68,7 +68,13 @@ from recon_cli.calibration.handeye import (
     solve_hand_eye,
 )
 from recon_cli.calibration.holdout import LEVER, HeldOut, best, leave_one_out
-from recon_cli.calibration.intrinsics import SkippedImage
+from recon_cli.calibration.intrinsics import (
+    BoardView,
+    DistortionModel,
+    IntrinsicsResult,
+    SkippedImage,
+    calibrate_intrinsics,
+)
 from recon_cli.calibration.setups import (
     CornerView,
     Refinement,
@@ -92,6 +98,7 @@ from recon_cli.geometry.transforms import pose_error
 from recon_cli.inputs.numbers import in_range
 from recon_cli.outputs import atomic_write, atomic_write_text
 from recon_cli.perception.boards import Board
+from recon_cli.perception.camera_model import Intrinsics
 from recon_cli.perception.charuco import cell_board
 from recon_cli.robot.description import expand_urdf
 from recon_cli.robot.kinematics import Kinematics
@@ -113,6 +120,9 @@ class DatasetHandEyeOptions:
     method: None: the candidate with the smallest held-out error; a method: it, or its
         refinement when that predicts held-out views better (refine)
     accept: write hand_eye.yaml and return normally also when the verdict is "not trusted"
+    camera_from_views: calibrate the camera (intrinsics, k1 k2 p1 p2) from the same photos
+        first, the given intrinsics as the start (True), never (False), when no camera is
+        given (None)
     """
 
     dataset: Path
@@ -133,6 +143,7 @@ class DatasetHandEyeOptions:
     drop_outliers: bool = False
     min_corners: int = 8
     accept: bool = False
+    camera_from_views: bool | None = None  # None: when no camera is given
 
 
 @dataclass(frozen=True)
@@ -212,6 +223,7 @@ class DatasetHandEyeResult:
         return {v.name: v.outlier for v in self.views if v.outlier is not None}
 
     written_converged: bool = True  # the written candidate's solver stopped on its tolerances
+    camera_fit: IntrinsicsResult | None = None  # the camera calibrated from the same photos
 
     @property
     def converged(self) -> bool:
@@ -260,6 +272,7 @@ class DatasetHandEyeResult:
                          "the board pose predicted by the calibration of the other views against the image's own",
             "held_out": [c.held_out.to_dict() for c in self.candidates],
             "mount_std_mm_deg": None if self.mount_std is None else list(self.mount_std),
+            "camera_from_views": None if self.camera_fit is None else self.camera_fit.to_dict(),
             "dataset": str(self.dataset), "layout": self.layout, "sources": self.sources,
             **{name: T for name, T in self.solution.named().items()},
             "views_used": len(self.used), "dropped": self.dropped,
@@ -305,6 +318,50 @@ def _camera(opt: DatasetHandEyeOptions, spec: DatasetSpec, hint: CameraNumbers |
     raise InputError("the camera's intrinsics are not known for the data set",
                      hint="pass --camera-file FILE (recon calibrate intrinsics writes one) or --intrinsics "
                           "fx,fy,cx,cy, or give camera: in the mapping file")
+
+
+#: views a camera calibration from the hand-eye photos needs
+MIN_CAMERA_VIEWS = 8
+
+
+def guessed_camera(image: Path) -> CameraNumbers:
+    """A start for the board poses of a camera calibrated from the views: the focal length
+    the image's larger side [px], the principal point in the image's centre."""
+    from recon_cli.inputs.images import read_color
+
+    h, w = read_color(image).shape[:2]
+    f = float(max(w, h))
+    return CameraNumbers(f, f, (w - 1) / 2.0, (h - 1) / 2.0)
+
+
+def camera_from_views(views: list[CornerView], initial: Intrinsics | None) -> tuple[list[CornerView], IntrinsicsResult]:
+    """Intrinsics and distortion (k1, k2, p1, p2) from the views' corners (cv2.calibrateCamera
+    by recon_cli.calibration.intrinsics, ``initial`` as the start, else OpenCV's own), then
+    every view's board pose again (solvePnP with the calibrated camera, from its pose)."""
+    import cv2
+
+    if len(views) < MIN_CAMERA_VIEWS:
+        raise InputError(f"calibrating the camera from the photos needs {MIN_CAMERA_VIEWS} or more views of the "
+                         f"board, {len(views)} are usable", hint="give the camera (--camera-file or --intrinsics), "
+                                                                 "or add views")
+    K0 = views[0].camera.intrinsics
+    board_views = [BoardView(v.name, (K0.width, K0.height), np.arange(v.corners), v.object_points, v.image_points, 0)
+                   for v in views]
+    fit = calibrate_intrinsics(board_views, DistortionModel.K1K2P, initial=initial)
+    K, dist = fit.camera.intrinsics.matrix(), fit.camera.distortion_array
+    out = []
+    for v in views:
+        rvec = cv2.Rodrigues(np.ascontiguousarray(v.camera_T_board[:3, :3]))[0]
+        tvec = v.camera_T_board[:3, 3].reshape(3, 1).copy()
+        _, rvec, tvec = cv2.solvePnP(v.object_points, v.image_points, K, dist, rvec=rvec, tvec=tvec,
+                                     useExtrinsicGuess=True, flags=cv2.SOLVEPNP_ITERATIVE)
+        T = np.eye(4)
+        T[:3, :3] = cv2.Rodrigues(rvec)[0]
+        T[:3, 3] = np.asarray(tvec).reshape(3)
+        uv, _ = cv2.projectPoints(v.object_points.reshape(-1, 1, 3), rvec, tvec, K, dist)
+        rms_px = float(np.sqrt(np.mean(np.sum((uv.reshape(-1, 2) - v.image_points) ** 2, axis=1))))
+        out.append(dataclasses.replace(v, camera=fit.camera, camera_T_board=T, pnp_rms=rms_px))
+    return out, fit
 
 
 def _views_report(views: list[CornerView], solution: SetupSolution, used: set[str],
@@ -393,7 +450,13 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
     else:
         board = cell_board(opt.cell.cell_file)
         sources["board"] = f"the cell {opt.cell.cell_file.name}'s ({opt.cell.cell_file.board_file})"
-    camera, sources["camera"] = _camera(opt, spec, hints.camera)
+    no_camera = opt.camera_file is None and opt.intrinsics is None and spec.camera is None and hints.camera is None
+    guessed = no_camera and opt.camera_from_views is not False and bool(dataset.views)
+    camera: CameraSource
+    if guessed:
+        camera, sources["camera"] = guessed_camera(dataset.views[0].image), "calibrated from the views"
+    else:
+        camera, sources["camera"] = _camera(opt, spec, hints.camera)
     if mapping.pose_format is None and dataset.views:
         try:
             mapping = detect_format(dataset.views[0].record, mapping, dataset.views[0].where)
@@ -411,6 +474,11 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
     found = dataset_views(dataset, mapping, board, camera, kin, opt.min_corners, progress, poses_read)
     views = found.views
     check_solvable([v.base_T_flange for v in views], total, found.skipped, setup, opt.dataset)
+    camera_fit = None
+    if guessed or opt.camera_from_views:
+        views, camera_fit = camera_from_views(views, None if guessed else views[0].camera.intrinsics)
+        sources["camera"] = (f"calibrated from the {len(views)} views" if guessed else
+                             f"calibrated from the {len(views)} views, starting from {sources['camera']}")
     observations = chain_observations(views, setup)
     check_observations(observations, pose_diversity([o.world_T_flange for o in observations]), str(opt.dataset))
     # outliers by the closed chains of OpenCV's solution: the refinement would spread one bad
@@ -444,7 +512,7 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
     result = DatasetHandEyeResult(Path(opt.out), Path(opt.dataset), dataset.layout, setup, solution,
                                   judged.refinement, reports, method_reports, diversity, found.skipped, found.mapping,
                                   board, sources, time.perf_counter() - t0, failures, judged.candidates, chosen.name,
-                                  verdict, judged.mount_std, judged.converged[chosen.name])
+                                  verdict, judged.mount_std, judged.converged[chosen.name], camera_fit)
     out = Path(opt.out)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "handeye.json", result.to_dict())

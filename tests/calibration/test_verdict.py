@@ -85,3 +85,40 @@ def test_transposed_rotations_are_not_trusted(tmp_path, capsys):
                                                                        "look transposed"), err
     assert json.loads((tmp_path / "cli" / "handeye.json").read_text())["verdict"]["trusted"] is False
     assert not (tmp_path / "cli" / "hand_eye.yaml").exists()
+
+
+@pytest.fixture(scope="module")
+def camera_from_views(tmp_path_factory):
+    """The camera (intrinsics and distortion k1 k2 p1 p2) calibrated from the same photos first,
+    the data set's intrinsics (given without distortion) as the start."""
+    return run_handeye_dataset(DatasetHandEyeOptions(DATA, tmp_path_factory.mktemp("cam") / "out",
+                                                     camera_from_views=True))
+
+
+def test_the_camera_from_the_same_photos_meets_the_pnp_bound(camera_from_views):
+    """docs/benchmarks.md, "Hand-eye on real data": every usable view kept, the mean difference
+    from each image's own PnP pose under 5 mm and 1 deg."""
+    r = camera_from_views
+    assert len(r.used) == 15 and not r.dropped and r.camera_fit is not None
+    assert r.camera_fit.rms < 0.7  # the camera's own reprojection RMS [px]
+    assert r.camera_fit.camera.distortion[0] < -0.05  # a barrel lens the given intrinsics left out
+    dt, dr = r.pnp_mean
+    assert dt < 0.002 and np.degrees(dr) < 0.25, (dt, np.degrees(dr))
+    held_t, held_r = r.written.held_out.rms
+    assert held_t < 0.003 and np.degrees(held_r) < 0.3, (held_t, np.degrees(held_r))
+    assert r.verdict is not None and r.verdict.trusted and "calibrated from the 15 views" in r.sources["camera"]
+    assert json.loads((r.folder / "handeye.json").read_text())["camera_from_views"]["rms_px"] < 0.7
+
+
+def test_without_any_intrinsics_the_camera_comes_from_the_photos(tmp_path, capsys):
+    data = tmp_path / "data"
+    shutil.copytree(DATA, data)
+    index = data / "cal_data.yaml"
+    index.chmod(0o644)
+    text = index.read_text()
+    index.write_text(text[:text.index("intrinsics:")] + text[text.index("# Extrinsic"):])
+    code = main(["calibrate", "handeye", "--dataset", str(data), "--out", str(tmp_path / "out")])
+    out = capsys.readouterr().out
+    assert code == 0 and "camera from the 15 views: reprojection RMS" in out and "verdict: trusted" in out, out
+    d = json.loads((tmp_path / "out" / "handeye.json").read_text())
+    assert d["sources"]["camera"] == "calibrated from the 15 views" and d["pnp_agreement"]["translation_mean_m"] < 0.005

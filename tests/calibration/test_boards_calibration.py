@@ -94,3 +94,18 @@ def test_hand_eye_from_a_data_set_of_another_board(name: str, tmp_path) -> None:
     base_T_board_cv = board_pose_in_opencv_frame(board, named["base_T_board"])
     dt, dr = pose_error(base_T_board_cv, BASE_T_MARKER @ invert(board.opencv_board_T_marker()))
     assert dt < 1e-3 and np.degrees(dr) < 0.1
+
+
+def test_a_mapping_names_its_board_in_the_board_syntax(tmp_path) -> None:
+    from recon_cli.calibration.dataset import read_mapping
+    from recon_cli.errors import InputError
+    from recon_cli.perception.boards import ChessboardSpec
+
+    mapping = tmp_path / "mapping.yaml"
+    mapping.write_text('board: "chessboard:9x6,0.025"\n')
+    assert read_mapping(mapping).board == ChessboardSpec(9, 6, 0.025)
+    mapping.write_text('board: "circles:4x10,0.02"\n')
+    with pytest.raises(InputError) as info:
+        read_mapping(mapping)
+    line = info.value.one_line()
+    assert "mapping.yaml:1: board 'circles:4x10,0.02'" in line and "odd number of rows" in line

@@ -7,7 +7,13 @@ Where the poses are (:func:`read_dataset`; the first that applies):
                          or inline values, e.g. ros-industrial's cal_data.yaml (its
                          ``intrinsics``, ``target_finder`` and ``static_camera`` are read too)
     one CSV file         a row per image, a column naming the image
-    one file per image   poses/3.yaml (or .yml, .json) for images/3.png, matched by stem
+    one file per image   poses/3.yaml (or .yml, .json) for images/3.png, matched by stem, or
+                         side by side (0001.png beside 0001.json)
+    a folder per view    pose_00/{image.png, data.json}, ... in natural order
+
+The camera (:func:`view_camera`): each pose file's intrinsics and distortion by key (K,
+camera_matrix, intrinsics, camera_intrinsics, ...; D, dist_coeffs, ...), else a camera file at
+the top of the data set (intrinsics.yaml, camera_info.json, ...).
 
 What a pose is (:class:`PoseMapping`, from a mapping file, CLI options or the keys of the
 first pose): joint positions (forward kinematics of a cell to its flange), a 4x4 matrix
@@ -1187,14 +1193,17 @@ def _from_view_folders(folder: Path, root: Path, subs: list[Path]) -> Dataset:
 INTRINSICS_KEYS = ("K", "camera_matrix", "cameraMatrix", "intrinsics", "camera_intrinsics", "intrinsic_matrix",
                    "camera_info.K", "camera_info.k")
 DISTORTION_KEYS = ("D", "dist", "distortion", "dist_coeffs", "distCoeffs", "distortion_coefficients", "coeffs",
-                   "camera_info.D", "camera_info.d")
+                   "camera_info.D", "camera_info.d")  # a list, or a YAML matrix {rows, cols, data}
 #: coefficients OpenCV takes (k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, ty]]]]); recon's model uses the first 5
 DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
 
 
 def _distortion(value: Any, key: str, where: str) -> tuple[float, ...]:
     """k1, k2, p1, p2, k3 of a distortion key's list (OpenCV's order); more coefficients only
-    when they are zero (recon's camera model is OpenCV's five)."""
+    when they are zero (recon's camera model is OpenCV's five). A ROS or OpenCV YAML matrix
+    ({rows, cols, data}) is read by its data."""
+    if isinstance(value, dict) and isinstance(value.get("data"), list):
+        value, key = value["data"], f"{key}.data"
     if not isinstance(value, list):
         raise InputError(f"{where}: {key} is {_kind(value)}, not a list of distortion coefficients",
                          hint="write [k1, k2, p1, p2, k3] (OpenCV's order)")
@@ -1216,6 +1225,8 @@ def _pinhole(value: Any, key: str, where: str) -> tuple[tuple[float, float, floa
     def ranged(v: Any, name: str, i: int) -> float:
         return _in_range(v, name, where, *(FOCAL_RANGE if i < 2 else CENTRE_RANGE), unit="px")
 
+    if isinstance(value, dict) and "fx" not in value and isinstance(value.get("data"), list):
+        value, key = value["data"], f"{key}.data"  # a ROS or OpenCV YAML matrix: {rows, cols, data}
     if isinstance(value, dict):
         names = [next((n for n in options if n in value), options[0])
                  for options in (("fx",), ("fy",), ("cx", "ppx"), ("cy", "ppy"))]
@@ -1277,12 +1288,45 @@ def view_camera(record: Any, where: str, intrinsics_key: str | None = None, dist
     return CameraNumbers(*pinhole, distortion=dist)
 
 
+#: stems of a camera file at the top of a data set (recon's intrinsics.yaml, a ROS camera_info, ...)
+CAMERA_FILE_STEMS = ("intrinsics", "camera", "camera_info", "camera_intrinsics", "camera_calibration",
+                     "calibration", "cam")
+
+
+def _camera_file(folder: Path) -> CameraNumbers | None:
+    """The camera of a file at the top of a data set folder named like CAMERA_FILE_STEMS (its
+    intrinsics by key, or {fx, fy, cx, cy[, distortion]} at its top), inside the folder and
+    bounded like a pose file; a file that cannot be read is refused in one line."""
+    if not folder.is_dir():
+        return None
+    root = folder.resolve()
+    found = sorted(p for p in _files(_entries(folder), POSE_SUFFIXES) if p.stem.lower() in CAMERA_FILE_STEMS)
+    for path in found:
+        if not path.resolve().is_relative_to(root):
+            continue
+        doc = _read_doc(path, "camera file", MAX_POSE_BYTES, max_values=MAX_POSE_VALUES)
+        if not isinstance(doc, dict):
+            continue
+        camera = view_camera(doc, str(path))
+        if camera is None and all(k in doc for k in ("fx", "fy")):
+            camera = view_camera({"intrinsics": doc}, str(path))
+        if isinstance(camera, str):
+            raise InputError(camera, hint="fix the camera file, or move it out of the data set folder")
+        if camera is not None:
+            return camera
+    return None
+
+
 def _with_cameras(dataset: Dataset, spec: DatasetSpec) -> Dataset:
     """The data set with the camera each view's pose file holds; the first one read becomes
-    the data set's camera (unless an index file names one)."""
+    the data set's camera (unless an index file names one), else a camera file at the top
+    of the data set folder."""
     views = [replace(v, camera=view_camera(v.record, v.where, spec.intrinsics_key, spec.distortion_key))
              for v in dataset.views]
     first = next((v.camera for v in views if isinstance(v.camera, CameraNumbers)), None)
+    if first is None and dataset.hints.camera is None and not spec.intrinsics_key:
+        top = _camera_file(dataset.folder)
+        return dataset if top is None else replace(dataset, hints=replace(dataset.hints, camera=top))
     if first is None and not spec.intrinsics_key:
         return dataset
     hints = dataset.hints if dataset.hints.camera is not None else replace(dataset.hints, camera=first)

@@ -401,3 +401,38 @@ def test_fuzzed_view_folders_are_read_or_refused_in_one_line(tmp_path_factory, r
             robot_pose(v.record, v.where, detect_format(v.record, PoseMapping(), v.where))
         except ReconError as exc:
             assert "\n" not in exc.one_line() and "secret_text" not in exc.one_line()
+
+
+# ----------------------------------------------------------------------------- a camera file at the top
+@pytest.mark.parametrize(("name", "text", "distortion"), [
+    ("intrinsics.yaml", f"fx: {K.fx}\nfy: {K.fy}\ncx: {K.cx}\ncy: {K.cy}\ndistortion: [0.01, 0, 0, 0]\n",
+     (0.01, 0.0, 0.0, 0.0, 0.0)),
+    ("camera_info.yaml", "image_width: 960\nimage_height: 720\ncamera_name: d415\n"
+                         f"camera_matrix: {{rows: 3, cols: 3, data: [{K.fx}, 0, {K.cx}, 0, {K.fy}, {K.cy}, 0, 0, 1]}}\n"
+                         "distortion_model: plumb_bob\n"
+                         "distortion_coefficients: {rows: 1, cols: 5, data: [0.01, 0, 0, 0, 0]}\n",
+     (0.01, 0.0, 0.0, 0.0, 0.0)),
+    ("camera.json", json.dumps({"K": K3}), (0.0,) * 5),
+], ids=["flat-yaml", "ros-camera-info", "json-K"])
+def test_a_camera_file_at_the_top_of_the_data_set(rendered, tmp_path, name, text, distortion):
+    data = _view_folders(rendered, tmp_path / "data", lambda k, F: {"O_T_EE": F.T.ravel().tolist()})
+    (data / name).write_text(text)
+    found = read_dataset(data)
+    assert found.hints.camera == CameraNumbers(K.fx, K.fy, K.cx, K.cy, distortion)
+    assert len(found.views) == N_VIEWS and not found.skipped
+
+
+def test_the_pose_files_camera_comes_before_a_camera_file(rendered, tmp_path):
+    data = _view_folders(rendered, tmp_path / "data", _franka)
+    (data / "intrinsics.yaml").write_text("fx: 100\nfy: 100\ncx: 50\ncy: 50\n")
+    assert read_dataset(data).hints.camera.fx == K.fx
+
+
+def test_a_camera_file_that_cannot_be_read_is_one_line(rendered, tmp_path):
+    data = _view_folders(rendered, tmp_path / "data", lambda k, F: {"O_T_EE": F.T.ravel().tolist()})
+    (data / "camera_info.yaml").write_text("camera_matrix: {rows: 3, cols: 3, data: [1, 2, 3]}\n")
+    with pytest.raises(InputError) as info:
+        read_dataset(data)
+    line = info.value.one_line()
+    assert f"{data / 'camera_info.yaml'}: camera_matrix.data holds 3 numbers" in line and "\n" not in line
+    assert "fix the camera file, or move it out of the data set folder" in line

@@ -28,6 +28,7 @@ from recon_cli.perception.boards import (
     find_points,
     find_pose,
     frame_text,
+    opencv_frame_fields,
     parse_board,
 )
 from recon_cli.perception.camera_model import Intrinsics
@@ -149,6 +150,8 @@ def test_board_frames() -> None:
         assert np.allclose(world_T_board @ T, world_T_marker)
         assert frame_text(board).startswith("opencv: origin at") and "z into the board" in frame_text(board)
         assert board_dict(board)["board_frame"] == frame_text(board)
+        fields = opencv_frame_fields(board, world_T_marker, "base_T_board_opencv")
+        assert np.allclose(fields["base_T_board_opencv"], world_T_board) and fields["board_frame"] == frame_text(board)
         assert parse_board(board_text(board)) == board
 
 

@@ -690,7 +690,8 @@ def _joints_pose(record: Any, where: str, mapping: PoseMapping, kin) -> np.ndarr
 
 def detect_format(record: Any, mapping: PoseMapping, where: str) -> PoseMapping:
     """The mapping with its pose format (and keys) told by the keys of a pose, when it has
-    none: O_T_EE (libfranka, column-major), x y z qx qy qz qw, position.{x,y,z} +
+    none: O_T_EE (libfranka's; at the top or under one key, e.g. robot_state.O_T_EE; its
+    order told by its numbers), x y z qx qy qz qw, position.{x,y,z} +
     orientation.{x,y,z,w} (a ROS Pose), x y z roll pitch yaw, matrix, joints."""
     if mapping.pose_format is not None:
         return mapping
@@ -709,8 +710,11 @@ def detect_format(record: Any, mapping: PoseMapping, where: str) -> PoseMapping:
         with np.errstate(all="ignore"):
             return matrix_order_of(np.array(items, dtype=np.float64), key)
 
-    if has("O_T_EE"):
-        return replace(mapping, pose_format=PoseFormat.MATRIX, matrix=("O_T_EE",), matrix_order=order("O_T_EE"))
+    franka = "O_T_EE" if has("O_T_EE") else next(
+        (f"{k}.O_T_EE" for k, v in record.items() if isinstance(k, str) and isinstance(v, dict) and "O_T_EE" in v),
+        None) if isinstance(record, dict) else None  # libfranka's state at the top, or under one key
+    if franka is not None:
+        return replace(mapping, pose_format=PoseFormat.MATRIX, matrix=(franka,), matrix_order=order(franka))
     if has("x", "y", "z", "qx", "qy", "qz", "qw"):
         return replace(mapping, pose_format=PoseFormat.XYZ_QUAT, quaternion=("qx", "qy", "qz", "qw"),
                        quaternion_order=QuaternionOrder.XYZW)

@@ -195,6 +195,10 @@ def test_the_order_of_a_matrix_is_told_by_its_numbers():
         mapping = detect_format({"O_T_EE": values.tolist()}, PoseMapping(), "p.json")
         assert np.allclose(robot_pose({"O_T_EE": values.tolist()}, "p.json", mapping), F)
     assert detect_format({"O_T_EE": F.T.ravel().tolist()}, PoseMapping(), "p").matrix_order is MatrixOrder.COLUMN
+    nested = detect_format({"time": 3.0, "robot_state": {"q": [0.0] * 7, "O_T_EE": F.T.ravel().tolist()}},
+                           PoseMapping(), "p")
+    assert nested.matrix == ("robot_state.O_T_EE",) and nested.matrix_order is MatrixOrder.COLUMN
+    assert np.allclose(robot_pose({"robot_state": {"O_T_EE": F.T.ravel().tolist()}}, "p", nested), F)
     # an order the mapping states is kept, and a matrix in the other order refused in one line
     said = detect_format({"O_T_EE": F.ravel().tolist()}, PoseMapping(matrix_order=MatrixOrder.COLUMN), "p")
     assert said.matrix_order is MatrixOrder.COLUMN

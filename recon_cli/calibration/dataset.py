@@ -1137,7 +1137,8 @@ def _one_of(found: list[Path], stems: tuple[str, ...]) -> Path | list[Path]:
 def _from_view_folders(folder: Path, root: Path, subs: list[Path]) -> Dataset:
     """One folder per view (pose_00/{image.png, data.json}, ...), in natural order of the
     folders' names: each holds one image and one pose file (a depth image beside them is
-    left aside)."""
+    left aside). A folder holding neither an image nor a pose file (output/, .git/) is no
+    view."""
     if len(subs) > MAX_VIEWS:
         raise InputError(f"{folder}: {len(subs):,} folders, more than the {MAX_VIEWS:,} views recon reads",
                          hint=f"use at most {MAX_VIEWS:,} views (every second or third one of a larger set)")
@@ -1150,14 +1151,21 @@ def _from_view_folders(folder: Path, root: Path, subs: list[Path]) -> Dataset:
         if not sub.resolve().is_relative_to(root):
             skipped.append(SkippedImage(name, f"{sub} is a link leading out of the data set folder; not read"))
             continue
+        if name.startswith("."):
+            continue
         try:
             entries = _entries(sub, MAX_VIEW_ENTRIES)
+        except FileError as exc:
+            skipped.append(SkippedImage(name, exc.one_line()))
+            continue
         except ReconError:
             skipped.append(SkippedImage(name, f"{sub} holds more than {MAX_VIEW_ENTRIES} entries; a view's folder "
                                               "holds its image and its pose file"))
             continue
         image = _one_of(_files(entries, IMAGE_SUFFIXES), VIEW_IMAGE_STEMS)
         pose = _one_of(_files(entries, POSE_SUFFIXES), VIEW_POSE_STEMS)
+        if image == [] and pose == []:
+            continue  # not a view
         any_image = any_image or bool(image)
         problem = None
         if isinstance(image, list):

@@ -218,6 +218,10 @@ def test_view_folders_that_cannot_be_used_are_one_line_each(rendered, tmp_path):
     (data / "pose_3" / "extra.yaml").write_text("x: 1\n")
     (data / "pose_5" / "data.json").write_text("{not json")
     (data / "notes").mkdir()
+    (data / "notes" / "notes.yaml").write_text("seen: 1\n")
+    (data / "output").mkdir()
+    (data / "output" / "result.txt").write_text("")
+    (data / ".git").mkdir()
     outside = tmp_path / "outside"
     outside.mkdir()
     (outside / "data.json").write_text(json.dumps({"secret_word": 1}))
@@ -230,6 +234,7 @@ def test_view_folders_that_cannot_be_used_are_one_line_each(rendered, tmp_path):
     assert reasons["pose_3"].startswith(f"3 pose files in {data / 'pose_3'}")
     assert reasons["pose_5/image.png"].startswith(f"{data / 'pose_5' / 'data.json'}")
     assert reasons["notes"] == f"no image (.png, .jpg, .jpeg, .bmp, .tif, .tiff) in {data / 'notes'}"
+    assert "output" not in reasons and ".git" not in reasons  # folders of neither images nor pose files
     assert reasons["pose_99"] == f"{data / 'pose_99'} is a link leading out of the data set folder; not read"
     assert all("\n" not in r and "secret_word" not in r for r in reasons.values())
     assert len(found.views) == N_VIEWS - 4

@@ -122,9 +122,28 @@ def test_connecting_and_moving_leave_the_callers_scheduling_as_it_was(fr3, stand
     before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
     robot = FrankaRobot(CONFIG, fr3.joint_names, fr3.kin.limits)
     assert (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority) == before
+    # another thread of the process: real-time below the loop while it runs (it may hold the
+    # interpreter lock the loop needs), as before afterwards
+    seen: set[int] = set()
+    done = threading.Event()
+
+    def watch() -> None:
+        while not done.is_set():
+            seen.add(os.sched_getscheduler(0))
+            time.sleep(0.002)
+        seen.add(-1)
+        seen.add(os.sched_getscheduler(0) + 100)  # after the motion
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
     start = robot.measured_joints()
     robot.execute(_plan(fr3, start, start + np.radians([5.0, 0, 0, 0, 0, 0, 5.0])))
     assert (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority) == before
+    done.set()
+    watcher.join()
+    if before[0] == os.SCHED_OTHER and os.sched_get_priority_max(os.SCHED_FIFO) > 0:
+        assert os.SCHED_RR in seen or os.SCHED_OTHER in seen  # RR where the system permits it
+    assert os.SCHED_OTHER + 100 in seen, seen  # restored after the motion
     robot.close()
 
 

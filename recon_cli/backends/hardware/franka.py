@@ -24,6 +24,7 @@ import contextlib
 import gc
 import os
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -60,25 +61,65 @@ STAMP_WINDOW = 32
 STOP_BOUND = 2.0
 
 
+#: real-time priorities while the 1 kHz loop runs: the loop's thread (FIFO) and the process's
+#: other threads (round-robin, below a controller stand-in's 40 and above every normal process)
+LOOP_PRIORITY = 80
+OTHERS_PRIORITY = 30
+_NORMAL = tuple(getattr(os, name) for name in ("SCHED_OTHER", "SCHED_BATCH", "SCHED_IDLE") if hasattr(os, name))
+
+
+def _threads() -> set[int]:
+    """The native ids of this process's threads."""
+    try:
+        return {int(t) for t in os.listdir("/proc/self/task")}
+    except OSError:
+        return set()
+
+
 @contextlib.contextmanager
 def realtime_priority() -> Iterator[bool]:
     """Run the calling thread under the real-time FIFO scheduler meanwhile, as libfranka does
-    for its own control loop on a real-time kernel (yields False where the system does not
-    permit it: then the loop runs at normal priority and missed cycles are more likely)."""
+    for its own control loop on a real-time kernel, and the process's other threads under
+    round-robin below it (yields False where the system does not permit it: then the loop
+    runs at normal priority and missed cycles are more likely).
+
+    The loop needs Python's interpreter lock for every cycle. Another thread of the process
+    (a progress bar's refresh, a recording, a test's watcher) that holds the lock when a
+    normal process preempts it would keep the loop waiting for as long as that process runs:
+    at a real-time priority of its own it is not preempted by normal processes and hands the
+    lock over within the switch interval. Every thread's policy is restored afterwards; a
+    thread started meanwhile is given the caller's former policy."""
     if not hasattr(os, "sched_setscheduler"):
         yield False
         return
+    me = threading.get_native_id()
     try:
         policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(min(80, os.sched_get_priority_max(os.SCHED_FIFO))))
+        top = os.sched_get_priority_max(os.SCHED_FIFO)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(min(LOOP_PRIORITY, top)))
     except OSError:
         yield False
         return
+    before = _threads()
+    saved: dict[int, tuple[int, os.sched_param]] = {}
+    for tid in before - {me}:
+        with contextlib.suppress(OSError):
+            other = os.sched_getscheduler(tid)
+            if other in _NORMAL:
+                saved[tid] = (other, os.sched_getparam(tid))
+                os.sched_setscheduler(tid, os.SCHED_RR, os.sched_param(min(OTHERS_PRIORITY, top)))
     try:
         yield True
     finally:
         with contextlib.suppress(OSError):
             os.sched_setscheduler(0, policy, param)
+        for tid, (other, other_param) in saved.items():
+            with contextlib.suppress(OSError):  # (a thread that ended meanwhile)
+                os.sched_setscheduler(tid, other, other_param)
+        for tid in _threads() - before:  # started meanwhile: they inherited a real-time policy
+            with contextlib.suppress(OSError):
+                if os.sched_getscheduler(tid) not in _NORMAL:
+                    os.sched_setscheduler(tid, policy, param)
 
 
 @contextlib.contextmanager

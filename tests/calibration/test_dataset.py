@@ -361,13 +361,15 @@ def test_an_outlier_is_flagged_and_dropped_on_request(views, tmp_path):
         if k == 5:  # a robot that had not settled: 2 cm and 2° off
             F = F @ _T([0, np.radians(2.0), 0], [0.02, 0, 0])
         (data / "poses" / f"{k}.json").write_text(json.dumps({"matrix": F.tolist()}))
-    kept = _calibrate(data, tmp_path / "kept")
+    kept = _calibrate(data, tmp_path / "kept", accept=True)
     assert list(kept.outliers) == ["images/5.png"] and len(kept.used) == N_VIEWS
+    assert kept.verdict is not None and not kept.verdict.trusted  # the outlier kept: not trusted
     dropped = _calibrate(data, tmp_path / "dropped", drop_outliers=True)
     assert dropped.dropped == ["images/5.png"] and len(dropped.used) == N_VIEWS - 1
     assert dropped.chain_rms[0] < kept.chain_rms[0]
     dt, dr = pose_error(dropped.solution.named()["flange_T_camera"], FLANGE_T_CAMERA)
     assert dt < 1e-3 and np.degrees(dr) < 0.1
+    assert dropped.verdict is not None and dropped.verdict.trusted
 
 
 def _run(capsys, *argv) -> tuple[int, str]:
@@ -397,7 +399,7 @@ def test_the_command_line(eye_in_hand, tmp_path, capsys):
                       ",".join(map(str, INTRINSICS)), "--board-spec", "5,7,0.04,0.03,DICT_6X6_250", "--out",
                       tmp_path / "cli")
     assert code == 0, text
-    assert "10 views, converged" in text and "flange_T_camera (tsai refined)" in text
+    assert "10 views, converged" in text and f"flange_T_camera ({r.chosen})" in text and "verdict: trusted" in text
     report = json.loads((tmp_path / "cli" / "handeye.json").read_text())
     assert np.allclose(report["flange_T_camera"], r.solution.X, atol=1e-9)
 

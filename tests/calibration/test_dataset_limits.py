@@ -106,10 +106,12 @@ def test_three_usable_views_calibrate_and_the_methods_without_a_solution_are_nam
     by 70-80° about different axes, so Tsai's solution is written; Andreff's and Li's linear
     solvers find none on three views and are reported, not raised."""
     data = _real_views(tmp_path / "data", [2, 3, 4, 5])
-    code, text = _run(capfd, "calibrate", "handeye", "--dataset", data, *REAL_ARGS, "--out", tmp_path / "out")
+    code, text = _run(capfd, "calibrate", "handeye", "--dataset", data, *REAL_ARGS, "--accept", "--out",
+                      tmp_path / "out")
     assert code == 0, text
     assert "images/2.png not used: board not found (4 corners, 8 needed)" in text
     assert "3 views, converged" in text
+    assert "verdict: not trusted: the calibration without images/" in text  # 3 views: none can be held out
     assert "andreff     no solution (Rotation normalization issue: determinant(R) is null)" in text
     assert "li          no solution (Rotation normalization issue: determinant(R) is null)" in text
     report = json.loads((tmp_path / "out" / "handeye.json").read_text())
@@ -198,7 +200,8 @@ def test_paths_leaving_the_folder_are_skipped_unread_and_three_views_remain(tmp_
         {"image": "images/5.png", "pose": "~/secret.yaml"}] + [
         {"image": f"images/{k}.png", "pose": f"poses/{k}.yaml"} for k in (3, 4, 5)]
     (data / "index.yaml").write_text(yaml.safe_dump({"data": entries}))
-    code, text = _run(capfd, "calibrate", "handeye", "--dataset", data, *REAL_ARGS, "--out", tmp_path / "out")
+    code, text = _run(capfd, "calibrate", "handeye", "--dataset", data, *REAL_ARGS, "--accept", "--out",
+                      tmp_path / "out")
     assert code == 0 and "3 views, converged" in text, text
     assert SECRET not in text
     assert "'../../outside/6.png' leaves the data set folder" in text
@@ -312,7 +315,8 @@ def test_an_image_claiming_60000_x_60000_pixels_is_refused_from_its_header(tmp_p
     ended in a traceback from OpenCV's solvers)."""
     data = _real_views(tmp_path / "data", [3, 4, 5, 6])
     (data / "images" / "6.png").write_bytes(_png_header(60000, 60000))
-    code, text = _run(capfd, "calibrate", "handeye", "--dataset", data, *REAL_ARGS, "--out", tmp_path / "out")
+    code, text = _run(capfd, "calibrate", "handeye", "--dataset", data, *REAL_ARGS, "--accept", "--out",
+                      tmp_path / "out")
     assert code == 0 and "3 views, converged" in text, text
     assert f"images/6.png not used: {data / 'images' / '6.png'}: board image declares 60000 x 60000 pixels (3600 " \
            f"megapixels), more than the {image_reader.MAX_IMAGE_PIXELS / 1e6:g} megapixels recon reads" in text

@@ -9,7 +9,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from recon_cli.calibration.handeye import BoardObservation, HandEyeMethod, HandEyeSolution, pose_diversity, solve_hand_eye
+from recon_cli.calibration.handeye import (
+    BoardObservation,
+    HandEyeMethod,
+    HandEyeSolution,
+    pose_diversity,
+    solve_hand_eye,
+)
 from recon_cli.calibration.holdout import LEVER, HeldOut, HeldOutView, best, leave_one_out, predicted_board
 from recon_cli.calibration.verdict import check_observations, judge, likely_cause
 from recon_cli.errors import InputError
@@ -157,3 +163,16 @@ def test_wrong_inputs_are_refused_before_any_solver(case, message):
     with pytest.raises(InputError) as e:
         check_observations(obs, pose_diversity([o.world_T_flange for o in obs]), "the data set")
     assert message in e.value.one_line() and "\n" not in e.value.one_line()
+
+
+def test_bench_handeye_writes_its_table(tmp_path, capsys):
+    import json
+
+    from recon_cli.cli import main
+
+    assert main(["bench", "handeye", "--seeds", "1", "--board-views", "10", "--no-joints", "--out",
+                 str(tmp_path / "b")]) == 0
+    text = capsys.readouterr().out
+    assert "ratio recon / best OpenCV" in text and "daniilidis" in text
+    d = json.loads((tmp_path / "b" / "bench_handeye.json").read_text())
+    assert d["seeds"] == 1 and d["views"] == 10 and {r["method"] for r in d["rows"]} >= {"tsai", "recon"}

@@ -14,10 +14,12 @@ On the FR3 cell (a RealSense D405 on the flange) the generated board views
   with the D405's intrinsics (1280 x 720), 0.2 px of Gaussian noise per coordinate, then
   cv2.solvePnP (corners outside the image dropped).
 
-Every OpenCV method of calibrateHandEye and recon's refinement with pose errors (from the
-best closed-form solution by the chain residual, :mod:`recon_cli.calibration.robust`) solve
-the same views; the table gives each method's median mount error against the true X over
-the seeds, and how well the refinement's stated 1-sigma matches its actual error.
+Every OpenCV method of calibrateHandEye and recon's refinements with pose errors (from the
+best closed-form solution by the chain residual, :mod:`recon_cli.calibration.robust`: on the
+board poses, with the joint offsets where the views determine them, on the corners, and on
+the corners with the joint offsets under their prior) solve the same views; the table gives
+each method's median mount error against the true X over the seeds, and how well each
+refinement's stated 1-sigma matches its actual error.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from recon_cli.calibration.camera_file import CameraCalibration
 from recon_cli.calibration.handeye import (
     BoardObservation,
     HandEyeMethod,
@@ -35,9 +38,17 @@ from recon_cli.calibration.handeye import (
     solve_hand_eye,
     view_residuals,
 )
-from recon_cli.calibration.robust import PosePrior, _exp, estimate_joint_offsets, refine_with_pose_errors
+from recon_cli.calibration.robust import (
+    PosePrior,
+    _exp,
+    estimate_joint_offsets,
+    refine_corners_with_pose_errors,
+    refine_with_pose_errors,
+)
+from recon_cli.calibration.setups import CornerView, Setup
 from recon_cli.errors import ReconError
 from recon_cli.geometry.transforms import invert, pose_error
+from recon_cli.perception.camera_model import Intrinsics
 from recon_cli.robot.kinematics import Kinematics
 
 #: OpenCV's AX = XB methods compared
@@ -45,6 +56,9 @@ CLOSED_FORM = (HandEyeMethod.TSAI, HandEyeMethod.PARK, HandEyeMethod.HORAUD, Han
                HandEyeMethod.DANIILIDIS)
 REFINED = "recon"  # the row of refine_with_pose_errors
 JOINTS = "recon+joints"  # the row of estimate_joint_offsets
+CORNERS = "recon-corners"  # the row of refine_corners_with_pose_errors
+CORNERS_JOINTS = "recon-corners+joints"  # the same with the joint positions (offsets with their prior)
+RECON_ROWS = (REFINED, JOINTS, CORNERS, CORNERS_JOINTS)
 
 
 @dataclass(frozen=True)
@@ -102,10 +116,11 @@ def _random_twist(rng: np.random.Generator, translation: float, rotation: float)
     return np.concatenate([a / np.linalg.norm(a) * translation, b / np.linalg.norm(b) * rotation])
 
 
-def measured_board_pose(camera_T_marker: np.ndarray, views: Views, pixel_noise: float,
-                        rng: np.random.Generator) -> np.ndarray | None:
+def measured_corners(camera_T_marker: np.ndarray, views: Views, pixel_noise: float,
+                     rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """The board pose solvePnP finds from the corners projected with ``pixel_noise`` [px] of
-    noise (None when fewer than 12 corners are in the image)."""
+    noise, with the corners it used: (camera_T_marker, object points (N, 3) [m], image points
+    (N, 2) [px]); None when fewer than 12 corners are in the image."""
     import cv2
 
     P = views.corners @ camera_T_marker[:3, :3].T + camera_T_marker[:3, 3]
@@ -125,7 +140,14 @@ def measured_board_pose(camera_T_marker: np.ndarray, views: Views, pixel_noise: 
     T = np.eye(4)
     T[:3, :3] = cv2.Rodrigues(rvec)[0]
     T[:3, 3] = tvec.ravel()
-    return T
+    return T, views.corners[inside].copy(), img
+
+
+def measured_board_pose(camera_T_marker: np.ndarray, views: Views, pixel_noise: float,
+                        rng: np.random.Generator) -> np.ndarray | None:
+    """The board pose of :func:`measured_corners` alone."""
+    found = measured_corners(camera_T_marker, views, pixel_noise, rng)
+    return None if found is None else found[0]
 
 
 @dataclass(frozen=True)
@@ -137,6 +159,8 @@ class SimulatedSet:
     flange_T_camera: np.ndarray  # the truth
     world_T_marker: np.ndarray
     joint_offsets: np.ndarray  # (n_joints,) true offsets [rad]: true joints = measured + offsets
+    corner_views: list[CornerView] = field(default_factory=list)  # the same views with their corners
+
 
 
 def simulate(views: Views, n: int, rng: np.random.Generator, errors: RobotErrors = RobotErrors(),  # noqa: B008
@@ -151,21 +175,36 @@ def simulate(views: Views, n: int, rng: np.random.Generator, errors: RobotErrors
     nj = views.joints.shape[1]
     offsets = np.asarray(rng.uniform(-errors.joint_offset, errors.joint_offset, size=nj), dtype=float)
     order = pick if pick is not None else rng.permutation(len(views.joints))
-    obs, joints = [], []
+    camera = CameraCalibration(Intrinsics(views.image_size[0], views.image_size[1], views.K[0, 0], views.K[1, 1],
+                                          views.K[0, 2], views.K[1, 2]))
+    obs, joints, corner_views = [], [], []
     for k in order:
         q_true = views.joints[k]
         noise = np.concatenate([rng.normal(scale=errors.pose_translation, size=3),
                                 rng.normal(scale=errors.pose_rotation, size=3)])
         F_true = kin.frame_pose(q_true, fid) @ _exp(noise)
-        B = measured_board_pose(invert(F_true @ X) @ W, views, errors.pixel_noise, rng)
-        if B is None:
+        found = measured_corners(invert(F_true @ X) @ W, views, errors.pixel_noise, rng)
+        if found is None:
             continue
+        B, object_points, image_points = found
         q_meas = q_true - offsets
-        obs.append(BoardObservation(f"view {k + 1}", kin.frame_pose(q_meas, fid), B))
+        F_meas = kin.frame_pose(q_meas, fid)
+        obs.append(BoardObservation(f"view {k + 1}", F_meas, B))
+        corner_views.append(CornerView(f"view {k + 1}", F_meas, B, object_points, image_points, camera,
+                                       _pnp_rms(B, object_points, image_points, views.K)))
         joints.append(q_meas)
         if len(obs) == n:
             break
-    return SimulatedSet(obs, np.array(joints), X, W, offsets)
+    return SimulatedSet(obs, np.array(joints), X, W, offsets, corner_views)
+
+
+def _pnp_rms(camera_T_marker: np.ndarray, object_points: np.ndarray, image_points: np.ndarray,
+             K: np.ndarray) -> float:
+    """RMS reprojection error [px] of the corners through their own board pose."""
+    P = object_points @ camera_T_marker[:3, :3].T + camera_T_marker[:3, 3]
+    uv = P @ K.T
+    d = uv[:, :2] / uv[:, 2:3] - image_points
+    return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
 
 
 def best_closed_form(observations: list[BoardObservation]) -> tuple[dict[HandEyeMethod, HandEyeSolution],
@@ -210,23 +249,27 @@ class HandEyeStudy:
     best_opencv: tuple[str, str]  # the best method by mm and by deg
     seconds: float
     refine_seconds: float  # mean per refinement
+    ratios: dict[str, tuple[float, float]] = field(default_factory=dict)  # every recon row's ratio (mm, deg)
+    stated: dict[str, np.ndarray] = field(default_factory=dict)  # recon row -> (seeds, 2) its std_mm_deg
 
     def table(self) -> str:
-        lines = [f"{'method':<12} {'median mm':>10} {'median deg':>11} {'p90 mm':>8} {'p90 deg':>8}"]
+        lines = [f"{'method':<20} {'median mm':>10} {'median deg':>11} {'p90 mm':>8} {'p90 deg':>8}"]
         for r in self.rows:
-            lines.append(f"{r.method:<12} {r.median_mm:>10.3f} {r.median_deg:>11.4f} {r.p90_mm:>8.3f} "
+            lines.append(f"{r.method:<20} {r.median_mm:>10.3f} {r.median_deg:>11.4f} {r.p90_mm:>8.3f} "
                          f"{r.p90_deg:>8.4f}")
-        lines.append(f"ratio recon / best OpenCV: {self.ratio[0]:.2f} (mm, best {self.best_opencv[0]}), "
-                     f"{self.ratio[1]:.2f} (deg, best {self.best_opencv[1]})")
-        stated = np.median(self.stated_mm_deg, axis=0)
-        spread = self.spread()
-        lines.append(f"recon's stated 1-sigma (median): {stated[0]:.3f} mm / {stated[1]:.4f} deg; "
-                     f"observed RMS error: {spread[0]:.3f} mm / {spread[1]:.4f} deg")
+        for name, ratio in (self.ratios or {REFINED: self.ratio}).items():
+            lines.append(f"ratio {name} / best OpenCV: {ratio[0]:.2f} (mm, best {self.best_opencv[0]}), "
+                         f"{ratio[1]:.2f} (deg, best {self.best_opencv[1]})")
+        for name, values in (self.stated or {REFINED: self.stated_mm_deg}).items():
+            stated = np.median(values, axis=0)
+            spread = self.spread(name)
+            lines.append(f"{name} stated 1-sigma (median): {stated[0]:.3f} mm / {stated[1]:.4f} deg; "
+                         f"observed RMS error: {spread[0]:.3f} mm / {spread[1]:.4f} deg")
         return "\n".join(lines)
 
-    def spread(self) -> tuple[float, float]:
-        """RMS of recon's mount error over the seeds [mm, deg] (what a 1-sigma should match)."""
-        e = self.errors[REFINED]
+    def spread(self, method: str = REFINED) -> tuple[float, float]:
+        """RMS of a recon row's mount error over the seeds [mm, deg] (what a 1-sigma should match)."""
+        e = self.errors[method]
         return float(np.sqrt(np.mean(e[:, 0] ** 2))), float(np.sqrt(np.mean(e[:, 1] ** 2)))
 
     def to_dict(self) -> dict:
@@ -235,22 +278,28 @@ class HandEyeStudy:
                 "refine_seconds": self.refine_seconds,
                 "rows": [r.__dict__ for r in self.rows],
                 "stated_mm_deg": self.stated_mm_deg.tolist(),
+                "ratios": {k: list(v) for k, v in self.ratios.items()},
+                "stated": {k: v.tolist() for k, v in self.stated.items()},
                 "errors_mm_deg": {k: v.tolist() for k, v in self.errors.items()}}
 
 
 def handeye_study(seeds: int = 20, views: int = 16, errors: RobotErrors = RobotErrors(),  # noqa: B008
                   cell_views: Views | None = None, first_seed: int = 0, prior: PosePrior | None = None,
-                  loss: str = "linear", joints: bool = True) -> HandEyeStudy:
+                  loss: str = "linear", joints: bool = True, corners: bool = True) -> HandEyeStudy:
     """The study of the module docstring over seeds ``first_seed`` ... ``first_seed + seeds - 1``.
     ``cell_views``: the FR3 views (:func:`fr3_views`) when already made; ``prior``: the
     refinement's (default: the simulated pose errors, the detection std from the data);
-    ``joints``: also estimate the joint zero offsets (row ``recon+joints``)."""
+    ``joints``: also estimate the joint zero offsets (row ``recon+joints``); ``corners``: also
+    the corner-level refinement (rows ``recon-corners``, ``recon-corners+joints``, the latter
+    when ``joints``)."""
     t0 = time.perf_counter()
     cell_views = cell_views or fr3_views()
     prior = prior or PosePrior(errors.pose_translation, errors.pose_rotation)
-    names = [m.value for m in CLOSED_FORM] + [REFINED] + ([JOINTS] if joints else [])
+    names = [m.value for m in CLOSED_FORM] + [REFINED] + ([JOINTS] if joints else []) + \
+        ([CORNERS] if corners else []) + ([CORNERS_JOINTS] if corners and joints else [])
     errs: dict[str, list[tuple[float, float]]] = {k: [] for k in names}
-    stated, t_refine = [], 0.0
+    stated: dict[str, list[tuple[float, float]]] = {k: [] for k in names if k in (REFINED, CORNERS, CORNERS_JOINTS)}
+    t_refine = 0.0
     for seed in range(first_seed, first_seed + seeds):
         rng = np.random.default_rng(seed)
         sim = simulate(cell_views, views, rng, errors)
@@ -264,7 +313,15 @@ def handeye_study(seeds: int = 20, views: int = 16, errors: RobotErrors = RobotE
         t_refine += time.perf_counter() - t1
         e = pose_error(refined.solution.flange_T_camera, sim.flange_T_camera)
         errs[REFINED].append((e[0] * 1e3, math.degrees(e[1])))
-        stated.append(refined.std_mm_deg)
+        stated[REFINED].append(refined.std_mm_deg)
+        if corners:
+            runs = [(CORNERS, None)] + ([(CORNERS_JOINTS, sim.joints)] if joints else [])
+            for name, q in runs:
+                r = refine_corners_with_pose_errors(sim.corner_views, Setup.EYE_IN_HAND, best, prior, joints=q,
+                                                    kin=cell_views.kin)
+                e = pose_error(r.solution.flange_T_camera, sim.flange_T_camera)
+                errs[name].append((e[0] * 1e3, math.degrees(e[1])))
+                stated[name].append(r.std_mm_deg)
         if joints:
             assert cell_views.kin is not None
             found = estimate_joint_offsets(list(sim.joints), [o.camera_T_marker for o in sim.observations],
@@ -273,10 +330,11 @@ def handeye_study(seeds: int = 20, views: int = 16, errors: RobotErrors = RobotE
             errs[JOINTS].append((e[0] * 1e3, math.degrees(e[1])))
     arrays = {k: np.array(v) for k, v in errs.items()}
     rows = [StudyRow(k, *np.nanmedian(a, axis=0), *np.nanpercentile(a, 90, axis=0)) for k, a in arrays.items()]
-    opencv = [r for r in rows if r.method not in (REFINED, JOINTS)]
+    opencv = [r for r in rows if r.method not in RECON_ROWS]
     best_mm = min(opencv, key=lambda r: r.median_mm)
     best_deg = min(opencv, key=lambda r: r.median_deg)
-    ours = next(r for r in rows if r.method == REFINED)
-    return HandEyeStudy(seeds, views, rows, arrays, np.array(stated),
-                        (ours.median_mm / best_mm.median_mm, ours.median_deg / best_deg.median_deg),
-                        (best_mm.method, best_deg.method), time.perf_counter() - t0, t_refine / max(seeds, 1))
+    ratios = {r.method: (r.median_mm / best_mm.median_mm, r.median_deg / best_deg.median_deg)
+              for r in rows if r.method in RECON_ROWS}
+    return HandEyeStudy(seeds, views, rows, arrays, np.array(stated[REFINED]), ratios[REFINED],
+                        (best_mm.method, best_deg.method), time.perf_counter() - t0, t_refine / max(seeds, 1),
+                        ratios, {k: np.array(v) for k, v in stated.items()})

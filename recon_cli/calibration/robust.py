@@ -37,6 +37,13 @@ joints plus the offsets, and only offsets that the views determine are estimated
 rotation of the first joint moves the whole base about the vertical, which the board's pose
 absorbs; one of the last joint turns the flange about its axis, which the mount absorbs).
 :func:`bootstrap_mount` gives a mount uncertainty from any solver by resampling the views.
+
+:func:`refine_corners_with_pose_errors` is the same MAP on what the images measured: the
+board corners' reprojection errors [px] over their std (pooled from every view's own PnP
+fit), instead of six board-pose numbers per view with one std per camera axis, which cannot
+hold a PnP pose's anisotropic, correlated error (depth with tilt). Given the measured joints
+and the cell, the flange errors are also correlated through the joints' zero offsets, every
+offset under a Gaussian prior (``PosePrior.joint_offset``), all estimated in the same solve.
 """
 
 from __future__ import annotations
@@ -48,6 +55,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from recon_cli.calibration.handeye import BoardObservation, HandEyeSolution
+from recon_cli.calibration.setups import CornerView, Setup, SetupSolution
 from recon_cli.geometry.transforms import invert
 
 log = logging.getLogger(__name__)
@@ -69,9 +77,10 @@ class PosePrior:
     rotation: float = float(np.radians(0.05))  # [rad] std of its orientation error
     detection_translation: float | None = None  # [m] std of a board pose's position (None: estimated from the data)
     detection_rotation: float | None = None  # [rad]
+    joint_offset: float = float(np.radians(0.03))  # [rad] std of a joint's zero offset (corner level, with joints)
 
     def __post_init__(self) -> None:
-        for name in ("translation", "rotation", "detection_translation", "detection_rotation"):
+        for name in ("translation", "rotation", "detection_translation", "detection_rotation", "joint_offset"):
             value = getattr(self, name)
             if value is not None and not (np.isfinite(value) and value > 0):
                 raise ValueError(f"PosePrior.{name} must be a positive finite number, not {value!r}")
@@ -89,6 +98,8 @@ class RobustRefinement:
     message: str
     detection_std: tuple[float, float] = (0.0, 0.0)  # [m, rad] the board poses' std used (RMS over the axes)
     detection_axes: np.ndarray = field(default_factory=lambda: np.zeros(6))  # (6,) per camera axis [m, m, m, rad, ...]
+    pixel_std: float = 0.0  # [px] the corners' std per image coordinate (corner-level refinement only)
+    joint_offsets: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (k,) [rad] (corner level, with joints)
 
 
 @dataclass(frozen=True)
@@ -382,6 +393,199 @@ def _result(problem: _Problem, fit, start: HandEyeSolution) -> RobustRefinement:
     detection = (float(np.sqrt(np.mean(d[:3] ** 2))), float(np.sqrt(np.mean(d[3:] ** 2))))
     return RobustRefinement(HandEyeSolution(start.method, X, W), c.copy(), cov, _std_mm_deg(cov),
                             bool(fit.success), str(fit.message), detection, d.copy())
+
+
+# --------------------------------------------------------------------- corner level
+#: smallest corner std the data may set [px] (exact data would otherwise give 0)
+PIXEL_FLOOR = 1e-4
+
+
+@dataclass
+class _CornerProblem:
+    """The corner-level MAP: parameters [xi_X (6), xi_W (6), c (6n), d (k)]; residuals: every
+    corner's image coordinates (predicted minus detected) [px] / pixel std, then c / prior,
+    then d / offset std. View i's chain pose is ``G_i exp(A_i d) exp(c_i)``."""
+
+    G: np.ndarray  # (n, 4, 4) chain poses (the robot's pose, inverted for eye-to-hand)
+    X0: np.ndarray
+    W0: np.ndarray
+    obj: np.ndarray  # (M, 3) every view's corners on the board [m]
+    uv: np.ndarray  # (M, 2) where they were detected, undistorted [px]
+    view: np.ndarray  # (M,) the view of each corner
+    K: np.ndarray  # (M, 4) fx, fy, cx, cy of its camera [px]
+    prior: np.ndarray  # (6,) pose std per twist component
+    pixel: float  # [px]
+    A: np.ndarray  # (n, 6, k) the chain poses' twists per joint offset [m/rad, rad/rad]
+    offset_std: float = np.inf  # [rad]
+
+    @property
+    def n(self) -> int:
+        return len(self.G)
+
+    @property
+    def k(self) -> int:
+        return self.A.shape[2]
+
+    @property
+    def size(self) -> int:
+        return 12 + 6 * self.n + self.k
+
+    def unpack(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        n = self.n
+        return self.X0 @ _exp(x[:6]), self.W0 @ _exp(x[6:12]), x[12:12 + 6 * n].reshape(n, 6), x[12 + 6 * n:]
+
+    def _raw_batch(self, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Corner residuals (b, M, 2) [px] and corrections (b, n, 6) of parameter vectors (b, size)."""
+        b, n = len(xs), self.n
+        X = self.X0 @ _exp(xs[:, :6])
+        W = self.W0 @ _exp(xs[:, 6:12])
+        c = xs[:, 12:12 + 6 * n].reshape(b, n, 6)
+        G = self.G[None] @ _exp(c)
+        if self.k:
+            G = self.G[None] @ _exp(np.einsum("nak,bk->bna", self.A, xs[:, 12 + 6 * n:])) @ _exp(c)
+        T = _inv_many(G @ X[:, None]) @ W[:, None]  # (b, n, 4, 4) camera_T_board
+        Tm = T[:, self.view]  # (b, M, 4, 4) each corner's view
+        P = np.einsum("bmij,mj->bmi", Tm[..., :3, :3], self.obj) + Tm[..., :3, 3]
+        z = P[..., 2]
+        u = self.K[:, 0] * P[..., 0] / z + self.K[:, 2]
+        v = self.K[:, 1] * P[..., 1] / z + self.K[:, 3]
+        return np.stack([u, v], axis=-1) - self.uv, c
+
+    def _weighted(self, corners: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
+        b = len(corners)
+        return np.concatenate([corners.reshape(b, -1) / self.pixel, (c / self.prior).reshape(b, -1),
+                               d / self.offset_std], axis=1)
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        return self._weighted(*self._raw_batch(x[None]), x[None, 12 + 6 * self.n:])[0]
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        """Dense Jacobian by central differences: the mount's and the board's twists, one
+        component of every view's correction at once (a view's corners see only its own) and
+        each offset, in one batch; the prior rows exactly."""
+        n, k, size = self.n, self.k, self.size
+        m = 2 * len(self.obj)
+        steps = np.concatenate([np.full(12, 1e-6), 1e-3 * self.prior, np.full(k, 1e-6)])
+        E = np.zeros((18 + k, size))
+        E[np.arange(12), np.arange(12)] = steps[:12]
+        for a in range(6):
+            E[12 + a, 12 + 6 * np.arange(n) + a] = steps[12 + a]
+        E[18 + np.arange(k), 12 + 6 * n + np.arange(k)] = steps[18:]
+        corners, _ = self._raw_batch(np.concatenate([x + E, x - E]))
+        D = (corners[:18 + k] - corners[18 + k:]).reshape(18 + k, m) / (2.0 * steps[:, None] * self.pixel)
+        J = np.zeros((m + 6 * n + k, size))
+        J[:m, :12] = D[:12].T
+        for a in range(6):
+            J[np.arange(m), 12 + 6 * np.repeat(self.view, 2) + a] = D[12 + a]
+        J[:m, 12 + 6 * n:] = D[18:].T
+        J[m + np.arange(6 * n), 12 + np.arange(6 * n)] = 1.0 / np.tile(self.prior, n)
+        J[m + 6 * n + np.arange(k), 12 + 6 * n + np.arange(k)] = 1.0 / self.offset_std
+        return J
+
+
+def offset_twists(joints: np.ndarray, kin, setup: Setup, step: float = 1e-6) -> np.ndarray:
+    """(n, 6, n_joints) how each view's chain pose moves per joint zero offset: the twist of
+    ``inv(G(q)) G(q + step e_j)`` over ``step`` (G the flange's forward kinematics, inverted
+    for eye-to-hand) [m/rad, rad/rad], by central differences."""
+    fid = kin.frame_id(kin.cell.flange_link)
+    Q = np.asarray(joints, dtype=float)
+    nj = Q.shape[1]
+    out = np.zeros((len(Q), 6, nj))
+    for i, q in enumerate(Q):
+        G_inv = invert(setup.chain_pose(kin.frame_pose(q, fid)))
+        for j in range(nj):
+            e = np.zeros(nj)
+            e[j] = step
+            Tp = G_inv @ setup.chain_pose(kin.frame_pose(q + e, fid))
+            Tm = G_inv @ setup.chain_pose(kin.frame_pose(q - e, fid))
+            tw = [np.concatenate([T[:3, 3], _rotvec(T[None, :3, :3])[0]]) for T in (Tp, Tm)]
+            out[i, :, j] = (tw[0] - tw[1]) / (2.0 * step)
+    return out
+
+
+def _undistorted(view: CornerView) -> np.ndarray:
+    """(N, 2) the detected corners without the lens distortion, in the camera's pixels."""
+    dist = view.camera.distortion_array
+    pts = np.asarray(view.image_points, dtype=float).reshape(-1, 2)
+    if not np.any(dist):
+        return pts
+    import cv2
+
+    K = view.camera.intrinsics.matrix()
+    return cv2.undistortPoints(pts.reshape(-1, 1, 2), K, dist, P=K).reshape(-1, 2)
+
+
+def corner_pixel_std(views: list[CornerView]) -> float:
+    """The corners' std per image coordinate [px] from every view's own board pose: the sum of
+    squares of its reprojection over the redundancy (2 N - 6 per view), pooled over the views."""
+    ssq, dof = 0.0, 0
+    for v in views:
+        T = v.camera_T_board
+        P = v.object_points @ T[:3, :3].T + T[:3, 3]
+        K = v.camera.intrinsics
+        uv = np.stack([K.fx * P[:, 0] / P[:, 2] + K.cx, K.fy * P[:, 1] / P[:, 2] + K.cy], axis=1)
+        ssq += float(np.sum((uv - _undistorted(v)) ** 2))
+        dof += 2 * len(P) - 6
+    return max(float(np.sqrt(ssq / max(dof, 1))), PIXEL_FLOOR)
+
+
+def refine_corners_with_pose_errors(views: list[CornerView], setup: Setup, start: SetupSolution | HandEyeSolution,
+                                    prior: PosePrior = PosePrior(), *,  # noqa: B008 (frozen)
+                                    pixel_std: float | None = None, joints: np.ndarray | None = None,
+                                    kin=None) -> RobustRefinement:
+    """MAP estimate of X, W (the set-up's, :class:`~recon_cli.calibration.setups.SetupSolution`)
+    and per-view corrections c_i of the chain pose (the flange pose, eye-in-hand; its inverse,
+    eye-to-hand) on the board corners themselves::
+
+        sum_i sum_k | project(inv(G_i exp(c_i) X) W, p_k) - u_ik |^2 / pixel_std^2 + | c_i / pose std |^2
+
+    A board pose from solvePnP has a strongly anisotropic, correlated error (depth and tilt
+    couple); the corners carry it exactly, which the six numbers of a board pose with one std
+    per axis cannot. ``pixel_std`` [px] per image coordinate: given, else pooled from every
+    view's own PnP fit (:func:`corner_pixel_std`). The detected corners are undistorted once
+    with the view's distortion; the residuals are in the camera's undistorted pixels.
+    With ``joints`` (n, n_joints) [rad], the measured joint positions of the views, and
+    ``kin`` (the cell's :class:`~recon_cli.robot.kinematics.Kinematics`), the flange errors
+    are also correlated through the joints' zero offsets d (prior std
+    ``prior.joint_offset`` each): view i's chain pose is ``G_i exp(A_i d) exp(c_i)``, A_i the
+    chain pose's twist per offset (:func:`offset_twists`; first order in d, which is exact to
+    the square of the offsets times the arm's reach). The offsets found are
+    ``refinement.joint_offsets``.
+    Returns the solution as a :class:`HandEyeSolution` (``flange_T_camera`` = X,
+    ``world_T_marker`` = W, the start's method), the corrections, and the covariance of X's
+    twist, the inverse of the normal matrix: every std in the problem is stated (the prior)
+    or measured apart from the hand-eye (the pixel std), so no variance factor scales it."""
+    from scipy.optimize import least_squares
+
+    if isinstance(start, SetupSolution):
+        start = HandEyeSolution(start.method, start.X, start.W)
+    obj = np.concatenate([np.asarray(v.object_points, dtype=float).reshape(-1, 3) for v in views])
+    uv = np.concatenate([_undistorted(v) for v in views])
+    view = np.concatenate([np.full(len(v.object_points), i) for i, v in enumerate(views)])
+    K = np.concatenate([np.tile([v.camera.intrinsics.fx, v.camera.intrinsics.fy, v.camera.intrinsics.cx,
+                                 v.camera.intrinsics.cy], (len(v.object_points), 1)) for v in views])
+    G = np.array([setup.chain_pose(v.base_T_flange) for v in views], dtype=float)
+    sigma = float(pixel_std) if pixel_std is not None else corner_pixel_std(views)
+    if joints is not None:
+        if kin is None:
+            raise ValueError("joint positions without the cell's kinematics (kin)")
+        A = offset_twists(np.asarray(joints, dtype=float), kin, setup)
+    else:
+        A = np.zeros((len(views), 6, 0))
+    problem = _CornerProblem(G, start.flange_T_camera, start.world_T_marker, obj, uv, view, K, _prior_vector(prior),
+                             sigma, A, prior.joint_offset)
+    x0 = np.zeros(problem.size)
+    if not np.all(np.isfinite(problem.residuals(x0))):
+        raise ValueError(f"the {start.method.value} solution puts some board corners behind the camera")
+    scale = np.concatenate([np.full(12, 1e-3), np.tile(problem.prior, problem.n), np.full(problem.k, 1e-3)])
+    fit = least_squares(problem.residuals, x0, jac=problem.jacobian, method="lm", x_scale=scale,
+                        xtol=1e-12, ftol=1e-12, gtol=1e-10, max_nfev=200)
+    X, W, c, d = problem.unpack(fit.x)
+    J = np.asarray(fit.jac)
+    cov = np.asarray(_inverse(J.T @ J)[:6, :6])
+    return RobustRefinement(HandEyeSolution(start.method, X, W), c.copy(), cov, _std_mm_deg(cov),
+                            bool(fit.success), str(fit.message), pixel_std=sigma, joint_offsets=d.copy())
 
 
 # --------------------------------------------------------------------- joint offsets

@@ -3,6 +3,7 @@ views of the ChArUco board."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated
 
@@ -18,6 +19,7 @@ from recon_cli.calibration.dataset import (
     parse_camera_numbers,
 )
 from recon_cli.calibration.handeye import HandEyeMethod
+from recon_cli.calibration.holdout import HeldOut
 from recon_cli.calibration.intrinsics import DistortionModel
 from recon_cli.calibration.setups import Setup
 from recon_cli.calibration.views import BoardViewOptions
@@ -215,9 +217,10 @@ def handeye(
         console.print(f"{name:11s} {dt * 1e3:14.3f}  {np.degrees(dr):.4f}")
     for m, why in r.method_failures.items():
         console.print(f"{m.value:11s} no solution ({why})")
+    print_held_out([_Judged(name, held) for name, held in r.candidates], r.chosen)
     X = r.solution.flange_T_camera
     dt, dr = r.change
-    label = r.solution.method.value + (" refined" if r.refined else "")
+    label = r.chosen or r.solution.method.value
     console.print(f"flange_T_camera ({label}), {dt * 1e3:.2f} mm / {np.degrees(dr):.3f}° from the model's:")
     for row in X[:3]:
         console.print("  [" + ", ".join(f"{v: .6f}" for v in row) + "]")
@@ -229,6 +232,8 @@ def handeye(
         console.print(f"simulation: {e[0] * 1e3:.3f} mm / {np.degrees(e[1]):.4f}° from the true camera mount")
     for _, message in r.diversity.issues:
         console.print(styled("warning:", "yellow", f" {message}"))
+    if r.verdict is not None:
+        console.print(styled("verdict:", "green" if r.verdict.trusted else "red", f" {r.verdict.line()}"))
     if r.station_written is not None:
         console.print(f"written into {r.station_written} (hand_eye; the old file is {r.station_backup})")
     elif station is not None and write:
@@ -236,6 +241,12 @@ def handeye(
                                                       "warnings); record more views or pass --force-write"))
     console.print(f"report: {r.folder / 'handeye.json'}\nhand_eye block: {r.folder / 'hand_eye.yaml'}\n"
                   f"figure: {r.folder / 'handeye_residuals.png'}")
+
+
+@dataclass(frozen=True)
+class _Judged:
+    name: str
+    held_out: HeldOut
 
 
 def print_held_out(candidates, chosen: str) -> None:

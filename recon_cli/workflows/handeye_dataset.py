@@ -388,6 +388,21 @@ def _skipped_text(skipped: list[SkippedImage], shown: int = 5) -> str:
     return " (skipped: " + "; ".join(f"{s.name}: {s.reason}" for s in skipped[:shown]) + more + ")"
 
 
+#: the reader's words for a pose in another unit than the mapping says (recon_cli.calibration.dataset)
+UNIT_MISMATCH = ("it looks like millimetres", "it looks like degrees")
+
+
+def check_units(skipped: list[SkippedImage], usable: int) -> None:
+    """Refuse a data set whose poses mix units: some views skipped because their pose looks
+    like millimetres (or degrees) while others read as metres (radians). Calibrating the
+    rest would hide a logging mistake that likely affects every view."""
+    mixed = [s for s in skipped if any(m in s.reason for m in UNIT_MISMATCH)]
+    if mixed and usable:
+        raise InputError(f"the poses mix units: {len(mixed)} views look like another unit than the mapping says "
+                         f"({mixed[0].name}: {mixed[0].reason}), {usable} read as it says",
+                         hint="log every pose in one unit, or give --length-unit/--angle-unit for all of them")
+
+
 def check_solvable(base_T_flange: list[np.ndarray], views: int, skipped: list[SkippedImage], setup: Setup,
                    dataset: Path) -> None:
     """Refuse, before any solver runs, a data set whose usable robot poses cannot determine
@@ -473,6 +488,7 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
 
     found = dataset_views(dataset, mapping, board, camera, kin, opt.min_corners, progress, poses_read)
     views = found.views
+    check_units(found.skipped, len(views))
     check_solvable([v.base_T_flange for v in views], total, found.skipped, setup, opt.dataset)
     camera_fit = None
     if guessed or opt.camera_from_views:

@@ -122,3 +122,21 @@ def test_without_any_intrinsics_the_camera_comes_from_the_photos(tmp_path, capsy
     assert code == 0 and "camera from the 15 views: reprojection RMS" in out and "verdict: trusted" in out, out
     d = json.loads((tmp_path / "out" / "handeye.json").read_text())
     assert d["sources"]["camera"] == "calibrated from the 15 views" and d["pnp_agreement"]["translation_mean_m"] < 0.005
+
+
+def test_mixed_units_are_refused_in_one_line(tmp_path, capsys):
+    """Three of the poses logged in millimetres, the others in metres: nothing calibrated."""
+    data = tmp_path / "data"
+    shutil.copytree(DATA, data)
+    for k in (3, 4, 5):
+        f = data / "poses" / f"{k}.yaml"
+        f.chmod(0o644)
+        p = yaml.safe_load(f.read_text())
+        for key in ("x", "y", "z"):
+            p[key] = p[key] * 1000.0
+        f.write_text(yaml.safe_dump(p))
+    code = main(["calibrate", "handeye", "--dataset", str(data), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and len(err.splitlines()) == 1 and err.startswith("error: the poses mix units: 3 views look "
+                                                                       "like another unit"), err
+    assert "millimetres" in err and not (tmp_path / "out").exists()

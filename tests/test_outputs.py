@@ -513,9 +513,10 @@ def test_a_station_file_link_is_updated_where_it_points(tmp_path):
     from recon_cli.calibration.station_update import write_station_hand_eye
     from tests.calibration.test_station_update import STATION, _calibrated
 
-    real_dir, link_dir = tmp_path / "stations", tmp_path / "cwd"
-    real_dir.mkdir()
-    link_dir.mkdir()
+    # (inside the link's folder: a station file linked out of its folder is not read)
+    link_dir = tmp_path / "cwd"
+    real_dir = link_dir / "stations"
+    real_dir.mkdir(parents=True)
     real = real_dir / "cell.yaml"
     real.write_text(STATION)
     real.chmod(0o640)
@@ -530,7 +531,7 @@ def test_a_station_file_link_is_updated_where_it_points(tmp_path):
     assert (tmp_path / "victim.txt").read_text() == "keep me\n"
     assert np.allclose(np.reshape(load_station(link).cell.flange_T_camera, (4, 4)), X, atol=1e-9)
     assert "a comment that must survive" in real.read_text() and real.stat().st_mode & 0o777 == 0o640
-    assert sorted(os.listdir(link_dir)) == ["cell.yaml"]  # nothing beside the link
+    assert sorted(os.listdir(link_dir)) == ["cell.yaml", "stations"]  # nothing beside the link
     assert sorted(os.listdir(real_dir)) == ["cell.yaml", "cell.yaml.bak"]
 
 

@@ -245,28 +245,37 @@ _OUTSIDE_LISTING: dict[str, list[tuple[str, int]]] = {}
 
 def _wait(proc: subprocess.Popen, start: float, seconds_bound: float) -> tuple[int, int, bool]:
     """(wait status, peak resident memory [bytes], timed out) of a child, killed (with its
-    process group) after ``seconds_bound`` or when its memory passes 1.5 :data:`MEMORY`."""
+    process group) after ``seconds_bound`` or when its memory passes 1.5 :data:`MEMORY`.
+
+    The peak is the child's own high-water mark (``VmHWM``), read while it runs. The
+    ``ru_maxrss`` that ``wait4`` reports is not used: a child started by vfork and exec
+    carries the high-water mark of its parent's memory into it, so a campaign run from a
+    large process (a test session) would charge every case with that process's size."""
     peak = 0
     while True:
-        pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+        pid, status, _ = os.wait4(proc.pid, os.WNOHANG)
         if pid:
             proc.returncode = 0  # reaped here; keep Popen from waiting again
-            return status, max(peak, usage.ru_maxrss * 1024), False
-        peak = max(peak, _rss(proc.pid))
+            return status, peak, False
+        peak = max(peak, _peak(proc.pid))
         if time.monotonic() - start > seconds_bound or peak > 1.5 * MEMORY:
             os.killpg(proc.pid, signal.SIGKILL)
-            _, status, usage = os.wait4(proc.pid, 0)
+            _, status, _ = os.wait4(proc.pid, 0)
             proc.returncode = -9
-            return status, max(peak, usage.ru_maxrss * 1024), time.monotonic() - start > seconds_bound
+            return status, peak, time.monotonic() - start > seconds_bound
         time.sleep(0.05)
 
 
-def _rss(pid: int) -> int:
+def _peak(pid: int) -> int:
+    """The high-water mark of a running process's resident memory [bytes] (0 once it ended)."""
     try:
-        with open(f"/proc/{pid}/statm") as f:
-            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
     except (OSError, ValueError, IndexError):
-        return 0
+        pass
+    return 0
 
 
 @dataclass(frozen=True)

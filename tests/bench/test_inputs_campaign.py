@@ -41,3 +41,20 @@ def test_mutations_are_seeded():
     a = B._mutate("abcdefghij" * 5, B.YAML_PIECES, np.random.default_rng(3))
     b = B._mutate("abcdefghij" * 5, B.YAML_PIECES, np.random.default_rng(3))
     assert a == b and a != "abcdefghij" * 5
+
+
+def test_a_case_is_charged_its_own_memory_not_its_parents(tmp_path):
+    """A child started by vfork and exec inherits its parent's high-water mark in ru_maxrss:
+    run from a process holding 1.2 GB, a refusal that takes 100 MB must still be judged by
+    its own peak."""
+    root = tmp_path / "r"
+    B._secrets(root)
+    B._OUTSIDE_LISTING[str(root)] = B._listing(root / "outside")
+    folder = root / "case"
+    folder.mkdir()
+    held = bytearray(1_200_000_000)
+    held[::4096] = b"x" * len(held[::4096])  # resident, not only reserved
+    outcome = B._run_one(B.Case("t", 0, folder, ("validate", str(folder / "missing.xml"))), root, 600.0)
+    del held
+    assert outcome.verdict == "refused" and outcome.reason == "", outcome
+    assert 10e6 < outcome.peak_bytes < 500e6, outcome.peak_bytes

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from recon_cli.calibration.camera_file import CameraCalibration
+from recon_cli.calibration.goals import board_view_goals
 from recon_cli.calibration.handeye import (
     BoardObservation,
     HandEyeMethod,
@@ -46,9 +47,14 @@ from recon_cli.calibration.robust import (
     refine_with_pose_errors,
 )
 from recon_cli.calibration.setups import CornerView, Setup
+from recon_cli.calibration.views import BoardViewOptions, board_views
 from recon_cli.errors import ReconError
 from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.perception.camera_model import Intrinsics
+from recon_cli.perception.charuco import cell_board
+from recon_cli.perception.sensor import cell_sensor
+from recon_cli.robot.cell import Cell
+from recon_cli.robot.description import CellConfig, CellName
 from recon_cli.robot.kinematics import Kinematics
 
 #: OpenCV's AX = XB methods compared
@@ -88,13 +94,6 @@ class Views:
 
 def fr3_views(generated: int = 28) -> Views:
     """The FR3 cell's reachable board views (of ``generated`` generated ones)."""
-    from recon_cli.calibration.goals import board_view_goals
-    from recon_cli.calibration.views import BoardViewOptions, board_views
-    from recon_cli.perception.charuco import cell_board
-    from recon_cli.perception.sensor import cell_sensor
-    from recon_cli.robot.cell import Cell
-    from recon_cli.robot.description import CellConfig, CellName
-
     cell = Cell(CellConfig(kind=CellName.parse("fr3")))
     cell_file = cell.config.cell_file
     board, sensor = cell_board(cell_file), cell_sensor(cell_file)

@@ -318,7 +318,7 @@ def read_mapping(path: Path, dataset: Path | None = None) -> DatasetSpec:
         b = doc["board"]
         where = f"{path}:{line_of(doc, 'board') or 1}"
         if isinstance(b, str) and b.partition(":")[0].strip().lower() in BOARD_KINDS:
-            board = parse_board(b, f"{where}: board")  # the --board syntax, e.g. chessboard:9x6,0.025
+            board = parse_board(b, f"{where}: board")  # the --board-spec syntax, e.g. chessboard:9x6,0.025
         elif isinstance(b, str):
             if dataset is None:
                 root = path.parent.resolve()

@@ -164,7 +164,7 @@ def calibrate_intrinsics(views: list[BoardView], model: DistortionModel = Distor
         raise InputError(f"camera calibration needs the board in at least {MIN_VIEWS} images, found it in "
                          f"{len(views)}" + (f" ({why}{', ...' if len(skipped) > 3 else ''})" if why else ""),
                          hint="record more views of the whole board, tilted by 20-45 degrees in different directions "
-                              "and placed across the image (check --board for other boards)")
+                              "and placed across the image (check --board-spec for other boards)")
     sizes = {v.image_size for v in views}
     if len(sizes) > 1:
         listed = ", ".join(f"{w} x {h}" for w, h in sorted(sizes))

@@ -56,6 +56,7 @@ import numpy as np
 
 from recon_cli.calibration.handeye import BoardObservation, HandEyeSolution
 from recon_cli.calibration.setups import CornerView, Setup, SetupSolution
+from recon_cli.errors import ReconError
 from recon_cli.geometry.transforms import invert
 
 log = logging.getLogger(__name__)
@@ -699,8 +700,6 @@ def _inverse(N: np.ndarray) -> np.ndarray:
 def bootstrap_mount(observations, solver, n: int = 200, seed: int = 0) -> tuple[float, float]:
     """1-sigma scatter of flange_T_camera [mm, deg] over view resamplings (with replacement;
     resamplings the solver refuses are skipped); solver: list[BoardObservation] -> HandEyeSolution."""
-    from recon_cli.errors import ReconError
-
     rng = np.random.default_rng(seed)
     obs = list(observations)
     reference = solver(obs).flange_T_camera

@@ -31,7 +31,7 @@ the one that makes the views agree.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -46,6 +46,7 @@ from recon_cli.calibration.handeye import (
 )
 from recon_cli.calibration.holdout import HeldOut, prediction_errors
 from recon_cli.errors import InputError, ReconError
+from recon_cli.geometry.transforms import invert
 
 #: the held-out error may be at most this many times the detection's precision (RMS over views)
 DETECTION_RATIO = 25.0
@@ -209,10 +210,6 @@ def likely_cause(observations: list[BoardObservation], eye_in_hand: bool = True)
     matrix written by columns), every robot pose inverted (flange_T_base logged). The
     observations are in chain form: eye-to-hand, their poses are the robot poses' inverses,
     and the mistake is undone on the robot poses."""
-    from dataclasses import replace
-
-    from recon_cli.geometry.transforms import invert
-
     now = _quick_error(observations)
     if not np.isfinite(now):
         return None

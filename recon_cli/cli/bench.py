@@ -13,6 +13,7 @@ import typer
 
 from recon_cli.bench import render
 from recon_cli.bench.cell_planners import PEERS, run_cell_planners
+from recon_cli.bench.handeye import handeye_study
 from recon_cli.bench.ik import IKBenchConfig, run_ik_bench
 from recon_cli.bench.inputs import MAKERS, run_campaign
 from recon_cli.bench.mplib_peer import run_mplib
@@ -366,8 +367,6 @@ def bench_handeye(
 ) -> None:
     """Hand-eye calibration with imperfect robot poses on the FR3 cell (simulation with a known truth): OpenCV's
     methods against recon's refinement with flange pose errors, the mount error over the seeds."""
-    from recon_cli.bench.handeye import handeye_study
-
     folder = output_folder(out, "bench handeye", force=force).path
     with console.status(f"{seeds} simulated calibrations of {views} views"):
         study = handeye_study(seeds=seeds, views=views, first_seed=seed, joints=joints)

@@ -50,7 +50,7 @@ calibrate_app = typer.Typer(help="Calibration from views of the ChArUco board: c
 app.add_typer(calibrate_app, name="calibrate")
 
 BoardOpt = Annotated[str | None, typer.Option(
-    "--board", "--board-spec",
+    "--board-spec",
     help="Another board than the cell's (robot/board.yaml): charuco:COLSxROWS,SQUARE,MARKER,DICTIONARY[,legacy] "
          "(squares; legacy: printed by OpenCV before 4.6), chessboard:COLSxROWS,SQUARE (inner corners, one count "
          "even and one odd), circles:COLSxROWS,SPACING (asymmetric grid: circles per row x rows, an odd number "
@@ -65,9 +65,9 @@ def _metavar(enum) -> str:
 
 
 def parse_board(text: str | None) -> Board | None:
-    """The board of ``--board`` (None: the cell's board); a malformed one is a one-line error
+    """The board of ``--board-spec`` (None: the cell's board); a malformed one is a one-line error
     (recon_cli.perception.boards.parse_board)."""
-    return None if text is None else parse_board_text(text, "--board")
+    return None if text is None else parse_board_text(text, "--board-spec")
 
 
 @calibrate_app.command("handeye")

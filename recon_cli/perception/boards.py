@@ -45,7 +45,7 @@ else:
 #: circles of a circle grid's row or column) and the largest square or spacing [m]
 BOARD_COUNTS = (2, 100)
 BOARD_LENGTH = 1.0
-#: the kinds of the ``--board`` syntax (kind:...)
+#: the kinds of the ``--board-spec`` syntax (kind:...)
 BOARD_KINDS = ("charuco", "chessboard", "circles")
 
 
@@ -108,7 +108,7 @@ Board = BoardSpec | ChessboardSpec | CircleGridSpec
 
 
 def board_kind(board: Board) -> str:
-    """charuco, chessboard or circles (the prefix of the ``--board`` syntax)."""
+    """charuco, chessboard or circles (the prefix of the ``--board-spec`` syntax)."""
     if isinstance(board, ChessboardSpec):
         return "chessboard"
     if isinstance(board, CircleGridSpec):
@@ -117,7 +117,7 @@ def board_kind(board: Board) -> str:
 
 
 def board_text(board: Board) -> str:
-    """The board in the ``--board`` syntax, e.g. ``chessboard:9x6,0.025``."""
+    """The board in the ``--board-spec`` syntax, e.g. ``chessboard:9x6,0.025``."""
     if isinstance(board, ChessboardSpec):
         return f"chessboard:{board.cols}x{board.rows},{board.square_length:g}"
     if isinstance(board, CircleGridSpec):
@@ -153,7 +153,7 @@ def opencv_frame_fields(board: Board, parent_T_marker: np.ndarray, name: str = "
 
 
 def board_dict(board: Board) -> dict:
-    """The board for a JSON report: its kind, ``--board`` text, dimensions and OpenCV frame."""
+    """The board for a JSON report: its kind, ``--board-spec`` text, dimensions and OpenCV frame."""
     return {"kind": board_kind(board), "text": board_text(board), **asdict(board), "board_frame": frame_text(board),
             "opencv_board_T_marker": board.opencv_board_T_marker()}
 
@@ -209,7 +209,7 @@ def find_points(image: np.ndarray, board: Board, min_points: int = 8) -> BoardPo
         if det.n_corners == 0 and det.marker_count >= 4:
             other = "without ',legacy'" if board.legacy else "with ',legacy'"
             return BoardMissing(f"board not found ({det.marker_count} markers but no chessboard corners: squares_x "
-                                f"and squares_y swapped, or a board of the other ChArUco pattern (try --board "
+                                f"and squares_y swapped, or a board of the other ChArUco pattern (try --board-spec "
                                 f"{other}: OpenCV before 4.6 drew boards of an even squares_y differently)?)")
         return BoardMissing(f"board not found ({len(obj)} corners, {min_points} needed)")
     return BoardPoints(img, obj, det.ids.copy()[: len(obj)], det.marker_count)
@@ -283,14 +283,14 @@ def _circles(grey: np.ndarray, board: CircleGridSpec) -> BoardPoints | BoardMiss
     return BoardPoints(grid.reshape(-1, 2), board.object_points(), np.arange(board.cols * board.rows))
 
 
-# --------------------------------------------------------------------- --board
+# ---------------------------------------------------------------- --board-spec
 SYNTAX = ("charuco:COLSxROWS,SQUARE,MARKER,DICTIONARY[,legacy] (or COLS,ROWS,SQUARE,MARKER,DICTIONARY), "
           "chessboard:COLSxROWS,SQUARE (inner corners), circles:COLSxROWS,SPACING (lengths in metres)")
 EXAMPLES = "e.g. charuco:5x7,0.04,0.02,DICT_6X6_250, chessboard:9x6,0.025 or circles:4x11,0.02"
 
 
-def parse_board(text: str, what: str = "--board") -> Board:
-    """A board of the ``--board`` syntax (SYNTAX); anything else is a one-line InputError that
+def parse_board(text: str, what: str = "--board-spec") -> Board:
+    """A board of the ``--board-spec`` syntax (SYNTAX); anything else is a one-line InputError that
     names ``what`` (the option or key) and the text."""
     raw = text.strip()
     kind, sep, rest = raw.partition(":")

@@ -53,6 +53,7 @@ from recon_cli.calibration.intrinsics import (
 )
 from recon_cli.calibration.observations import scan_observations
 from recon_cli.calibration.refine import corrected, refine_hand_eye
+from recon_cli.calibration.robust import PosePrior, refine_with_pose_errors
 from recon_cli.calibration.station_update import hand_eye_block, write_station_hand_eye
 from recon_cli.calibration.verdict import NotTrusted, Verdict, check_observations, judge
 from recon_cli.calibration.views import BoardViewOptions, board_views
@@ -285,7 +286,7 @@ def run_handeye(opt: HandEyeOptions, progress: Progress | None = None) -> HandEy
     scans = opt.scans
     if scans is None:
         if not isinstance(board, BoardSpec):
-            raise InputError(f"the simulation shows a ChArUco board, not the {board_text(board)} of --board",
+            raise InputError(f"the simulation shows a ChArUco board, not the {board_text(board)} of --board-spec",
                              hint="calibrate views of that board recorded on a cell with --scan-store or --dataset")
         scans = out / "scans"
         recorded = record_board_views(scans, opt.config, opt.views, opt.station, board, progress)
@@ -356,8 +357,6 @@ def _judged_candidates(obs: list, methods: dict[HandEyeMethod, HandEyeSolution],
     flange pose errors (recon_cli.calibration.robust), both from ``start`` (None: the
     closed-form method with the smallest held-out score). Returns [(name, HeldOut)] by score,
     (name, solution) of the candidate written, and the base-error refinement on every view."""
-    from recon_cli.calibration.robust import PosePrior, refine_with_pose_errors
-
     held: dict[str, HeldOut] = {}
     solutions: dict[str, HandEyeSolution] = {}
     total, done = len(methods) + (2 if refine_too else 0), 0

@@ -75,6 +75,7 @@ from recon_cli.calibration.intrinsics import (
     SkippedImage,
     calibrate_intrinsics,
 )
+from recon_cli.calibration.robust import PosePrior, refine_with_pose_errors
 from recon_cli.calibration.setups import (
     CornerView,
     Refinement,
@@ -95,6 +96,7 @@ from recon_cli.config import CellConfig
 from recon_cli.console import write_json
 from recon_cli.errors import InputError, ReconError
 from recon_cli.geometry.transforms import pose_error
+from recon_cli.inputs.images import read_color
 from recon_cli.inputs.numbers import in_range
 from recon_cli.outputs import atomic_write, atomic_write_text
 from recon_cli.perception.boards import Board
@@ -327,8 +329,6 @@ MIN_CAMERA_VIEWS = 8
 def guessed_camera(image: Path) -> CameraNumbers:
     """A start for the board poses of a camera calibrated from the views: the focal length
     the image's larger side [px], the principal point in the image's centre."""
-    from recon_cli.inputs.images import read_color
-
     h, w = read_color(image).shape[:2]
     f = float(max(w, h))
     return CameraNumbers(f, f, (w - 1) / 2.0, (h - 1) / 2.0)
@@ -564,8 +564,6 @@ def judge_candidates(views: list[CornerView], setup: Setup, methods: dict[HandEy
     ``refine_too``, of the reprojection refinement and the refinement with flange pose errors
     from ``start`` (None: the closed-form method with the smallest held-out score). With
     ``start`` given, the candidate written is ``start`` or one of its refinements; else any."""
-    from recon_cli.calibration.robust import PosePrior, refine_with_pose_errors
-
     observations = chain_observations(views, setup)
     by_name = {v.name: v for v in views}
     total = len(methods) + (2 if refine_too else 0)

@@ -1,5 +1,5 @@
 """Camera calibration from a chessboard and from a circle grid (rendered views of a known
-pinhole camera, tests/perception/test_boards.py), and ``--board`` on the command line."""
+pinhole camera, tests/perception/test_boards.py), and ``--board-spec`` on the command line."""
 
 from __future__ import annotations
 
@@ -38,18 +38,18 @@ def test_board_option_on_the_command_line(tmp_path, capsys) -> None:
     board = BOARDS["chessboard"]
     for k, p in enumerate(POSES):
         cv2.imwrite(str(tmp_path / f"v{k}.png"), _render(board, _pose(board, *p)))
-    code, out = _run(capsys, "calibrate", "intrinsics", tmp_path, "--board", "chessboard:9x6,0.025", "--out",
+    code, out = _run(capsys, "calibrate", "intrinsics", tmp_path, "--board-spec", "chessboard:9x6,0.025", "--out",
                      tmp_path / "o")
     assert code == 0, out
     report = json.loads((tmp_path / "o" / "intrinsics.json").read_text())
     assert report["board"]["text"] == "chessboard:9x6,0.025" and report["board_frame"].startswith("opencv: origin")
     assert len(report["views"][0]["camera_T_board_opencv"]) == 4
-    code, out = _run(capsys, "calibrate", "intrinsics", tmp_path, "--board", "chessboard:8x6,0.025", "--out",
+    code, out = _run(capsys, "calibrate", "intrinsics", tmp_path, "--board-spec", "chessboard:8x6,0.025", "--out",
                      tmp_path / "o2")
     assert code == 1 and "ambiguous" in out and len(out.strip().splitlines()) == 1, out
     assert not (tmp_path / "o2").exists()
     # the simulation shows a ChArUco board only
-    code, out = _run(capsys, "calibrate", "handeye", "--board", "circles:4x11,0.02", "--out", tmp_path / "o3")
+    code, out = _run(capsys, "calibrate", "handeye", "--board-spec", "circles:4x11,0.02", "--out", tmp_path / "o3")
     assert code == 1 and "the simulation shows a ChArUco board" in out and len(out.strip().splitlines()) == 1, out
 
 

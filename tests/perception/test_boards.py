@@ -1,5 +1,5 @@
 """The three board kinds, rendered with OpenCV, seen through a pinhole camera at a known pose,
-found and posed by solvePnP; the board frames; the ``--board`` syntax.
+found and posed by solvePnP; the board frames; the ``--board-spec`` syntax.
 
 Rendering: the printed board is a texture (ChArUco: ``CharucoBoard.generateImage``;
 chessboard and circle grid drawn with numpy and cv2) mapped into a 960 x 720 image by the

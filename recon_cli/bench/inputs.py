@@ -152,7 +152,8 @@ def _script_case(folder: Path, rng: np.random.Generator) -> tuple[str, ...]:
     script = folder / "scan.xml"
     shutil.copy(SCRIPTS_DIR / "macros.xml", folder / "macros.xml")
     profile = (ROBOT_DIR / "realism" / "thesis.yaml").read_text()
-    text = (SCRIPTS_DIR / "smoke.xml").read_text().replace('<cell kind="gantry"', '<cell kind="gantry" realism="p.yaml"')
+    text = (SCRIPTS_DIR / "smoke.xml").read_text().replace('<cell kind="gantry"',
+                                                           '<cell kind="gantry" realism="p.yaml"')
     if rng.random() < 0.5:
         text = _mutate(text, XML_PIECES, rng)
     else:

@@ -402,7 +402,8 @@ def _check(cell: CellFile, urdf: str) -> None:
             if link not in links:
                 raise InputError(f"{cell.where(f'collision.allowed[{i}]')}: {link} is not a link of {desc}",
                                  hint=f"its links: {', '.join(links)}")
-    shapes = {f"{link.get('name')}/{c.get('name')}" for link in root.iterfind("link") for c in link.findall("collision")}
+    shapes = {f"{link.get('name')}/{c.get('name')}" for link in root.iterfind("link")
+              for c in link.findall("collision")}
     if not any(s.endswith(f"/{cell.table_shape}") for s in shapes):
         alone = arm_alone(urdf, cell.base_link)
         raise InputError(f"{cell.where('table.shape')}: {desc} has no collision shape {cell.table_shape}"

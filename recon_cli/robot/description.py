@@ -278,7 +278,8 @@ MAX_DESCRIPTION_BYTES = 20_000_000
 #: xacro files a description may include, at most
 MAX_XACRO_FILES = 200
 #: bounds of a description's xacro expansion (expressions checked as a script's are)
-DESCRIPTION_LIMITS = Limits(percent_format=True, max_text=100_000_000, max_elements=500_000, max_macro_depth=100, max_seconds=20.0,
+DESCRIPTION_LIMITS = Limits(percent_format=True, max_text=100_000_000, max_elements=500_000, max_macro_depth=100,
+                            max_seconds=20.0,
                             max_file_bytes=MAX_DESCRIPTION_BYTES, max_files=MAX_XACRO_FILES)
 
 

@@ -16,11 +16,11 @@ import numpy as np
 from recon_cli.config import DEFAULTS as D
 from recon_cli.config import SensorConfig
 from recon_cli.errors import InputError, ScriptError
+from recon_cli.expansion.sandbox import LIMITS
 from recon_cli.geometry.view import Frame, View
 from recon_cli.planning.options import PLANNERS
 from recon_cli.robot.cell_file import load_cell, shipped_cells
 from recon_cli.scripts import commands as C
-from recon_cli.expansion.sandbox import LIMITS
 
 
 def _cell_safety(kind: str) -> float | None:

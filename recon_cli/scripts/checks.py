@@ -25,6 +25,7 @@ import numpy as np
 
 from recon_cli.backends.base import Backend
 from recon_cli.errors import HardwareUnavailable, JointLimitError, ReconError, ScriptError
+from recon_cli.expansion.readable import readable, readable_roots
 from recon_cli.objects import BUILTIN, available_objects, ycb_names
 from recon_cli.paths import CELLS_DIR, ROBOT_DIR
 from recon_cli.realism import BUILT_IN, load_profile
@@ -32,7 +33,6 @@ from recon_cli.robot.cell_file import DEFAULT_CELL, load_cell
 from recon_cli.robot.description import CellConfig, CellName, expand_urdf
 from recon_cli.robot.limits import limits_from_urdf
 from recon_cli.scripts import commands as C
-from recon_cli.expansion.readable import readable, readable_roots
 
 if TYPE_CHECKING:
     from recon_cli.robot.limits import JointLimits

@@ -26,7 +26,8 @@ def test_help_lists_both_commands(capsys):
      "Invalid value for '--method': 'kabsch' is not one of 'tsai', 'park'"),
     (("handeye", "--scan-store", "{tmp}/none"), 1, "does not exist"),
     (("intrinsics", "{tmp}", "--board-spec", "5,7,0.04,0.02,DICT_9X9"), 1, "unknown ArUco dictionary 'DICT_9X9'"),
-    (("intrinsics", "{tmp}", "--board-spec", "5,7,0.04"), 1, "--board-spec '5,7,0.04': is not one of charuco:COLSxROWS,SQUARE,MARKER,DICTIONARY"),
+    (("intrinsics", "{tmp}", "--board-spec", "5,7,0.04"), 1,
+     "--board-spec '5,7,0.04': is not one of charuco:COLSxROWS,SQUARE,MARKER,DICTIONARY"),
     (("intrinsics", "{tmp}"), 1, "holds no images"),
     (("intrinsics", "{tmp}", "--model", "fisheye"), 2, "Invalid value for '--model': 'fisheye' is not one of "),
 ])

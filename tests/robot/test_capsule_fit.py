@@ -17,7 +17,6 @@ from lxml import etree
 
 from recon_cli.errors import InputError
 from recon_cli.geometry.transforms import pose_from_xyz_rpy, transform_points
-from recon_cli.paths import ROBOT_DIR
 from recon_cli.robot.capsule_fit import FittedCapsule, fit_capsule, fit_mesh_collisions, resolve_mesh
 from recon_cli.robot.collision import shapes_from_urdf
 

@@ -181,7 +181,8 @@ def test_the_cell_option_runs_a_script_on_another_cell(tmp_path):
 
     shutil.copytree(ROBOT_DIR, tmp_path / "robot", ignore=shutil.ignore_patterns("realism"))
     cell = tmp_path / "lab.yaml"
-    cell.write_text((CELLS_DIR / "fr3.yaml").read_text().replace("name: fr3", "name: lab").replace("../robot/", "robot/"))
+    text = (CELLS_DIR / "fr3.yaml").read_text()
+    cell.write_text(text.replace("name: fr3", "name: lab").replace("../robot/", "robot/"))
     script = tmp_path / "two.xml"
     script.write_text(HEAD + '<recon name="two" on_failure="skip">\n  <cell kind="gantry" resolution="0.25"/>\n'
                       '  <object name="bottle"/>\n  <box/>\n'
@@ -205,7 +206,8 @@ def _lab_cell(folder: Path, name: str = "lab.yaml") -> Path:
 
     shutil.copytree(ROBOT_DIR, folder / "cells" / "robot", ignore=shutil.ignore_patterns("realism"))
     cell = folder / "cells" / name
-    cell.write_text((CELLS_DIR / "fr3.yaml").read_text().replace("name: fr3", "name: lab").replace("../robot/", "robot/"))
+    text = (CELLS_DIR / "fr3.yaml").read_text()
+    cell.write_text(text.replace("name: fr3", "name: lab").replace("../robot/", "robot/"))
     return cell
 
 

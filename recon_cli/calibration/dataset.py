@@ -352,7 +352,7 @@ def _board(b: dict, path: Path, where: str) -> BoardSpec:
         raise InputError(f"{where}marker_length is not smaller than square_length",
                          hint="a ChArUco marker sits inside its square")
     return BoardSpec(int(b["squares_x"]), int(b["squares_y"]), float(b["square_length"]),
-                     float(b["marker_length"]), str(b["dictionary"]))
+                     float(b["marker_length"]), str(b["dictionary"]), bool(b.get("legacy", False)))
 
 
 def _kind(value: Any) -> str:

@@ -118,7 +118,7 @@ def _board_file(path: Path, stamp: tuple[int, int]) -> BoardSpec:
                          f"is not smaller than square_length {float(d['square_length']):g} m",
                          hint="a ChArUco marker sits inside its square")
     return BoardSpec(int(d["squares_x"]), int(d["squares_y"]), float(d["square_length"]),
-                     float(d["marker_length"]), str(d["dictionary"]))
+                     float(d["marker_length"]), str(d["dictionary"]), bool(d.get("legacy", False)))
 
 
 @dataclass(frozen=True)

@@ -203,3 +203,15 @@ def test_real_charuco_photos_still_found() -> None:
     legacy = find_points(cv2.cvtColor(image, cv2.COLOR_BGR2RGB),
                          parse_board("charuco:5x7,0.04,0.02,DICT_6X6_250,legacy"))
     assert not isinstance(legacy, BoardMissing) and legacy.count == 24
+
+
+def test_a_board_file_names_the_legacy_pattern(tmp_path: Path) -> None:
+    from recon_cli.perception.charuco import board_file
+    path = tmp_path / "board.yaml"
+    path.write_text("squares_x: 5\nsquares_y: 6\nsquare_length: 0.04\nmarker_length: 0.02\n"
+                    "dictionary: DICT_6X6_250\nlegacy: true\n")
+    assert board_file(path) == BOARDS["charuco_legacy"]
+    path.write_text("squares_x: 5\nsquares_y: 6\nsquare_length: 0.04\nmarker_length: 0.02\n"
+                    "dictionary: DICT_6X6_250\nlegacy: maybe\n")
+    with pytest.raises(InputError, match="legacy"):
+        board_file(path)

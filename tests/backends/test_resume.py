@@ -225,3 +225,43 @@ def test_the_blend_tables_are_made_with_the_resumption_not_in_the_loop(fr3, stre
     resume._blends.cache_clear()
     Resumption(stream, fr3.kin.limits)
     assert resume._blends.cache_info().currsize == 1
+
+
+def test_the_chosen_blend_is_the_shortest_whose_differences_fit_the_budgets(fr3, stream):
+    """The blend table checks every blend's first, second and third differences at once; the
+    choice is the one of checking each blend and order on its own: the shortest blend whose
+    velocity, acceleration and jerk stay within what the stream leaves of each limit (the
+    longest when none does). The answering command alone is :meth:`Resumption.command`."""
+    from recon_cli.backends.hardware.resume import BLEND_CYCLES, LIMIT_SHARE, _quintic
+
+    lim = fr3.kin.limits
+    resumption = Resumption(stream, lim)
+    peaks = (stream.peak_velocity, stream.peak_acceleration, stream.peak_jerk)
+    budgets = [np.maximum(LIMIT_SHARE * limit - peak, (1.0 - LIMIT_SHARE) * limit) * DT ** (order + 1)
+               for order, (limit, peak) in enumerate(zip((lim.velocity, lim.acceleration, lim.jerk), peaks,
+                                                         strict=True))]
+    rng = np.random.default_rng(5)
+    chosen = set()
+    for _ in range(300):
+        i = int(rng.integers(3, len(stream.q)))
+        scale = 10.0 ** rng.uniform(-8, -4)
+        q = stream.q
+        ref = Reference(q[i - 1] + rng.normal(0, scale, 7), (q[i - 1] - q[i - 2]) / DT + rng.normal(0, scale / DT, 7),
+                        (q[i - 1] - 2 * q[i - 2] + q[i - 3]) / DT**2 + rng.normal(0, scale / DT**2, 7))
+        age = int(rng.integers(1, 5))
+        command, blend = resumption.resume(ref, age, i)
+        assert np.array_equal(command, resumption.command(ref, age))
+        velocity = ref.dq + ref.ddq * (age * DT)
+        before = command - velocity * DT
+        offsets = np.vstack([before - (velocity - ref.ddq * DT) * DT, before, command]) - \
+            q[np.clip(np.arange(i - 2, i + 1), 0, len(q) - 1)]
+        expected = len(BLEND_CYCLES) - 1
+        for k, cycles in enumerate(BLEND_CYCLES):
+            series = np.vstack([offsets, _quintic(cycles) @ offsets])
+            if all(np.all(np.abs(np.diff(series, order + 1, axis=0)).max(axis=0) <= budget * (1 + 1e-12))
+                   for order, budget in enumerate(budgets)):
+                expected = k
+                break
+        assert len(blend) == BLEND_CYCLES[expected]
+        chosen.add(expected)
+    assert len(chosen) >= 4  # the draws reach short and long blends

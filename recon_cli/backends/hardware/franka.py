@@ -46,15 +46,24 @@ PERIOD = 0.001
 SWITCH_INTERVAL = 0.0002
 #: controller cycles of the loop's recent history a control fault reports lost cycles from
 RECENT_CYCLES = 200
+#: the blend of a resumption whose command is on its way (made once the command is out): no
+#: offsets yet, and not the end of the motion
+_BLEND_PENDING = np.zeros((0, 7))
 #: a state not answered within this of reading it is left to the controller's extrapolation [s]
 LATE_ANSWER = 0.0008
 #: a read that returned within this had its state waiting: published before the read began [s]
 WAITED = 0.0001
-#: consecutive states after a gap left unanswered so that the next is answered at the start of its cycle
-MAX_SKIPS = 3
+#: consecutive states after a gap left unanswered so that the next is answered at the start of its cycle:
+#: one. Every state left unanswered is another cycle the controller extrapolates, and a controller
+#: that applied a late command differences the resumed one over the whole gap since (franka-sim
+#: does): its velocity is then the gap's mean, and the next command's acceleration is off by
+#: half the gap times the motion's own: a discontinuity reflex in a fast motion when the gap is
+#: several cycles long
+MAX_SKIPS = 1
 #: a state read this much later after its controller time than the quickest of the last
-#: STAMP_WINDOW reads (since the last gap) was waiting: its read was delayed (the thread
-#: descheduled, or another thread holding the interpreter lock when the state arrived) [s]
+#: STAMP_WINDOW reads (since the last gap, or the last state the controller published late)
+#: was waiting: its read was delayed (the thread descheduled, or another thread holding the
+#: interpreter lock when the state arrived) [s]
 STALE = 0.0004
 STAMP_WINDOW = 32
 #: how long a stop may take to bring the joints to rest before it counts as unconfirmed
@@ -360,31 +369,44 @@ class FrankaRobot:
                 if step > 1:  # a gap: the states after it are waited for anew
                     resync, skipped = True, 0
                     delays.clear()  # and the controller's schedule may have moved with it
+                elif read_at - asked_at > PERIOD + STALE:
+                    # the state came late by the controller's own clock (it published late, not
+                    # the loop read late): its schedule moved, and states after it are measured
+                    # from it
+                    delays.clear()
                 delays.append(delay)
                 ref = Reference(np.asarray(state.q_d, dtype=float), np.asarray(state.dq_d, dtype=float),
                                 np.asarray(state.ddq_d, dtype=float))
                 # a state that does not report the last command as sent came from a controller
                 # that did not apply it in time (or applied it late, over another interval)
                 resync = resync or (applied_dq is not None and not continues(ref, sent, applied_dq, PERIOD))
+                resumed: tuple[Reference, int] | None = None
                 if resync:
                     problem = ref.problem()
                     if problem is not None:
                         control = None
                         raise self._reference_fault(problem, f"at setpoint {index} of {last + 1}")
-                    match = match_history(ref, history, history_cycles, cycle, PERIOD)
                     # after a gap, answer a state the read waited for (published after the last
                     # command went out, answered at the start of its cycle: not one that waited
                     # for the read) whose reference continues the last command sent: a late
                     # command can reach the controller after it published the next state, and a
                     # simulator applies it then
-                    reflects = count > 0 and match.command_cycle == history_cycles[(count - 1) % RECENT]
                     waiting = read_at - asked_at < WAITED or delays[-1] - min(delays) > STALE
-                    if skipped < MAX_SKIPS and (step > 1 or waiting or not reflects):
+                    if skipped < MAX_SKIPS and (step > 1 or waiting):
                         skipped += 1
                         self._unanswered()
                         continue
-                    command, blend = resumption.resume(ref, match.age, index)
-                    blend_at = cycle
+                    match = match_history(ref, history, history_cycles, cycle, PERIOD)
+                    reflects = count > 0 and match.command_cycle == history_cycles[(count - 1) % RECENT]
+                    if skipped < MAX_SKIPS and not reflects:
+                        skipped += 1
+                        self._unanswered()
+                        continue
+                    # the command now; the blend back onto the stream once it is out (the next
+                    # cycle's command is the first to need it)
+                    command = resumption.command(ref, match.age)
+                    resumed = ref, match.age
+                    blend, blend_at = _BLEND_PENDING, cycle
                     resync = False
                     since, interval = ref.q, match.age  # what the controller differences it against
                 elif blend is not None and cycle - blend_at <= len(blend):
@@ -422,6 +444,8 @@ class FrankaRobot:
                     resync = True  # it may have come late: the controller extrapolated meanwhile
                 if finished:
                     return max_err, final, now - arrived
+                if resumed is not None:
+                    blend = resumption.blend(resumed[0], resumed[1], index)
         except BaseException:
             # the ActiveControl goes now, while the connection is as the error left it (its
             # destructor cancels an unfinished motion over that connection), not whenever the

@@ -71,6 +71,9 @@ class Reference:
     def problem(self, joints: int = 7) -> str | None:
         """What makes this reference unusable for a resumption (a wrong size or a value that
         is not finite), as text naming the field and the joint; None when it is usable."""
+        if (self.q.shape == self.dq.shape == self.ddq.shape == (joints,)
+                and np.isfinite(self.q).all() and np.isfinite(self.dq).all() and np.isfinite(self.ddq).all()):
+            return None
         for name, value in (("q_d", self.q), ("dq_d", self.dq), ("ddq_d", self.ddq)):
             if value.shape != (joints,):
                 return f"its reference {name} has {value.size} values, not {joints}"
@@ -106,34 +109,44 @@ def match_history(ref: Reference, sent: npt.NDArray[np.float64], sent_cycles: np
     answered."""
     if len(sent) == 0:
         return HistoryMatch(1, None)
-    recent = np.argsort(sent_cycles)[-RECENT:]
-    sent, sent_cycles = sent[recent], sent_cycles[recent]
-    back = int(min(max(cycle - int(sent_cycles.min()), 0), MAX_AGE + RECENT))
+    if len(sent) > RECENT:
+        recent = np.argsort(sent_cycles)[-RECENT:]
+        sent, sent_cycles = sent[recent], sent_cycles[recent]
+    back = min(max(cycle - int(sent_cycles.min()), 0), MAX_AGE + RECENT)
     # the reference walked back along its constant-acceleration chain: chain[j] is the value
-    # j cycles before (semi-implicit Euler backwards: x_j-1 = x_j - v_j dt, v_j-1 = v_j - a dt)
-    j = np.arange(back + PREDECESSORS + 1)[:, None]
-    velocities = ref.dq[None, :] - j * ref.ddq[None, :] * dt
-    chain = ref.q[None, :] - np.vstack([np.zeros((1, ref.q.size)), np.cumsum(velocities[:-1], axis=0)]) * dt
-    close = np.all(np.abs(chain[:, None, :] - sent[None, :, :]) <= match_tolerance(ref.q), axis=2)  # (J, R)
+    # j cycles before (semi-implicit Euler backwards: x_j-1 = x_j - v_j dt, v_j-1 = v_j - a dt,
+    # summed: x_j = x_0 - j dt v_0 + j (j - 1) / 2 dt^2 a)
+    steps_back, triangle = _chain_steps(back + PREDECESSORS)
+    chain = ref.q - steps_back * (ref.dq * dt) + triangle * (ref.ddq * (dt * dt))
+    close: npt.NDArray[np.bool_] = np.all(np.abs(chain[:, None, :] - sent[None, :, :]) <= match_tolerance(ref.q),
+                                          axis=2)  # (J, R)
     # a match at chain step j with command r: the controller applied r, then extrapolated j cycles
-    applied = sent_cycles[None, :] + np.arange(len(chain))[:, None]
-    valid = close & (applied < cycle)
-    valid[back + 1:] = False
-    if not np.any(valid):
+    valid: npt.NDArray[np.bool_] = close[:back + 1] & (sent_cycles[None, :] + steps_back[:back + 1] < cycle)
+    matched: list[bool] = np.any(valid, axis=0).tolist()
+    if not any(matched):
         return HistoryMatch(1, None)
     # the newest command matched is the last one applied: an older one can match too where the
     # arm was nearly at rest (the motion's first cycles), at a place the chain only passes near
-    r = int(np.argmax(np.where(np.any(valid, axis=0), sent_cycles, np.iinfo(np.int64).min)))
+    cycles = sent_cycles.tolist()
+    r = -max((c, -i) for i, (c, m) in enumerate(zip(cycles, matched, strict=True)) if m)[1]
     steps = np.flatnonzero(valid[:, r])
     # of its matches, those whose predecessors lie on the chain too, a cycle further back each;
     # of those the youngest: at rest every step matches, and a longer age would invent a step
     support = np.zeros(len(steps), dtype=int)
+    column = {c: i for i, c in reversed(list(enumerate(cycles)))}  # a cycle's first column
     for k in range(1, PREDECESSORS + 1):
-        before = np.flatnonzero(sent_cycles == sent_cycles[r] - k)
-        if before.size:
-            support += close[steps + k, before[0]]
+        before = column.get(cycles[r] - k)
+        if before is not None:
+            support += close[steps + k, before]
     step = int(steps[support == support.max()].max())
-    return HistoryMatch(max(1, int(cycle - sent_cycles[r] - step)), int(sent_cycles[r]))
+    return HistoryMatch(max(1, cycle - cycles[r] - step), cycles[r])
+
+
+@functools.cache
+def _chain_steps(last: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """(last + 1, 1) columns j and j (j - 1) / 2 for j = 0 .. last (the chain's coefficients)."""
+    j = np.arange(last + 1, dtype=float)[:, None]
+    return j, j * (j - 1.0) / 2.0
 
 
 def continues(ref: Reference, q: npt.NDArray[np.float64], dq: npt.NDArray[np.float64], dt: float) -> bool:
@@ -165,25 +178,31 @@ def _quintic(cycles: int) -> npt.NDArray[np.float64]:
 
 @dataclass(frozen=True)
 class _Blends:
-    """Every blend of BLEND_CYCLES: its samples, and for each difference order (1, 2, 3) the
-    differences of [reference's last three samples, blend] of all blends stacked, with the
-    row where each blend's part starts (checked in one product)."""
+    """Every blend of BLEND_CYCLES: its samples, and the first, second and third differences
+    of [reference's last three samples, blend] of all blends stacked in one table (``table``,
+    (3, rows): a blend's rows together from ``starts``; ``orders`` the difference order of
+    each row), checked against the limits in one product (rows along the last axis: the
+    largest over the joints is then an elementwise maximum, not a reduction over 7 values)."""
 
     samples: list[npt.NDArray[np.float64]]
-    stacked: list[npt.NDArray[np.float64]]
-    starts: list[npt.NDArray[np.int64]]
+    table: npt.NDArray[np.float64]
+    orders: npt.NDArray[np.int64]
+    starts: npt.NDArray[np.int64]
 
 
 @functools.cache
 def _blends() -> _Blends:
     samples = [_quintic(k) for k in BLEND_CYCLES]
-    series = [np.vstack([np.eye(3), q]) for q in samples]  # (cycles + 3, 3) each
-    stacked, starts = [], []
-    for order in (1, 2, 3):
-        parts = [np.diff(x, order, axis=0) for x in series]
-        stacked.append(np.vstack(parts))
-        starts.append(np.cumsum([0] + [len(d) for d in parts[:-1]]))
-    return _Blends(samples, stacked, starts)
+    rows: list[npt.NDArray[np.float64]] = []
+    orders: list[npt.NDArray[np.int64]] = []
+    starts: list[int] = []
+    for q in samples:
+        series = np.vstack([np.eye(3), q])  # (cycles + 3, 3)
+        starts.append(sum(len(r) for r in rows))
+        for order in (1, 2, 3):
+            rows.append(np.diff(series, order, axis=0))
+            orders.append(np.full(len(rows[-1]), order - 1))
+    return _Blends(samples, np.ascontiguousarray(np.vstack(rows).T), np.concatenate(orders), np.array(starts))
 
 
 class Resumption:
@@ -196,31 +215,47 @@ class Resumption:
         jerk = limits.jerk if limits.jerk is not None else np.full(limits.n, np.inf)
         floor = 1.0 - LIMIT_SHARE
         # what the stream leaves of each limit (at least a tenth of it), per finite difference order
-        self._budgets = tuple(np.maximum(LIMIT_SHARE * np.asarray(limit, dtype=float) - peak, floor * limit)
-                              * self.dt ** order
-                              for order, limit, peak in ((1, limits.velocity, stream.peak_velocity),
-                                                         (2, limits.acceleration, stream.peak_acceleration),
-                                                         (3, jerk, stream.peak_jerk)))
+        budgets = np.array([np.maximum(LIMIT_SHARE * np.asarray(limit, dtype=float) - peak, floor * limit)
+                            * self.dt ** order
+                            for order, limit, peak in ((1, limits.velocity, stream.peak_velocity),
+                                                       (2, limits.acceleration, stream.peak_acceleration),
+                                                       (3, jerk, stream.peak_jerk))])
+        # per joint and row of the blend table, the reciprocal of what the row's order may use
+        self._scale = np.ascontiguousarray((1.0 / budgets[_blends().orders]).T)
 
     def planned(self, index: int) -> npt.NDArray[np.float64]:
         """The stream's setpoint at ``index`` (its start before it, its goal after it)."""
         return self.q[min(max(index, 0), len(self.q) - 1)]
 
-    def resume(self, ref: Reference, age: int, index: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """The command answering the stream's setpoint ``index`` after the controller reported
-        ``ref`` as applied ``age`` cycles before it, and the offsets (K, n) to add to the
-        setpoints ``index + 1 ... index + K`` that bring the motion back onto the stream."""
+    def command(self, ref: Reference, age: int) -> npt.NDArray[np.float64]:
+        """The command that continues ``ref``, which the controller reported as applied ``age``
+        cycles before the cycle it answers: over those cycles its first difference is the
+        reference's velocity carried on at its acceleration, its second the reference's own."""
+        velocity = ref.dq + ref.ddq * (age * self.dt)
+        command: npt.NDArray[np.float64] = ref.q + velocity * (age * self.dt)
+        return command
+
+    def blend(self, ref: Reference, age: int, index: int) -> npt.NDArray[np.float64]:
+        """The offsets (K, n) to add to the setpoints ``index + 1 ... index + K`` after
+        :meth:`command` answered setpoint ``index``: the shortest blend back onto the stream
+        that fits into what the stream leaves of the limits (computed after the command went
+        out: it is needed from the next cycle on)."""
         dt = self.dt
-        velocity = ref.dq + ref.ddq * age * dt
-        command = ref.q + age * dt * velocity  # over `age` cycles: first difference `velocity`, second ref.ddq
+        velocity = ref.dq + ref.ddq * (age * dt)
+        command = ref.q + velocity * (age * dt)
         # the command's last three samples as 1 ms steps with the same differences
         before = command - velocity * dt
         history = np.vstack([before - (velocity - ref.ddq * dt) * dt, before, command])
-        offsets = history - np.vstack([self.planned(index - 2), self.planned(index - 1), self.planned(index)])
+        offsets = history - self.q[np.clip(np.arange(index - 2, index + 1), 0, len(self.q) - 1)]
         blends = _blends()
-        fits = np.ones(len(BLEND_CYCLES), dtype=bool)
-        for stacked, starts, budget in zip(blends.stacked, blends.starts, self._budgets, strict=True):
-            peaks = np.maximum.reduceat(np.abs(stacked @ offsets), starts, axis=0)  # (blends, n)
-            fits &= np.all(peaks <= budget, axis=1)
+        use = np.abs(offsets.T @ blends.table)  # (n, rows)
+        use *= self._scale
+        use = np.maximum.reduceat(use.max(axis=0), blends.starts)  # per blend, the largest share of a limit
+        fits = use <= 1.0
         chosen = int(np.argmax(fits)) if fits.any() else len(BLEND_CYCLES) - 1
-        return command, blends.samples[chosen] @ offsets
+        offsets_blend: npt.NDArray[np.float64] = blends.samples[chosen] @ offsets
+        return offsets_blend
+
+    def resume(self, ref: Reference, age: int, index: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """:meth:`command` and :meth:`blend` together."""
+        return self.command(ref, age), self.blend(ref, age, index)

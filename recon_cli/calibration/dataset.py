@@ -756,6 +756,7 @@ class IndexHints:
     camera: CameraNumbers | None = None
     board: Board | None = None
     setup: Setup | None = None
+    camera_source: str = "the index file's intrinsics"  # where ``camera`` was read, for the report
 
 
 @dataclass(frozen=True)
@@ -1338,10 +1339,13 @@ def _with_cameras(dataset: Dataset, spec: DatasetSpec) -> Dataset:
     first = next((v.camera for v in views if isinstance(v.camera, CameraNumbers)), None)
     if first is None and dataset.hints.camera is None and not spec.intrinsics_key:
         top = _camera_file(dataset.folder)
-        return dataset if top is None else replace(dataset, hints=replace(dataset.hints, camera=top))
+        return dataset if top is None else replace(dataset, hints=replace(dataset.hints, camera=top,
+                                                                           camera_source="the camera file at the top "
+                                                                                         "of the data set"))
     if first is None and not spec.intrinsics_key:
         return dataset
-    hints = dataset.hints if dataset.hints.camera is not None else replace(dataset.hints, camera=first)
+    hints = (dataset.hints if dataset.hints.camera is not None else
+             replace(dataset.hints, camera=first, camera_source="the pose files' intrinsics"))
     return replace(dataset, views=views, hints=hints)
 
 

@@ -40,8 +40,6 @@ import numpy as np
 
 from recon_cli.calibration.camera_file import load_camera_file
 from recon_cli.calibration.dataset import (
-    CENTRE_RANGE,
-    FOCAL_RANGE,
     AngleUnit,
     CameraNumbers,
     CameraSource,
@@ -51,6 +49,7 @@ from recon_cli.calibration.dataset import (
     PoseFormat,
     PoseMapping,
     QuaternionOrder,
+    camera_numbers,
     dataset_views,
     detect_format,
     read_dataset,
@@ -97,7 +96,6 @@ from recon_cli.console import write_json
 from recon_cli.errors import InputError, ReconError
 from recon_cli.geometry.transforms import pose_error
 from recon_cli.inputs.images import read_color
-from recon_cli.inputs.numbers import in_range
 from recon_cli.outputs import atomic_write, atomic_write_text
 from recon_cli.perception.boards import Board
 from recon_cli.perception.camera_model import Intrinsics
@@ -302,21 +300,18 @@ class DatasetHandEyeResult:
         }
 
 
-def _camera(opt: DatasetHandEyeOptions, spec: DatasetSpec, hint: CameraNumbers | None) -> tuple[CameraSource, str]:
+def _camera(opt: DatasetHandEyeOptions, spec: DatasetSpec, hint: CameraNumbers | None,
+            hint_source: str = "the index file's intrinsics") -> tuple[CameraSource, str]:
     if opt.camera_file is not None:
         return load_camera_file(opt.camera_file), f"--camera-file {opt.camera_file}"
     if opt.intrinsics is not None:
-        if len(opt.intrinsics) != 4:
-            raise InputError(f"--intrinsics: {len(opt.intrinsics)} numbers, fx,fy,cx,cy expected",
-                             hint="give fx,fy,cx,cy in pixels")
-        fx, fy, cx, cy = (in_range(v, f"--intrinsics {name}", *(FOCAL_RANGE if name in ("fx", "fy") else CENTRE_RANGE),
-                                   unit="px", hint="give fx,fy,cx,cy in pixels")
-                          for v, name in zip(opt.intrinsics, ("fx", "fy", "cx", "cy"), strict=True))
-        return CameraNumbers(fx, fy, cx, cy), "--intrinsics (no distortion)"
+        camera = camera_numbers(opt.intrinsics, "--intrinsics")
+        return camera, ("--intrinsics" if any(camera.distortion) or len(opt.intrinsics) > 4
+                        else "--intrinsics (no distortion)")
     if spec.camera is not None:
         return spec.camera, f"the mapping {spec.source}"
     if hint is not None:
-        return hint, "the index file's intrinsics"
+        return hint, hint_source
     raise InputError("the camera's intrinsics are not known for the data set",
                      hint="pass --camera-file FILE (recon calibrate intrinsics writes one) or --intrinsics "
                           "fx,fy,cx,cy, or give camera: in the mapping file")
@@ -471,7 +466,7 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
     if guessed:
         camera, sources["camera"] = guessed_camera(dataset.views[0].image), "calibrated from the views"
     else:
-        camera, sources["camera"] = _camera(opt, spec, hints.camera)
+        camera, sources["camera"] = _camera(opt, spec, hints.camera, hints.camera_source)
     if mapping.pose_format is None and dataset.views:
         try:
             mapping = detect_format(dataset.views[0].record, mapping, dataset.views[0].where)

@@ -88,6 +88,7 @@ def test_a_folder_per_view_calibrates_without_index_camera_or_mapping(rendered, 
     data = _view_folders(rendered, tmp_path / "data", _franka)
     r = run_handeye_dataset(DatasetHandEyeOptions(data, tmp_path / "out", board=BOARD))
     assert len(r.used) == N_VIEWS and not r.skipped
+    assert r.sources["camera"] == "the pose files' intrinsics"
     assert r.mapping.pose_format is PoseFormat.MATRIX and r.mapping.matrix_order is MatrixOrder.COLUMN
     dt, dr = pose_error(r.solution.named()["flange_T_camera"], FLANGE_T_CAMERA)
     assert dt < 1e-3 and np.degrees(dr) < 0.1, (dt, np.degrees(dr))
@@ -428,6 +429,7 @@ def test_a_camera_file_at_the_top_of_the_data_set(rendered, tmp_path, name, text
     (data / name).write_text(text)
     found = read_dataset(data)
     assert found.hints.camera == CameraNumbers(K.fx, K.fy, K.cx, K.cy, distortion)
+    assert found.hints.camera_source == "the camera file at the top of the data set"
     assert len(found.views) == N_VIEWS and not found.skipped
 
 

@@ -91,6 +91,19 @@ def test_the_command_line_gives_the_same_numbers_every_run(calibration, tmp_path
     assert (tmp_path / "cli" / "handeye_residuals.png").stat().st_size > 10_000
 
 
+def test_intrinsics_with_distortion_reach_the_calibration(calibration, tmp_path):
+    """--intrinsics with OpenCV's distortion: zero distortion gives the index file's result,
+    and a distortion moves the board poses and so the camera."""
+    numbers = tuple(float(v) for v in INTRINSICS.split(","))
+    plain = run_handeye_dataset(DatasetHandEyeOptions(DATA, tmp_path / "plain", intrinsics=(*numbers, 0, 0, 0, 0)))
+    assert plain.sources["camera"] == "--intrinsics"
+    want = calibration.solution.named()["base_T_camera"]
+    assert np.allclose(plain.solution.named()["base_T_camera"], want, atol=1e-9)
+    bent = run_handeye_dataset(DatasetHandEyeOptions(DATA, tmp_path / "bent", intrinsics=(*numbers, 0.1, 0, 0, 0),
+                                                     accept=True))
+    assert pose_error(bent.solution.named()["base_T_camera"], want)[0] > 1e-4
+
+
 def test_a_board_with_its_sides_swapped_says_so():
     """7 x 5 instead of 5 x 7: the markers are found, the chessboard corners are not."""
     view = read_dataset(DATA).views[0]

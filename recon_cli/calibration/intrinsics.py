@@ -179,9 +179,16 @@ def calibrate_intrinsics(views: list[BoardView], model: DistortionModel = Distor
         K0 = initial.matrix()
         flags |= cv2.CALIB_USE_INTRINSIC_GUESS
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
-    # OpenCV takes None for "no initial camera matrix"; its stubs do not say so
-    rms, K, dist, rvecs, tvecs, std_int, _, _ = cv2.calibrateCameraExtended(
-        obj, img, (w, h), K0, np.zeros(5), flags=flags, criteria=criteria)  # type: ignore[arg-type]
+    # one thread: OpenCV's parallel sums make the result differ in the last digits from run to
+    # run, and the same photos give the same numbers every run
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        # OpenCV takes None for "no initial camera matrix"; its stubs do not say so
+        rms, K, dist, rvecs, tvecs, std_int, _, _ = cv2.calibrateCameraExtended(
+            obj, img, (w, h), K0, np.zeros(5), flags=flags, criteria=criteria)  # type: ignore[arg-type]
+    finally:
+        cv2.setNumThreads(threads)
     dist = np.asarray(dist, dtype=np.float64).reshape(-1)[:5]
     dist = np.concatenate([dist, np.zeros(5 - len(dist))])
     camera = CameraCalibration(Intrinsics(w, h, float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])),

@@ -149,7 +149,8 @@ def handeye(
         "--camera-from-views/--no-camera-from-views",
         help="With --dataset: calibrate the camera (intrinsics, distortion k1 k2 p1 p2) from the same photos "
              "first, the given intrinsics as the start, and report its reprojection; default: when no camera is "
-             "given (8 or more views needed).")] = None,
+             "given, or the given one has no distortion and a camera calibrated from the other photos explains "
+             "each photo better (held out; 8 or more views needed).")] = None,
     accept: Annotated[bool, typer.Option("--accept", help="Write the result (station file, hand_eye.yaml) and exit "
                                                           "0 also when the verdict is 'not trusted' (otherwise "
                                                           "exit code 5, only the report written).")] = False,

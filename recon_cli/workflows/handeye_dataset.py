@@ -121,8 +121,9 @@ class DatasetHandEyeOptions:
         refinement when that predicts held-out views better (refine)
     accept: write hand_eye.yaml and return normally also when the verdict is "not trusted"
     camera_from_views: calibrate the camera (intrinsics, k1 k2 p1 p2) from the same photos
-        first, the given intrinsics as the start (True), never (False), when no camera is
-        given (None)
+        first, the given intrinsics as the start (True), never (False); None: when no camera is
+        given, or when the given camera has no distortion and a camera calibrated from the
+        other photos explains each photo clearly better than it (:func:`camera_held_out`)
     """
 
     dataset: Path
@@ -143,7 +144,7 @@ class DatasetHandEyeOptions:
     drop_outliers: bool = False
     min_corners: int = 8
     accept: bool = False
-    camera_from_views: bool | None = None  # None: when no camera is given
+    camera_from_views: bool | None = None  # None: when no camera is given, or it is held out as worse
 
 
 @dataclass(frozen=True)
@@ -224,6 +225,7 @@ class DatasetHandEyeResult:
 
     written_converged: bool = True  # the written candidate's solver stopped on its tolerances
     camera_fit: IntrinsicsResult | None = None  # the camera calibrated from the same photos
+    camera_check: CameraCheck | None = None  # the given camera against one calibrated from the photos
 
     @property
     def converged(self) -> bool:
@@ -273,6 +275,7 @@ class DatasetHandEyeResult:
             "held_out": [c.held_out.to_dict() for c in self.candidates],
             "mount_std_mm_deg": None if self.mount_std is None else list(self.mount_std),
             "camera_from_views": None if self.camera_fit is None else self.camera_fit.to_dict(),
+            "camera_check": None if self.camera_check is None else self.camera_check.to_dict(),
             "dataset": str(self.dataset), "layout": self.layout, "sources": self.sources,
             **{name: T for name, T in self.solution.named().items()},
             "views_used": len(self.used), "dropped": self.dropped,
@@ -329,32 +332,80 @@ def guessed_camera(image: Path) -> CameraNumbers:
     return CameraNumbers(f, f, (w - 1) / 2.0, (h - 1) / 2.0)
 
 
+#: a camera calibrated from the photos replaces a given one without distortion when its
+#: held-out reprojection RMS is below this share of the given camera's
+CAMERA_GAIN = 0.8
+
+
+@dataclass(frozen=True)
+class CameraCheck:
+    """The given camera against one calibrated from the photos, on photos each calibration did
+    not see: the RMS over the views of each view's own board-pose reprojection RMS [px] with the
+    given camera, and with the camera calibrated from the other views (leave-one-view-out)."""
+
+    given_px: float
+    held_out_px: float
+    views: int
+
+    @property
+    def calibrate(self) -> bool:
+        """Whether the camera calibrated from the photos explains unseen photos clearly better."""
+        return self.held_out_px < CAMERA_GAIN * self.given_px
+
+    def to_dict(self) -> dict:
+        return {"given_rms_px": self.given_px, "held_out_rms_px": self.held_out_px, "views": self.views,
+                "calibrated_from_views": self.calibrate,
+                "rule": f"calibrate from the views when the held-out RMS is below {CAMERA_GAIN:g} x the given camera's"}
+
+
+def _board_views(views: list[CornerView]) -> list[BoardView]:
+    K0 = views[0].camera.intrinsics
+    return [BoardView(v.name, (K0.width, K0.height), np.arange(v.corners), v.object_points, v.image_points, 0)
+            for v in views]
+
+
+def _board_pose(v: CornerView, K: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, float]:
+    """The view's board pose with the camera (K, dist), from its current one, and its
+    reprojection RMS [px]."""
+    import cv2
+
+    rvec = cv2.Rodrigues(np.ascontiguousarray(v.camera_T_board[:3, :3]))[0]
+    tvec = v.camera_T_board[:3, 3].reshape(3, 1).copy()
+    _, rvec, tvec = cv2.solvePnP(v.object_points, v.image_points, K, dist, rvec=rvec, tvec=tvec,
+                                 useExtrinsicGuess=True, flags=cv2.SOLVEPNP_ITERATIVE)
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(rvec)[0]
+    T[:3, 3] = np.asarray(tvec).reshape(3)
+    uv, _ = cv2.projectPoints(v.object_points.reshape(-1, 1, 3), rvec, tvec, K, dist)
+    return T, float(np.sqrt(np.mean(np.sum((uv.reshape(-1, 2) - v.image_points) ** 2, axis=1))))
+
+
+def camera_held_out(views: list[CornerView]) -> CameraCheck:
+    """The views' given camera against the camera (intrinsics, k1 k2 p1 p2) calibrated from
+    the other views, the given intrinsics as the start, on each view in turn."""
+    given = np.array([v.pnp_rms for v in views])
+    board_views = _board_views(views)
+    initial = views[0].camera.intrinsics
+    held = []
+    for i, v in enumerate(views):
+        fit = calibrate_intrinsics(board_views[:i] + board_views[i + 1:], DistortionModel.K1K2P, initial=initial)
+        held.append(_board_pose(v, fit.camera.intrinsics.matrix(), fit.camera.distortion_array)[1])
+    return CameraCheck(float(np.sqrt(np.mean(given ** 2))), float(np.sqrt(np.mean(np.square(held)))), len(views))
+
+
 def camera_from_views(views: list[CornerView], initial: Intrinsics | None) -> tuple[list[CornerView], IntrinsicsResult]:
     """Intrinsics and distortion (k1, k2, p1, p2) from the views' corners (cv2.calibrateCamera
     by recon_cli.calibration.intrinsics, ``initial`` as the start, else OpenCV's own), then
     every view's board pose again (solvePnP with the calibrated camera, from its pose)."""
-    import cv2
-
     if len(views) < MIN_CAMERA_VIEWS:
         raise InputError(f"calibrating the camera from the photos needs {MIN_CAMERA_VIEWS} or more views of the "
                          f"board, {len(views)} are usable", hint="give the camera (--camera-file or --intrinsics), "
                                                                  "or add views")
-    K0 = views[0].camera.intrinsics
-    board_views = [BoardView(v.name, (K0.width, K0.height), np.arange(v.corners), v.object_points, v.image_points, 0)
-                   for v in views]
-    fit = calibrate_intrinsics(board_views, DistortionModel.K1K2P, initial=initial)
+    fit = calibrate_intrinsics(_board_views(views), DistortionModel.K1K2P, initial=initial)
     K, dist = fit.camera.intrinsics.matrix(), fit.camera.distortion_array
     out = []
     for v in views:
-        rvec = cv2.Rodrigues(np.ascontiguousarray(v.camera_T_board[:3, :3]))[0]
-        tvec = v.camera_T_board[:3, 3].reshape(3, 1).copy()
-        _, rvec, tvec = cv2.solvePnP(v.object_points, v.image_points, K, dist, rvec=rvec, tvec=tvec,
-                                     useExtrinsicGuess=True, flags=cv2.SOLVEPNP_ITERATIVE)
-        T = np.eye(4)
-        T[:3, :3] = cv2.Rodrigues(rvec)[0]
-        T[:3, 3] = np.asarray(tvec).reshape(3)
-        uv, _ = cv2.projectPoints(v.object_points.reshape(-1, 1, 3), rvec, tvec, K, dist)
-        rms_px = float(np.sqrt(np.mean(np.sum((uv.reshape(-1, 2) - v.image_points) ** 2, axis=1))))
+        T, rms_px = _board_pose(v, K, dist)
         out.append(dataclasses.replace(v, camera=fit.camera, camera_T_board=T, pnp_rms=rms_px))
     return out, fit
 
@@ -486,10 +537,18 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
     check_units(found.skipped, len(views))
     check_solvable([v.base_T_flange for v in views], total, found.skipped, setup, opt.dataset)
     camera_fit = None
-    if guessed or opt.camera_from_views:
+    camera_check = None
+    if (opt.camera_from_views is None and not guessed and len(views) >= MIN_CAMERA_VIEWS
+            and not np.any(views[0].camera.distortion_array)):
+        camera_check = camera_held_out(views)
+    if guessed or opt.camera_from_views or (camera_check is not None and camera_check.calibrate):
+        given = sources["camera"]
         views, camera_fit = camera_from_views(views, None if guessed else views[0].camera.intrinsics)
         sources["camera"] = (f"calibrated from the {len(views)} views" if guessed else
-                             f"calibrated from the {len(views)} views, starting from {sources['camera']}")
+                             f"calibrated from the {len(views)} views, starting from {given}")
+        if camera_check is not None:
+            sources["camera"] += (f" (it has no distortion; held out, {camera_check.held_out_px:.2f} px against "
+                                  f"{camera_check.given_px:.2f} px)")
     observations = chain_observations(views, setup)
     check_observations(observations, pose_diversity([o.world_T_flange for o in observations]), str(opt.dataset))
     # outliers by the closed chains of OpenCV's solution: the refinement would spread one bad
@@ -523,7 +582,8 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
     result = DatasetHandEyeResult(Path(opt.out), Path(opt.dataset), dataset.layout, setup, solution,
                                   judged.refinement, reports, method_reports, diversity, found.skipped, found.mapping,
                                   board, sources, time.perf_counter() - t0, failures, judged.candidates, chosen.name,
-                                  verdict, judged.mount_std, judged.converged[chosen.name], camera_fit)
+                                  verdict, judged.mount_std, judged.converged[chosen.name], camera_fit,
+                                  camera_check)
     out = Path(opt.out)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "handeye.json", result.to_dict())

@@ -27,7 +27,9 @@ pytestmark = pytest.mark.skipif(not DATA.exists(), reason="../shared/data/handey
 
 @pytest.fixture(scope="module")
 def calibration(tmp_path_factory):
-    return run_handeye_dataset(DatasetHandEyeOptions(DATA, tmp_path_factory.mktemp("real") / "out"))
+    """The data set's own camera (fx, fy, cx, cy, no distortion) kept: --no-camera-from-views."""
+    return run_handeye_dataset(DatasetHandEyeOptions(DATA, tmp_path_factory.mktemp("real") / "out",
+                                                     camera_from_views=False))
 
 
 def test_every_usable_view_is_kept_and_judged(calibration):
@@ -93,6 +95,15 @@ def camera_from_views(tmp_path_factory):
     the data set's intrinsics (given without distortion) as the start."""
     return run_handeye_dataset(DatasetHandEyeOptions(DATA, tmp_path_factory.mktemp("cam") / "out",
                                                      camera_from_views=True))
+
+
+def test_the_default_calibrates_the_camera_from_the_photos_as_camera_from_views_does(camera_from_views, tmp_path):
+    """The data set's camera has no distortion and is held out as worse: the default is the
+    calibration of --camera-from-views, to the digit."""
+    default = run_handeye_dataset(DatasetHandEyeOptions(DATA, tmp_path / "out"))
+    assert default.camera_check is not None and default.camera_check.calibrate
+    assert default.camera_check.held_out_px < 0.8 * default.camera_check.given_px
+    assert np.array_equal(default.solution.X, camera_from_views.solution.X) and default.chosen == camera_from_views.chosen
 
 
 def test_the_camera_from_the_same_photos_meets_the_pnp_bound(camera_from_views):

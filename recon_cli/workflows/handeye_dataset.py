@@ -97,7 +97,7 @@ from recon_cli.errors import InputError, ReconError
 from recon_cli.geometry.transforms import pose_error
 from recon_cli.inputs.images import read_color
 from recon_cli.outputs import atomic_write, atomic_write_text
-from recon_cli.perception.boards import Board
+from recon_cli.perception.boards import Board, board_dict, opencv_frame_fields
 from recon_cli.perception.camera_model import Intrinsics
 from recon_cli.perception.charuco import cell_board
 from recon_cli.robot.description import expand_urdf
@@ -298,7 +298,8 @@ class DatasetHandEyeResult:
             "methods_failed": {m.value: why for m, why in self.method_failures.items()},
             "diversity": self.diversity.to_dict(),
             "skipped": [{"name": s.name, "reason": s.reason} for s in self.skipped],
-            "mapping": self.mapping.to_dict(), "board": dataclasses.asdict(self.board),
+            "mapping": self.mapping.to_dict(), "board": board_dict(self.board),
+            **opencv_frame_fields(self.board, self.solution.W, f"{self.setup.unknowns[1]}_opencv"),
             "seconds": self.seconds,
         }
 

@@ -67,6 +67,10 @@ def test_the_report_holds_the_table_and_the_per_view_errors(calibration):
     assert d["candidate"] == calibration.chosen and len(d["held_out"]) == len(calibration.candidates)
     assert len(d["held_out"][0]["views"]) == 15 and "smallest held-out score" in d["selection"]
     assert (calibration.folder / "handeye_residuals.png").stat().st_size > 10_000
+    # the board and its pose also in OpenCV's board frame (the set is eye-to-hand: the board on the flange)
+    assert d["board"]["text"].startswith("charuco:5x7") and d["board_frame"].startswith("opencv: origin")
+    flange_T_board = np.array(d["flange_T_board"]) @ np.linalg.inv(np.array(d["board"]["opencv_board_T_marker"]))
+    assert np.allclose(np.array(d["flange_T_board_opencv"]), flange_T_board)
 
 
 def test_transposed_rotations_are_not_trusted(tmp_path, capsys):

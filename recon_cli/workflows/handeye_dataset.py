@@ -44,6 +44,7 @@ from recon_cli.calibration.dataset import (
     CameraNumbers,
     CameraSource,
     DatasetSpec,
+    DatasetView,
     LengthUnit,
     MatrixOrder,
     PoseFormat,
@@ -74,7 +75,8 @@ from recon_cli.calibration.intrinsics import (
     SkippedImage,
     calibrate_intrinsics,
 )
-from recon_cli.calibration.robust import PosePrior, refine_with_pose_errors
+from recon_cli.calibration.logged_joints import JOINT_KEYS, JointChain, match_chain, record_joints
+from recon_cli.calibration.robust import JointOffsets, PosePrior, estimate_joint_offsets, refine_with_pose_errors
 from recon_cli.calibration.setups import (
     CornerView,
     Refinement,
@@ -94,7 +96,7 @@ from recon_cli.calibration.verdict import NotTrusted, Verdict, check_observation
 from recon_cli.config import CellConfig
 from recon_cli.console import write_json
 from recon_cli.errors import InputError, ReconError
-from recon_cli.geometry.transforms import pose_error
+from recon_cli.geometry.transforms import invert, pose_error
 from recon_cli.inputs.images import read_color
 from recon_cli.outputs import atomic_write, atomic_write_text
 from recon_cli.perception.boards import Board, board_dict, opencv_frame_fields
@@ -226,6 +228,7 @@ class DatasetHandEyeResult:
     written_converged: bool = True  # the written candidate's solver stopped on its tolerances
     camera_fit: IntrinsicsResult | None = None  # the camera calibrated from the same photos
     camera_check: CameraCheck | None = None  # the given camera against one calibrated from the photos
+    joint_offsets: dict | None = None  # the joint zero offsets' candidate (offsets [deg], std, used), when it ran
 
     @property
     def converged(self) -> bool:
@@ -276,6 +279,7 @@ class DatasetHandEyeResult:
             "mount_std_mm_deg": None if self.mount_std is None else list(self.mount_std),
             "camera_from_views": None if self.camera_fit is None else self.camera_fit.to_dict(),
             "camera_check": None if self.camera_check is None else self.camera_check.to_dict(),
+            "joint_offsets": self.joint_offsets,
             "dataset": str(self.dataset), "layout": self.layout, "sources": self.sources,
             **{name: T for name, T in self.solution.named().items()},
             "views_used": len(self.used), "dropped": self.dropped,
@@ -333,6 +337,8 @@ def guessed_camera(image: Path) -> CameraNumbers:
     return CameraNumbers(f, f, (w - 1) / 2.0, (h - 1) / 2.0)
 
 
+#: [rad] the joint zero offsets estimated from logged joints stay within +- this
+OFFSET_BOUND = float(np.radians(0.5))
 #: a camera calibrated from the photos replaces a given one without distortion when its
 #: held-out reprojection RMS is below this share of the given camera's
 CAMERA_GAIN = 0.8
@@ -571,7 +577,9 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
                              hint="calibrate without --drop-outliers, or add views")
         methods, failures = solve_methods(kept, setup, opt.method)
     kept_observations = chain_observations(kept, setup)
-    judged = judge_candidates(kept, setup, methods, opt.method, opt.refine, progress)
+    logged = _logged_joints(dataset.views, kept, opt.cell, kin, sources) \
+        if opt.refine and setup is Setup.EYE_IN_HAND else None
+    judged = judge_candidates(kept, setup, methods, opt.method, opt.refine, progress, logged)
     chosen = judged.chosen
     solution = chosen.solution
     used = {v.name for v in kept}
@@ -584,7 +592,7 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
                                   judged.refinement, reports, method_reports, diversity, found.skipped, found.mapping,
                                   board, sources, time.perf_counter() - t0, failures, judged.candidates, chosen.name,
                                   verdict, judged.mount_std, judged.converged[chosen.name], camera_fit,
-                                  camera_check)
+                                  camera_check, judged.joint_offsets)
     out = Path(opt.out)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "handeye.json", result.to_dict())
@@ -600,6 +608,35 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
     return result
 
 
+def _logged_joints(records: list[DatasetView], views: list[CornerView], cell: CellConfig, kin: Kinematics | None,
+                   sources: dict[str, str]) -> LoggedJoints | None:
+    """The joint positions the pose files hold beside the poses, with the cell's kinematics
+    matched to the poses; None (and in ``sources["joints"]`` why) when there are none or the
+    cell does not explain the poses."""
+    by_name = {r.name: r.record for r in records}
+    first = by_name.get(views[0].name) if views else None
+    if not isinstance(first, dict) or not any(isinstance(first.get(k), list) for k in JOINT_KEYS):
+        return None
+    if kin is None:
+        kin = Kinematics(expand_urdf(cell), cell.cell_file)
+    read = {v.name: record_joints(by_name.get(v.name), kin.nq) for v in views}
+    q = {name: value for name, value in read.items() if value is not None}
+    if len(q) < len(views):
+        missing = next(name for name in read if name not in q)
+        held = next((len(first[k]) for k in JOINT_KEYS if isinstance(first.get(k), list)), 0)
+        sources["joints"] = (f"not used: {len(views) - len(q)} of {len(views)} views have no {kin.nq} joint "
+                             f"positions for the cell {cell.cell_file.name} (e.g. {missing}; the first holds "
+                             f"{held}); pass the --cell the poses were logged with")
+        return None
+    chain = match_chain(kin, [q[v.name] for v in views], [v.base_T_flange for v in views])
+    if isinstance(chain, str):
+        sources["joints"] = f"not used: {chain}; pass the --cell the poses were logged with"
+        return None
+    sources["joints"] = (f"the pose files' joint positions, the cell {cell.cell_file.name}'s kinematics "
+                         f"(flange {cell.cell_file.flange_link}) matched to the logged poses")
+    return LoggedJoints(chain, q)
+
+
 @dataclass(frozen=True)
 class JudgedCandidates:
     """Every candidate with its held-out errors, the one with the smallest held-out score,
@@ -611,18 +648,31 @@ class JudgedCandidates:
     refinement: Refinement | None
     converged: dict[str, bool]
     mount_std: tuple[float, float] | None
+    joint_offsets: dict | None = None  # the joint offsets' candidate: the offsets [deg], their std, which joints
+
+
+@dataclass(frozen=True)
+class LoggedJoints:
+    """The joint positions logged beside the views' poses (by view name) and the cell's
+    kinematics matched to those poses (:mod:`recon_cli.calibration.logged_joints`)."""
+
+    chain: JointChain
+    q: dict[str, np.ndarray]
 
 
 def judge_candidates(views: list[CornerView], setup: Setup, methods: dict[HandEyeMethod, SetupSolution],
-                     start: HandEyeMethod | None, refine_too: bool, progress: Progress | None = None
-                     ) -> JudgedCandidates:
+                     start: HandEyeMethod | None, refine_too: bool, progress: Progress | None = None,
+                     joints: LoggedJoints | None = None) -> JudgedCandidates:
     """Leave-one-view-out errors of every OpenCV method that solved the views and, with
     ``refine_too``, of the reprojection refinement and the refinement with flange pose errors
-    from ``start`` (None: the closed-form method with the smallest held-out score). With
-    ``start`` given, the candidate written is ``start`` or one of its refinements; else any."""
+    from ``start`` (None: the closed-form method with the smallest held-out score), and with
+    ``joints`` (a camera on the flange) of the joint zero offsets estimated with the mount
+    (reported, never written: see :func:`_joint_offsets_candidate`). With ``start`` given, the
+    candidate written is ``start`` or one of its refinements; else any."""
     observations = chain_observations(views, setup)
     by_name = {v.name: v for v in views}
-    total = len(methods) + (2 if refine_too else 0)
+    with_joints = refine_too and joints is not None and setup is Setup.EYE_IN_HAND
+    total = len(methods) + (2 if refine_too else 0) + (1 if with_joints else 0)
     done = 0
 
     def step() -> None:
@@ -669,10 +719,55 @@ def judge_candidates(views: list[CornerView], setup: Setup, methods: dict[HandEy
         mount_std = robust.std_mm_deg
         step()
         candidates += pool[-2:]
+    offsets = None
+    if with_joints:
+        assert joints is not None
+        # judged and reported, not written: its mount holds only with the offsets added to the
+        # measured joints, and recon's kinematics do not add them when it runs the robot
+        candidate, offsets, converged[f"{first.value} + joint offsets"] = _joint_offsets_candidate(
+            observations, setup, first, joints)
+        candidates.append(candidate)
+        step()
     chosen_held = best([c.held_out for c in pool])
     chosen = next(c for c in pool if c.held_out is chosen_held)
     candidates.sort(key=lambda c: c.held_out.score)
-    return JudgedCandidates(candidates, chosen, refinement, converged, mount_std)
+    return JudgedCandidates(candidates, chosen, refinement, converged, mount_std, offsets)
+
+
+def _joint_offsets_candidate(observations: list[BoardObservation], setup: Setup, first: HandEyeMethod,
+                             joints: LoggedJoints) -> tuple[Candidate, dict, bool]:
+    """The mount with the joints' zero offsets (recon_cli.calibration.robust.estimate_joint_offsets
+    from ``first``'s closed form), judged on held-out views predicted through the offsets of
+    the other views; the offsets for the report; whether the solver converged."""
+    chain, q = joints.chain, joints.q
+
+    def solve_with_offsets(o: list[BoardObservation]) -> JointOffsets:
+        world = [BoardObservation(x.name, chain.world_T_flange(q[x.name]), x.camera_T_marker) for x in o]
+        return estimate_joint_offsets([q[x.name] for x in o], [x.camera_T_marker for x in o], chain.kin,
+                                      solve_hand_eye(world, first), PosePrior(), bound=OFFSET_BOUND)
+
+    def predict(found: JointOffsets, o: BoardObservation) -> np.ndarray:
+        return (invert(found.solution.flange_T_camera) @ invert(chain.world_T_flange(q[o.name] + found.offsets))
+                @ found.solution.world_T_marker)
+
+    found = solve_with_offsets(observations)
+    name = f"{first.value} + joint offsets"
+    X = invert(chain.right) @ found.solution.flange_T_camera  # in the flange frame the poses name
+    W = chain.left @ found.solution.world_T_marker  # in the base the poses are logged in
+    held = leave_one_out(observations, solve_with_offsets, name, predict)
+    names = chain.kin.joint_names
+    # an offset held at the bound has no std of its own (the data would move it further)
+    at_bound = np.abs(found.offsets) >= OFFSET_BOUND * (1 - 1e-9)
+    report = {"joints": list(names), "offsets_deg": [float(np.degrees(v)) for v in found.offsets],
+              "std_deg": [float(np.degrees(v)) if np.isfinite(v) and v < OFFSET_BOUND and not b else None
+                          for v, b in zip(found.std, at_bound, strict=True)],
+              "observable": [bool(v) for v in found.observable], "at_bound": [bool(b) for b in at_bound],
+              "bound_deg": float(np.degrees(OFFSET_BOUND)), "candidate": name, "written": False,
+              "why_not_written": "its mount holds with the offsets added to the measured joints, and recon's "
+                                 "kinematics do not add them when it runs the robot",
+              "flange_T_camera": X, "base_T_board": W}
+    converged = found.refinement.converged if found.refinement is not None else True
+    return Candidate(name, SetupSolution(setup, first, X, W, refined=True), held), report, converged
 
 
 def plot_dataset_residuals(result: DatasetHandEyeResult, path: Path) -> None:

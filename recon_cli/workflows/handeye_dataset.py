@@ -309,7 +309,7 @@ class DatasetHandEyeResult:
 
 
 def _camera(opt: DatasetHandEyeOptions, spec: DatasetSpec, hint: CameraNumbers | None,
-            hint_source: str = "the index file's intrinsics") -> tuple[CameraSource, str]:
+            hint_source: str) -> tuple[CameraSource, str]:
     if opt.camera_file is not None:
         return load_camera_file(opt.camera_file), f"--camera-file {opt.camera_file}"
     if opt.intrinsics is not None:

@@ -8,6 +8,7 @@ A YAML file (documented with a complete example in docs/hardware.md)::
     hand_eye:                       # flange_T_camera, 4 rows (default: the description's)
       - [0.0085, -0.0118, -0.9999, -0.0289]
       - ...
+    joint_offsets: [0, 0, 0, 0, 0, 0, 0.5, -0.43, 0]   # the joints' zero offsets, [deg] or [mm] (optional)
     robot:
       adapter: ads                  # ads | sim
       ads: {ams_net_id: 5.80.201.232.1.1, ip: 192.168.0.10, port: 851, ...}
@@ -44,7 +45,7 @@ from recon_cli.robot.cell_file import load_cell
 from recon_cli.robot.description import CellConfig, CellName
 
 STATION_FORMAT = 1
-TOP_KEYS = ("format", "name", "cell", "hand_eye", "robot", "camera")
+TOP_KEYS = ("format", "name", "cell", "hand_eye", "joint_offsets", "robot", "camera")
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,10 @@ class StationFile:
     camera_adapter: str
     camera: CameraConfig
     raw: dict = field(default_factory=dict, repr=False)
+    #: the robot's joint zero offsets as the file gives them ([deg] of a revolute joint, [mm] of
+    #: a prismatic one), in the cell's joint order: the joints the robot reports plus these are
+    #: its true joints (recon_cli.backends.joint_offsets); None: none
+    joint_offsets: tuple[float, ...] | None = None
 
     @property
     def capabilities(self) -> Capabilities:
@@ -126,8 +131,21 @@ def load_station(path: Path) -> StationFile:
     robot_adapter, robot = _part(data, "robot", ROBOT_ADAPTERS, w,
                                  "robot: {adapter: ads, ads: {...}} or {adapter: sim}")
     camera_adapter, camera = _part(data, "camera", CAMERA_ADAPTERS, w, "camera: {adapter: genicam, genicam: {...}}")
+    offsets = None
+    if data.get("joint_offsets") is not None:  # (the schema has checked the numbers and their range)
+        line = line_of(data, "joint_offsets")
+        at = f"{w}:{line}" if line else w
+        if ROBOT_ADAPTERS[robot_adapter].simulated:
+            raise InputError(f"{at}: joint_offsets correct the joints a real robot reports; the {robot_adapter} "
+                             "robot adapter is a simulation and reports its true joints",
+                             hint="remove joint_offsets, or use it with the real robot's adapter")
+        offsets = tuple(float(v) for v in data["joint_offsets"])
+        joints = cell.cell_file.planning_joints
+        if len(offsets) != len(joints):
+            raise InputError(f"{at}: joint_offsets has {len(offsets)} numbers; the cell has {len(joints)} joints "
+                             f"({', '.join(joints)})", hint="one offset per joint, in the cell's joint order")
     return StationFile(path, str(data.get("name", path.stem)), cell, robot_adapter, robot, camera_adapter, camera,
-                       data)
+                       data, offsets)
 
 
 def _part(data: dict, part: str, registry: dict, w: str, example: str):

@@ -309,6 +309,14 @@ def _print_dataset(r: DatasetHandEyeResult) -> None:
     if r.mount_std is not None:
         console.print(f"mount uncertainty (refinement with pose errors, 1-sigma): {r.mount_std[0]:.2f} mm, "
                       f"{r.mount_std[1]:.3f}°")
+    if r.joint_offsets is not None:
+        j = r.joint_offsets
+        values = ", ".join(f"{n} {v:+.3f}" for n, v, seen in zip(j["joints"], j["station_values"], j["observable"],
+                                                                strict=True) if seen)
+        how = ("written: put its joint_offsets line into the station file with the hand_eye block" if j["written"]
+               else f"not written: {j['why_not_written']}")
+        console.print(f"joints' zero offsets ({j['candidate']}; [deg], [mm] of a prismatic joint): "
+                      f"{values or 'none the views determine'}; {how}")
     for name, T in r.solution.named().items():
         console.print(f"{name} ({r.chosen}):")
         for row in T[:3]:

@@ -8,14 +8,18 @@ Writes into the run folder::
                                   errors (per view and summarised), every view (reprojection,
                                   chain residual, agreement with its own board pose, outlier),
                                   the mapping and the sources of board and camera
-    <out>/hand_eye.yaml           eye-in-hand: flange_T_camera as a station file's hand_eye block
-                                  (only when the verdict is "trusted", or with accept)
+    <out>/hand_eye.yaml           eye-in-hand: flange_T_camera as a station file's hand_eye block,
+                                  and its joint_offsets line when the calibration written has the
+                                  joints' zero offsets (only when the verdict is "trusted", or
+                                  with accept)
     <out>/handeye_residuals.png   per view: reprojection RMS, chain residual [mm], [deg], and the
                                   held-out error of the written candidate [mm], [deg]
 
 The candidates are every OpenCV method, the reprojection refinement and the refinement with
 flange pose errors (recon_cli.calibration.robust), both from the closed-form method with the
-smallest held-out error (or from ``method`` when given); the one written has the smallest
+smallest held-out error (or from ``method`` when given), and with the joint positions logged
+beside the poses and a cell that explains them, the mount with the joints' zero offsets (its
+views' poses then the cell's forward kinematics of the corrected joints); the one written has the smallest
 held-out error (recon_cli.calibration.holdout), not the smallest in-sample residual. The
 verdict (recon_cli.calibration.verdict) is computed on it; a calibration that is not trusted
 raises :class:`~recon_cli.calibration.verdict.NotTrusted` after the report is written,
@@ -583,8 +587,15 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
     chosen = judged.chosen
     solution = chosen.solution
     used = {v.name for v in kept}
-    reports = _views_report(views, solution, used, outliers)
     method_reports = {m: _method_report(kept, s, solution) for m, s in methods.items()}
+    if judged.offsets is not None:  # the calibration written sees the robot with its joints corrected
+        assert logged is not None
+        chain, q, d = logged.chain, logged.q, judged.offsets
+        corrected = {v.name: dataclasses.replace(v, base_T_flange=chain.logged(q[v.name] + d)) for v in kept}
+        kept = [corrected[v.name] for v in kept]
+        views = [corrected.get(v.name, v) for v in views]
+        kept_observations = chain_observations(kept, setup)
+    reports = _views_report(views, solution, used, outliers)
     diversity = pose_diversity([setup.chain_pose(v.base_T_flange) for v in kept])
     verdict = judge(kept_observations, HandEyeSolution(solution.method, solution.X, solution.W), chosen.held_out,
                     diversity, eye_in_hand=setup is Setup.EYE_IN_HAND, precision=detection_precision(kept))
@@ -600,7 +611,13 @@ def run_handeye_dataset(opt: DatasetHandEyeOptions, progress: Progress | None = 
         comment = (f"recon calibrate handeye --dataset, {time.strftime('%Y-%m-%d %H:%M')}, {chosen.name}, "
                    f"{len(kept)} views, held-out error {chosen.held_out.rms[0] * 1e3:.2f} mm RMS, "
                    f"{'trusted' if verdict.trusted else 'NOT trusted (accepted)'}")
-        atomic_write_text(out / "hand_eye.yaml", hand_eye_block(solution.X, comment))
+        mount, line = solution.X, ""
+        if judged.offsets is not None and judged.joint_offsets is not None and logged is not None:
+            # the station's hand_eye is on the cell's flange, where the joints' offsets were found
+            mount = logged.chain.right @ solution.X
+            comment += f", on the cell's flange {opt.cell.cell_file.flange_link}"
+            line = joint_offsets_line(judged.joint_offsets["station_values"])
+        atomic_write_text(out / "hand_eye.yaml", hand_eye_block(mount, comment) + line)
     atomic_write(out / "handeye_residuals.png", lambda tmp: plot_dataset_residuals(result, tmp))
     if not verdict.trusted and not opt.accept:
         raise NotTrusted(verdict, hint=f"nothing written but the report {out / 'handeye.json'}; --accept writes it "
@@ -649,6 +666,7 @@ class JudgedCandidates:
     converged: dict[str, bool]
     mount_std: tuple[float, float] | None
     joint_offsets: dict | None = None  # the joint offsets' candidate: the offsets [deg], their std, which joints
+    offsets: np.ndarray | None = None  # its offsets [rad, m per joint] when it is the candidate chosen
 
 
 @dataclass(frozen=True)
@@ -667,7 +685,8 @@ def judge_candidates(views: list[CornerView], setup: Setup, methods: dict[HandEy
     ``refine_too``, of the reprojection refinement and the refinement with flange pose errors
     from ``start`` (None: the closed-form method with the smallest held-out score), and with
     ``joints`` (a camera on the flange) of the joint zero offsets estimated with the mount
-    (reported, never written: see :func:`_joint_offsets_candidate`). With ``start`` given, the
+    (:func:`_joint_offsets_candidate`: written with the offsets, which a station file's
+    ``joint_offsets`` adds to the joints its robot reports). With ``start`` given, the
     candidate written is ``start`` or one of its refinements; else any."""
     observations = chain_observations(views, setup)
     by_name = {v.name: v for v in views}
@@ -719,26 +738,34 @@ def judge_candidates(views: list[CornerView], setup: Setup, methods: dict[HandEy
         mount_std = robust.std_mm_deg
         step()
         candidates += pool[-2:]
-    offsets = None
+    offsets, found = None, None
     if with_joints:
         assert joints is not None
-        # judged and reported, not written: its mount holds only with the offsets added to the
-        # measured joints, and recon's kinematics do not add them when it runs the robot
-        candidate, offsets, converged[f"{first.value} + joint offsets"] = _joint_offsets_candidate(
+        # its mount holds with the offsets added to the measured joints: written with them
+        candidate, offsets, found, converged[f"{first.value} + joint offsets"] = _joint_offsets_candidate(
             observations, setup, first, joints)
         candidates.append(candidate)
+        pool.append(candidate)
         step()
     chosen_held = best([c.held_out for c in pool])
     chosen = next(c for c in pool if c.held_out is chosen_held)
     candidates.sort(key=lambda c: c.held_out.score)
-    return JudgedCandidates(candidates, chosen, refinement, converged, mount_std, offsets)
+    written = offsets is not None and chosen.name == offsets["candidate"]
+    if offsets is not None:
+        offsets["written"] = written
+        if not written:
+            offsets["why_not_written"] = f"{chosen.name} predicts held-out views better"
+    return JudgedCandidates(candidates, chosen, refinement, converged, mount_std, offsets,
+                            found if written else None)
 
 
 def _joint_offsets_candidate(observations: list[BoardObservation], setup: Setup, first: HandEyeMethod,
-                             joints: LoggedJoints) -> tuple[Candidate, dict, bool]:
+                             joints: LoggedJoints) -> tuple[Candidate, dict, np.ndarray, bool]:
     """The mount with the joints' zero offsets (recon_cli.calibration.robust.estimate_joint_offsets
     from ``first``'s closed form), judged on held-out views predicted through the offsets of
-    the other views; the offsets for the report; whether the solver converged."""
+    the other views; the offsets for the report (``station_values``: as a station file's
+    ``joint_offsets`` gives them, [deg] or [mm]); the offsets [rad or m]; whether the solver
+    converged."""
     chain, q = joints.chain, joints.q
 
     def solve_with_offsets(o: list[BoardObservation]) -> JointOffsets:
@@ -763,11 +790,21 @@ def _joint_offsets_candidate(observations: list[BoardObservation], setup: Setup,
                           for v, b in zip(found.std, at_bound, strict=True)],
               "observable": [bool(v) for v in found.observable], "at_bound": [bool(b) for b in at_bound],
               "bound_deg": float(np.degrees(OFFSET_BOUND)), "candidate": name, "written": False,
-              "why_not_written": "its mount holds with the offsets added to the measured joints, and recon's "
-                                 "kinematics do not add them when it runs the robot",
+              "station_values": station_offsets(found.offsets, chain.kin.limits.prismatic),
               "flange_T_camera": X, "base_T_board": W}
     converged = found.refinement.converged if found.refinement is not None else True
-    return Candidate(name, SetupSolution(setup, first, X, W, refined=True), held), report, converged
+    return Candidate(name, SetupSolution(setup, first, X, W, refined=True), held), report, found.offsets, converged
+
+
+def station_offsets(offsets: np.ndarray, prismatic: np.ndarray) -> list[float]:
+    """Joint offsets [rad, m] as a station file's ``joint_offsets`` gives them: [deg] of a
+    revolute joint, [mm] of a prismatic one."""
+    return [round(float(v * 1000.0 if p else np.degrees(v)), 4) for v, p in zip(offsets, prismatic, strict=True)]
+
+
+def joint_offsets_line(values: list[float]) -> str:
+    """The ``joint_offsets:`` line of a station file."""
+    return "joint_offsets: [" + ", ".join(f"{v:g}" for v in values) + "]   # [deg] ([mm] of a prismatic joint)\n"
 
 
 def plot_dataset_residuals(result: DatasetHandEyeResult, path: Path) -> None:

@@ -493,6 +493,33 @@ def test_station_check_reads_the_joints_and_a_frame(standin, tmp_path, capsys):
     assert "fr3_joint4 -130.0" in out and "station ok" in out
 
 
+def test_joint_offsets_of_a_station_file_make_the_robots_joints_true_joints(fr3, standin, tmp_path, capsys):
+    """A station file's joint zero offsets: recon reads the joints franka-sim reports plus the
+    offsets and sends a trajectory planned in those joints minus them, so the arm ends where
+    the encoders read the goal minus the offsets."""
+    from recon_cli.backends.hardware.station import AdapterStation
+    from recon_cli.backends.station_file import load_station
+
+    station, _ = _files(tmp_path)
+    station.write_text(station.read_text() + "joint_offsets: [0, 0, 0.5, 0, -0.5, 0, 0]\n")
+    assert main(["station", "check", str(station)]) == 0
+    out = capsys.readouterr().out
+    assert "fr3_joint3 0.5" in out and "fr3_joint5 -0.5" in out and "fr3_joint4 -130.0" in out
+    offsets = np.radians([0, 0, 0.5, 0, -0.5, 0, 0])
+    raw = FrankaRobot(CONFIG, fr3.joint_names, fr3.kin.limits)
+    reported = raw.measured_joints()
+    raw.close()
+    with AdapterStation(load_station(station), fr3, None, HOME, np.random.default_rng(0)) as st:
+        start = st.robot.measured_joints()
+        assert np.allclose(start, reported + offsets, atol=1e-4)
+        goal = start + np.radians([10.0, 0.0, -5.0, 5.0, 10.0, 0.0, 10.0])
+        st.robot.execute(_plan(fr3, start, goal))
+        assert np.abs(st.robot.measured_joints() - goal).max() <= CONFIG.settle_tolerance
+    raw = FrankaRobot(CONFIG, fr3.joint_names, fr3.kin.limits)
+    assert np.abs(raw.measured_joints() - (goal - offsets)).max() <= CONFIG.settle_tolerance
+    _nothing_flagged(raw, standin)
+
+
 def test_station_check_of_an_unreachable_franka_is_one_line(tmp_path, capsys):
     station, _ = _files(tmp_path)
     station.write_text(station.read_text().replace("127.0.0.1", "127.0.0.9"))

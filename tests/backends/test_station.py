@@ -162,6 +162,12 @@ def test_station_file_names_a_cell_file_beside_it(tmp_path, capsys):
      "hand_eye has 2 items, 4 expected"),
     ("format: 1\nhand_eye: [[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]\nrobot: {adapter: sim}\n"
      "camera: {adapter: sim}\n", "not a rigid 4 x 4 transform"),
+    ("format: 1\njoint_offsets: [0, 0, 2, 0, 0, 0, 0, 0, 0]\nrobot: {adapter: ads}\ncamera: {adapter: sim}\n",
+     r"station.yaml:2: joint_offsets\[2\] = 2 deg \(or mm\) is outside \[-1, 1\]"),
+    ("format: 1\njoint_offsets: [0, 0.5, 0]\nrobot: {adapter: ads}\ncamera: {adapter: sim}\n",
+     r"station.yaml:2: joint_offsets has 3 numbers; the cell has 9 joints \(base_joint_1, "),
+    ("format: 1\njoint_offsets: [0, 0, 0, 0, 0, 0, 0, 0, 0.5]\nrobot: {adapter: sim}\ncamera: {adapter: sim}\n",
+     "joint_offsets correct the joints a real robot reports; the sim robot adapter is a simulation"),
 ])
 def test_station_file_errors_are_one_line(text, message, tmp_path, capsys):
     path = tmp_path / "station.yaml"

@@ -22,6 +22,7 @@ import numpy as np
 from recon_cli.backends.adapters import CAMERA_ADAPTERS, ROBOT_ADAPTERS, CameraPart, RobotPart, Surroundings
 from recon_cli.backends.base import Backend, Capabilities, Station
 from recon_cli.backends.hardware.franka import FrankaRobot
+from recon_cli.backends.joint_offsets import OffsetRobot
 from recon_cli.backends.sim.rendered import RenderedCamera
 from recon_cli.backends.sim.robot import SimRobot
 from recon_cli.backends.sim.station import simulation_truth
@@ -47,6 +48,10 @@ class AdapterStation(Station):
         try:
             self.robot: RobotPart = ROBOT_ADAPTERS[station.robot_adapter].open(station.robot, around)
             self._open_robot = self.robot
+            if station.joint_offsets is not None:  # [deg] and [mm] as the file gives them
+                given = np.asarray(station.joint_offsets, dtype=float)
+                self.robot = OffsetRobot(self.robot, np.where(cell.kin.limits.prismatic, given / 1000.0,
+                                                              np.radians(given)))
             self.camera: CameraPart = CAMERA_ADAPTERS[station.camera_adapter].open(station.camera, around, self.robot)
             self._open_camera = self.camera
         except BaseException:

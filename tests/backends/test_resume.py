@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recon_cli.backends.hardware.resume import HistoryMatch, Reference, Resumption, continues, match_history
+from recon_cli.backends.hardware.resume import HistoryMatch, Reference, Resumption, continues, match_history, torn
 from recon_cli.backends.hardware.setpoint_stream import jerk_share_for, setpoint_stream
 from recon_cli.planning.trajectory import parameterize
 from recon_cli.robot.cell import Cell
@@ -205,6 +205,31 @@ def test_a_state_continues_the_command_answered_before_it_only_when_it_applied_i
     late.apply(command, cycles=6)  # the same value, differenced over six cycles
     assert np.array_equal(late.reported().q, applied.reported().q)
     assert not continues(late.reported(), command, (command - before) / DT, DT)
+
+
+def test_a_state_read_while_it_was_written_is_told_apart(fr3, stream):
+    """The new position with the previous cycle's velocity (franka-sim publishes q_d, then
+    dq_d, from another thread) is torn: a command continuing it would be a jerk of the
+    acceleration over one cycle. A state applied in time, an extrapolation and a late
+    command's reference are not torn."""
+    q = stream.q
+    i = int(np.argmax(np.abs(np.diff(q, 2, axis=0)).max(axis=1)))  # where the stream accelerates most
+    ctl = Controller(q[0])
+    for k in range(i + 1):
+        ctl.apply(q[k])
+    previous = ctl.reported(float32=False)
+    ctl.apply(q[i + 1])
+    applied_dq = (q[i + 1] - q[i]) / DT
+    assert not torn(ctl.reported(), q[i + 1], applied_dq, DT)
+    mixed = Reference(ctl.reported().q, previous.dq, ctl.reported().ddq)
+    assert torn(mixed, q[i + 1], applied_dq, DT)
+    # answered from, its jerk would be the acceleration over one cycle: above the limit
+    command = Resumption(stream, fr3.kin.limits).command(mixed, 1)
+    v = (command - q[i + 1]) / DT
+    jerk = ((v - applied_dq) / DT - ctl.a) / DT
+    assert np.max(np.abs(jerk) / fr3.kin.limits.jerk) > 1.0
+    ctl.extrapolate()
+    assert not torn(ctl.reported(), q[i + 2], (q[i + 2] - q[i + 1]) / DT, DT)  # another position
 
 
 def test_a_reference_names_what_makes_it_unusable():

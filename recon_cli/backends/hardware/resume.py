@@ -161,6 +161,18 @@ def continues(ref: Reference, q: npt.NDArray[np.float64], dq: npt.NDArray[np.flo
                 and np.all(np.abs(ref.dq - dq) <= np.spacing(np.abs(dq).astype(np.float32)) + tolerance / dt))
 
 
+def torn(ref: Reference, q: npt.NDArray[np.float64], dq: npt.NDArray[np.float64], dt: float) -> bool:
+    """Whether the reported reference is the command ``q`` but not the velocity ``dq`` its
+    difference gives, when the state before it reported the command answered before ``q``:
+    nothing a controller applied on time or extrapolated has that velocity. A state written
+    while it was read gives it (franka-sim publishes ``q_d`` and then ``dq_d`` from another
+    thread: read in between, the new position with the previous cycle's velocity); answered
+    from, the command's jerk is the acceleration over one cycle."""
+    tolerance = match_tolerance(q)
+    return bool(np.all(np.abs(ref.q - q) <= tolerance)
+                and np.any(np.abs(ref.dq - dq) > np.spacing(np.abs(dq).astype(np.float32)) + tolerance / dt))
+
+
 def _quintic(cycles: int) -> npt.NDArray[np.float64]:
     """(cycles, 3): the blend's samples at 1..cycles as a linear map of its values at -2, -1, 0,
     for the quintic through those three that ends at zero with zero slope and curvature."""

@@ -66,7 +66,8 @@ VENV_ENV = "RECON_FRANKA_SIM_VENV"
 DEFAULT_VENV = ROOT / ".venvs" / "franka-sim"
 
 #: run inside franka-sim's environment: the server bound to one address, the gripper off,
-#: motions checked against the FCI's limits and aborted on a violation as the robot does
+#: motions checked against the FCI's limits and aborted on a violation as the robot does, and
+#: a late answer dropped as the FCI drops it
 _LAUNCHER = """
 import logging, os, signal, sys, threading, time
 logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
@@ -84,6 +85,17 @@ except (AttributeError, OSError):
 sys.setswitchinterval(0.0002)
 import franka_sim.mujoco_franka_sim as arm
 from franka_sim import FrankaSimServer
+# An answer that reaches the controller after it published the next state is dropped, as the
+# FCI drops it ("If the <1 ms constraint is violated for a cycle, the packet is dropped by FCI",
+# libfranka's network requirements): the cycle stays lost and its extrapolation stands.
+# franka-sim applies it instead, for scripted clients, and rewrites the reference it already
+# published for the next state, which a 1 kHz client answering that state cannot see.
+_absorb = FrankaSimServer._absorb_within_motion_limits
+def _absorb_in_time(self, command, *, fresh):
+    if not fresh and self.comm._motion and int(command["message_id"]) < self.comm._published_id:
+        return False
+    return _absorb(self, command, fresh=fresh)
+FrankaSimServer._absorb_within_motion_limits = _absorb_in_time
 host, port = sys.argv[1], int(sys.argv[2])
 if len(sys.argv) > 3:  # where the arm stands at start-up (the module's start pose, changed in place)
     arm.ARM_INITIAL_Q[:] = [float(v) for v in sys.argv[3].split(",")]

@@ -77,11 +77,11 @@ def test_a_cell_description_runs_no_code(tmp_path, capsys, monkeypatch, name):
     monkeypatch.chdir(tmp_path)
     cell = _cell(tmp_path / "lab")
     (tmp_path / "lab" / "robot" / "ur5e" / "evil.xacro").write_text(EVIL.replace("MARK", str(_marker(tmp_path))))
-    (tmp_path / "outside.yaml").write_text("secret: 42\n")
+    (tmp_path / "outside.yaml").write_text("secret_of_the_outside_file: 9137462518\n")  # in no temporary path
     _insert(tmp_path / "lab", PAYLOADS[name].replace("MARK", str(_marker(tmp_path))))
     assert main(["cell", "--cell", str(cell)]) == 1
     line = _one_line_error(capsys, "ur5e.urdf.xacro:")
-    assert "secret" not in line and "42" not in line
+    assert "secret_of_the_outside_file" not in line and "9137462518" not in line
     assert not _marker(tmp_path).exists()
 
 

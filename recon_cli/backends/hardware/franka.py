@@ -34,7 +34,7 @@ import numpy as np
 from recon_cli import install_hint
 from recon_cli.backends.base import ExecutionReport
 from recon_cli.backends.hardware.franka_config import REST_SPREAD, SETTLE_STATES, FrankaConfig
-from recon_cli.backends.hardware.resume import RECENT, Reference, Resumption, continues, match_history, torn
+from recon_cli.backends.hardware.resume import RECENT, Reference, Resumption, applied_as, match_history
 from recon_cli.backends.hardware.setpoint_stream import SetpointStream, jerk_share_for, setpoint_stream
 from recon_cli.errors import HardwareUnavailable, InputError, RobotFault
 from recon_cli.planning.trajectory import Trajectory
@@ -377,17 +377,17 @@ class FrankaRobot:
                 delays.append(delay)
                 ref = Reference(np.asarray(state.q_d, dtype=float), np.asarray(state.dq_d, dtype=float),
                                 np.asarray(state.ddq_d, dtype=float))
-                if (not resync and applied_dq is not None and skipped < MAX_SKIPS
-                        and torn(ref, sent, applied_dq, PERIOD)):
-                    # the last command with a velocity it was not applied with: a state read while it
-                    # was written; the next one is answered from its reference
+                same_q, same_dq = applied_as(ref, sent, applied_dq, PERIOD) if applied_dq is not None else (True, True)
+                if not resync and same_q and not same_dq and skipped < MAX_SKIPS:
+                    # torn (resume.torn): the last command with a velocity it was not applied with, a
+                    # state read while it was written; the next one is answered from its reference
                     resync = True
                     skipped += 1
                     self._unanswered()
                     continue
                 # a state that does not report the last command as sent came from a controller
                 # that did not apply it in time (or applied it late, over another interval)
-                resync = resync or (applied_dq is not None and not continues(ref, sent, applied_dq, PERIOD))
+                resync = resync or not (same_q and same_dq)
                 resumed: tuple[Reference, int] | None = None
                 if resync:
                     problem = ref.problem()

@@ -149,28 +149,36 @@ def _chain_steps(last: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.flo
     return j, j * (j - 1.0) / 2.0
 
 
+def applied_as(ref: Reference, q: npt.NDArray[np.float64], dq: npt.NDArray[np.float64],
+               dt: float) -> tuple[bool, bool]:
+    """Whether the controller's reported reference is the command ``q``, and whether its
+    velocity is the ``dq`` the command's backward difference gives (each within the 32-bit
+    rounding of the reported values and of the position the difference was taken from)."""
+    tolerance = match_tolerance(q)
+    same_q = bool(np.all(np.abs(ref.q - q) <= tolerance))
+    same_dq = bool(np.all(np.abs(ref.dq - dq) <= np.spacing(np.abs(dq).astype(np.float32)) + tolerance / dt))
+    return same_q, same_dq
+
+
 def continues(ref: Reference, q: npt.NDArray[np.float64], dq: npt.NDArray[np.float64], dt: float) -> bool:
     """Whether the controller's reported reference is the command ``q`` applied on time, with
-    the velocity ``dq`` its backward difference gives (within the 32-bit rounding of the
-    reported values and of the position the difference was taken from). It is not when the
+    the velocity ``dq`` its backward difference gives (:func:`applied_as`). It is not when the
     command came too late for the state (the controller extrapolated instead) or when the
     controller applied a late command over another interval (franka-sim does): the next
     command then answers from the reference, not from the stream."""
-    tolerance = match_tolerance(q)
-    return bool(np.all(np.abs(ref.q - q) <= tolerance)
-                and np.all(np.abs(ref.dq - dq) <= np.spacing(np.abs(dq).astype(np.float32)) + tolerance / dt))
+    same_q, same_dq = applied_as(ref, q, dq, dt)
+    return same_q and same_dq
 
 
 def torn(ref: Reference, q: npt.NDArray[np.float64], dq: npt.NDArray[np.float64], dt: float) -> bool:
     """Whether the reported reference is the command ``q`` but not the velocity ``dq`` its
-    difference gives, when the state before it reported the command answered before ``q``:
-    nothing a controller applied on time or extrapolated has that velocity. A state written
-    while it was read gives it (franka-sim publishes ``q_d`` and then ``dq_d`` from another
-    thread: read in between, the new position with the previous cycle's velocity); answered
-    from, the command's jerk is the acceleration over one cycle."""
-    tolerance = match_tolerance(q)
-    return bool(np.all(np.abs(ref.q - q) <= tolerance)
-                and np.any(np.abs(ref.dq - dq) > np.spacing(np.abs(dq).astype(np.float32)) + tolerance / dt))
+    difference gives (:func:`applied_as`), when the state before it reported the command
+    answered before ``q``: nothing a controller applied on time or extrapolated has that
+    velocity. A state written while it was read gives it (franka-sim publishes ``q_d`` and then
+    ``dq_d`` from another thread: read in between, the new position with the previous cycle's
+    velocity); answered from, the command's jerk is the acceleration over one cycle."""
+    same_q, same_dq = applied_as(ref, q, dq, dt)
+    return same_q and not same_dq
 
 
 def _quintic(cycles: int) -> npt.NDArray[np.float64]:

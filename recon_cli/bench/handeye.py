@@ -159,6 +159,7 @@ class SimulatedSet:
     world_T_marker: np.ndarray
     joint_offsets: np.ndarray  # (n_joints,) true offsets [rad]: true joints = measured + offsets
     corner_views: list[CornerView] = field(default_factory=list)  # the same views with their corners
+    true_camera_T_marker: list[np.ndarray] = field(default_factory=list)  # each view's board pose, no detection error
 
 
 
@@ -176,13 +177,14 @@ def simulate(views: Views, n: int, rng: np.random.Generator, errors: RobotErrors
     order = pick if pick is not None else rng.permutation(len(views.joints))
     camera = CameraCalibration(Intrinsics(views.image_size[0], views.image_size[1], views.K[0, 0], views.K[1, 1],
                                           views.K[0, 2], views.K[1, 2]))
-    obs, joints, corner_views = [], [], []
+    obs, joints, corner_views, truth = [], [], [], []
     for k in order:
         q_true = views.joints[k]
         noise = np.concatenate([rng.normal(scale=errors.pose_translation, size=3),
                                 rng.normal(scale=errors.pose_rotation, size=3)])
         F_true = kin.frame_pose(q_true, fid) @ _exp(noise)
-        found = measured_corners(invert(F_true @ X) @ W, views, errors.pixel_noise, rng)
+        B_true = invert(F_true @ X) @ W
+        found = measured_corners(B_true, views, errors.pixel_noise, rng)
         if found is None:
             continue
         B, object_points, image_points = found
@@ -192,9 +194,10 @@ def simulate(views: Views, n: int, rng: np.random.Generator, errors: RobotErrors
         corner_views.append(CornerView(f"view {k + 1}", F_meas, B, object_points, image_points, camera,
                                        _pnp_rms(B, object_points, image_points, views.K)))
         joints.append(q_meas)
+        truth.append(B_true)
         if len(obs) == n:
             break
-    return SimulatedSet(obs, np.array(joints), X, W, offsets, corner_views)
+    return SimulatedSet(obs, np.array(joints), X, W, offsets, corner_views, truth)
 
 
 def _pnp_rms(camera_T_marker: np.ndarray, object_points: np.ndarray, image_points: np.ndarray,

@@ -154,3 +154,35 @@ def best(results: list[HeldOut]) -> HeldOut:
     if not results:
         raise ValueError("no candidates")
     return min(results, key=lambda h: h.score)
+
+
+def within_noise(candidate: HeldOut, reference: HeldOut) -> bool:
+    """Whether ``candidate``'s held-out score exceeds ``reference``'s by no more than one
+    standard error of their difference: the mean over the views of the per-view difference
+    of squared errors ``t^2 + (LEVER r)^2`` (both predict the same views) against that
+    difference's standard error. With 10-20 views, scores of good candidates differ by
+    less than that; the smallest is then a draw of the views, not a better calibration."""
+    if not (candidate.complete and reference.complete) or [v.name for v in candidate.views] != \
+            [v.name for v in reference.views]:
+        return False
+    t, r = candidate._values()
+    t0, r0 = reference._values()
+    d = (t**2 + (LEVER * r) ** 2) - (t0**2 + (LEVER * r0) ** 2)
+    if d.size < 3:
+        return bool(d.mean() <= 0.0)
+    return bool(d.mean() <= d.std(ddof=1) / np.sqrt(d.size))
+
+
+def preferred(results: list[HeldOut], order: list[str]) -> HeldOut:
+    """The candidate written: the first of ``order`` (the candidates that model more of the
+    robot's and the detection's errors, most first) whose held-out score is within noise of
+    the smallest (:func:`within_noise`), else the one with the smallest score. Held-out
+    error decides; where it cannot tell, the better model of the errors does (the
+    one-standard-error rule of model selection)."""
+    smallest = best(results)
+    by_name = {h.candidate: h for h in results}
+    for name in order:
+        h = by_name.get(name)
+        if h is not None and (h is smallest or within_noise(h, smallest)):
+            return h
+    return smallest

@@ -14,6 +14,7 @@ import typer
 from recon_cli.bench import render
 from recon_cli.bench.cell_planners import PEERS, run_cell_planners
 from recon_cli.bench.handeye import handeye_study
+from recon_cli.bench.handeye_held_out import held_out_study
 from recon_cli.bench.ik import IKBenchConfig, run_ik_bench
 from recon_cli.bench.inputs import MAKERS, run_campaign
 from recon_cli.bench.mplib_peer import run_mplib
@@ -361,6 +362,11 @@ def bench_handeye(
     = 16,
     joints: Annotated[bool, typer.Option("--joints/--no-joints", help="Also estimate the joint zero offsets "
                                                                       "(row recon+joints).")] = True,
+    unseen: Annotated[int, typer.Option("--unseen", min=0, max=12, help="Also run the data-set path "
+                                                                        "(calibrate handeye --dataset) per seed and "
+                                                                        "compare its stated held-out error with its "
+                                                                        "true error on N views it never saw (0: "
+                                                                        "not).")] = 0,
     seed: SeedOpt = D.seed,
     out: OutOpt = None,
     force: ForceOpt = False,
@@ -373,3 +379,9 @@ def bench_handeye(
     write_json(folder / "bench_handeye.json", study.to_dict())
     console.print(study.table())
     console.print(f"{study.seconds:.1f} s; results: {folder / 'bench_handeye.json'}")
+    if unseen:
+        with console.status(f"the data-set path on {seeds} calibrations, {unseen} unseen views each"):
+            held = held_out_study(seeds=seeds, views=views, unseen=unseen, first_seed=seed)
+        write_json(folder / "bench_handeye_held_out.json", held.to_dict())
+        console.print(held.table())
+        console.print(f"{held.seconds:.1f} s; results: {folder / 'bench_handeye_held_out.json'}")

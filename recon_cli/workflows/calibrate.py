@@ -42,7 +42,7 @@ from recon_cli.calibration.handeye import (
     solve_hand_eye,
     view_residuals,
 )
-from recon_cli.calibration.holdout import LEVER, HeldOut, best, leave_one_out, predicted_board
+from recon_cli.calibration.holdout import LEVER, HeldOut, best, leave_one_out, predicted_board, preferred
 from recon_cli.calibration.intrinsics import (
     DistortionModel,
     IntrinsicsResult,
@@ -210,7 +210,9 @@ class HandEyeResult:
         return {
             "status": self.status.value, "method": self.solution.method.value, "scans": str(self.scans),
             "candidate": self.chosen, "verdict": None if self.verdict is None else self.verdict.to_dict(),
-            "selection": f"smallest held-out score: RMS over the views of sqrt(t^2 + ({LEVER:g} m x r)^2)",
+            "selection": f"smallest held-out score (RMS over the views of sqrt(t^2 + ({LEVER:g} m x r)^2)); the "
+                         "refinement that models the robot's errors instead when its score is within one standard "
+                         "error of the smallest",
             "held_out": [h.to_dict() for _, h in self.candidates],
             "refined": self.refined, "views_used": self.views,
             "flange_T_camera": self.solution.flange_T_camera, "world_T_marker": self.solution.world_T_marker,
@@ -391,7 +393,9 @@ def _judged_candidates(obs: list, methods: dict[HandEyeMethod, HandEyeSolution],
         pool += [name, rname]
         if progress:
             progress("held-out views", total, total)
-    chosen = min(pool, key=lambda n: held[n].score)
+    # the flange pose errors model the robot's errors: written when held-out views cannot tell
+    # them from the smallest score
+    chosen = preferred([held[n] for n in pool], [f"{first.value} + pose errors"]).candidate
     ranked = sorted(held.items(), key=lambda item: item[1].score)
     return ranked, (chosen, solutions[chosen]), refined
 

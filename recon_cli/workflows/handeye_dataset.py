@@ -71,7 +71,7 @@ from recon_cli.calibration.handeye import (
     pose_diversity,
     solve_hand_eye,
 )
-from recon_cli.calibration.holdout import LEVER, HeldOut, best, leave_one_out
+from recon_cli.calibration.holdout import LEVER, HeldOut, best, leave_one_out, preferred
 from recon_cli.calibration.intrinsics import (
     BoardView,
     DistortionModel,
@@ -277,8 +277,10 @@ class DatasetHandEyeResult:
         return {
             "setup": self.setup.value, "method": self.solution.method.value, "refined": self.solution.refined,
             "candidate": self.chosen, "verdict": None if self.verdict is None else self.verdict.to_dict(),
-            "selection": f"smallest held-out score: RMS over the views of sqrt(t^2 + ({LEVER:g} m x r)^2), t and r "
-                         "the board pose predicted by the calibration of the other views against the image's own",
+            "selection": f"smallest held-out score (RMS over the views of sqrt(t^2 + ({LEVER:g} m x r)^2), t and r "
+                         "the board pose predicted by the calibration of the other views against the image's own); "
+                         "the refinement that models the robot's errors instead when its score is within one "
+                         "standard error of the smallest",
             "held_out": [c.held_out.to_dict() for c in self.candidates],
             "mount_std_mm_deg": None if self.mount_std is None else list(self.mount_std),
             "camera_from_views": None if self.camera_fit is None else self.camera_fit.to_dict(),
@@ -747,7 +749,10 @@ def judge_candidates(views: list[CornerView], setup: Setup, methods: dict[HandEy
         candidates.append(candidate)
         pool.append(candidate)
         step()
-    chosen_held = best([c.held_out for c in pool])
+    # the joint offsets and the flange pose errors model the robot's errors: written when
+    # held-out views cannot tell them from the smallest score
+    chosen_held = preferred([c.held_out for c in pool], [f"{first.value} + joint offsets",
+                                                        f"{first.value} + pose errors"])
     chosen = next(c for c in pool if c.held_out is chosen_held)
     candidates.sort(key=lambda c: c.held_out.score)
     written = offsets is not None and chosen.name == offsets["candidate"]

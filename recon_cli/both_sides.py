@@ -3,7 +3,9 @@
 Shared by ``recon autoscan --sides 2`` (recon_cli/workflows/two_sided.py) and scripts with
 ``<turn_over/>`` (recon_cli/scripts/handlers/sides.py):
 
-- :func:`turn_object`: in simulation MuJoCo turns the object over and lets it settle
+- :func:`turn_object`: in simulation MuJoCo turns the object over onto the stable face of its
+  hull that :class:`MissedSurface` ranks first (the one that shows most of what side 1
+  missed while side 1's surface still fixes the registration) and lets it settle
   (recon_cli/backends/sim/turnover.py); on a real cell the operator is asked in the terminal
   while the robot waits at its home posture (Ctrl-C at the prompt is a KeyboardInterrupt);
 - :func:`any_way_up_box`: the crop and collision box of a turned object whose pose nobody
@@ -27,10 +29,11 @@ from typing import Any
 
 import numpy as np
 
+from recon_cli.backends.sim.resting import Rest
 from recon_cli.backends.sim.turnover import turn_over, turned
 from recon_cli.console import console
 from recon_cli.errors import ReconError
-from recon_cli.geometry.transforms import invert
+from recon_cli.geometry.transforms import invert, transform_points
 from recon_cli.inputs.meshes import read_cloud
 from recon_cli.objects import SceneObject
 from recon_cli.reconstruction.assessment import align_icp
@@ -47,6 +50,16 @@ SIDES_VOXEL = 0.003
 ALIGN_SAMPLES = 50_000
 #: the turn's random draws come from the run's seed plus this (apart from the run's other draws)
 TURN_SEED_OFFSET = 7919
+#: samples of the whole surface that rank the faces a turned object can rest on
+RANK_SAMPLES = 20_000
+#: [m] surface closer than this to the face the object rests on is hidden by the table
+HIDDEN_ABOVE = 0.003
+#: surface whose normal is within 60 deg of straight down (cos) faces the table: not seen
+FACING_DOWN = 0.5
+#: side 1's surface still in view after the turn fixes the registration of the sides when its
+#: normals spread in every direction: the smallest eigenvalue of their scatter matrix
+#: (mean of n n^T; 1/3 for a sphere, 0 for flanks that are all vertical) at least this
+CONSTRAINED = 0.05
 OPERATOR_PROMPT = ("turn the object over onto another face and put it back on the same spot, then press Enter "
                    "(Ctrl-C stops; the first side's scans are kept)")
 
@@ -76,13 +89,65 @@ def _ask_in_terminal(prompt: str) -> None:
                          hint="run recon in a terminal on a real cell; the first side's scans are kept") from None
 
 
-def turn_object(obj: SceneObject, simulated: bool, rng: np.random.Generator, ask: Ask | None = None) -> Turn:
-    """The object turned over: by physics in simulation (``obj`` as it lies, drawn from
-    ``rng``), by the operator on a real cell (``ask``, default: a prompt in the terminal)."""
+class MissedSurface:
+    """Ranks the faces a turned object can rest on (:mod:`recon_cli.backends.sim.resting`)
+    by what side 1 missed: the share of the whole surface that side 1's cloud did not come
+    within the coverage tolerance of and that faces up or sideways on that face (not within
+    60 deg of straight down, more than 3 mm above the table). A face on which side 1's
+    surface still in view spreads its normals in every direction (:data:`CONSTRAINED`: the
+    two sides' shapes fix their registration; a box upside down shows side 1 only its
+    vertical flanks, along which side 2 could slide) ranks before every face that does not."""
+
+    def __init__(self, obj: SceneObject, side_1: Path) -> None:
+        import open3d as o3d
+
+        points, normals = obj.surface_samples(RANK_SAMPLES, np.random.default_rng(0), exclude_base=-np.inf)
+        seen = read_cloud(side_1, "side 1 cloud", points=False)
+        d = np.asarray(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)).compute_point_cloud_distance(seen))
+        self.covered = d <= COVERAGE_TOLERANCE
+        to_object = invert(obj.world_T_object)
+        self.points = transform_points(to_object, points)
+        self.normals = normals @ to_object[:3, :3].T
+        self.vertices = obj.vertices
+
+    def _in_view(self, face: Rest) -> np.ndarray:
+        height = float(np.max(self.vertices @ face.down)) - self.points @ face.down
+        return (height > HIDDEN_ABOVE) & (self.normals @ face.down < FACING_DOWN)
+
+    def exposed(self, face: Rest) -> tuple[float, float]:
+        """The share of the surface side 1 missed that is in view on ``face``, and the
+        smallest eigenvalue of the normal scatter of side 1's surface still in view."""
+        view = self._in_view(face)
+        overlap = self.normals[view & self.covered]
+        spread = float(np.linalg.eigvalsh(overlap.T @ overlap / len(overlap))[0]) if len(overlap) >= 100 else 0.0
+        return float(np.mean(view & ~self.covered)), spread
+
+    def __call__(self, face: Rest) -> float:
+        gain, spread = self.exposed(face)
+        return gain + (1.0 if spread >= CONSTRAINED else 0.0)
+
+    def record(self, face: Rest) -> dict[str, float | bool]:
+        gain, spread = self.exposed(face)
+        return {"missed_by_side_1": float(np.mean(~self.covered)), "missed_in_view": gain,
+                "side_1_normal_spread": spread, "registration_fixed": spread >= CONSTRAINED}
+
+
+def turn_object(obj: SceneObject, simulated: bool, rng: np.random.Generator, ask: Ask | None = None,
+                side_1: Path | None = None) -> Turn:
+    """The object turned over: by physics in simulation (``obj`` as it lies, the yaw and drop
+    drawn from ``rng``; with ``side_1``, side 1's cloud, onto the face :class:`MissedSurface`
+    ranks first), by the operator on a real cell (``ask``, default: a prompt in the terminal)."""
     if simulated:
-        t = turn_over(obj, rng)
-        return Turn(turned(obj, t), {"by": "physics", "tilt_deg": t.tilt_deg, "settle_s": t.settle_s,
-                                     "down_object": [float(v) for v in t.down_object]})
+        rank = MissedSurface(obj, side_1) if side_1 is not None else None
+        t = turn_over(obj, rng, rank=rank)
+        record: dict[str, Any] = {"by": "physics", "tilt_deg": t.tilt_deg, "settle_s": t.settle_s,
+                                  "down_object": [float(v) for v in t.down_object], "stable_faces": t.faces,
+                                  "faces_tried": t.tried}
+        if t.rest is not None:
+            record["face"] = t.rest.to_dict() | (rank.record(t.rest) if rank is not None else {})
+            # the face put down as a direction of side 1's world: what an operator is told ("upside down")
+            record["down_world"] = [float(v) for v in obj.world_T_object[:3, :3] @ t.rest.down]
+        return Turn(turned(obj, t), record)
     t0 = time.monotonic()
     (ask or _ask_in_terminal)(OPERATOR_PROMPT)
     return Turn(None, {"by": "operator", "pause_s": time.monotonic() - t0})
@@ -159,7 +224,9 @@ def merge_sides(out: Path, sides: tuple[SideModel, SideModel], first: SceneObjec
     import open3d as o3d
 
     clouds = [read_cloud(s.cloud, f"side {i + 1} cloud", points=False) for i, s in enumerate(sides)]
-    reg = register_sides(clouds[0], clouds[1], SIDES_VOXEL, seed=seed)
+    down = turn.get("down_world")
+    reg = register_sides(clouds[0], clouds[1], SIDES_VOXEL, seed=seed,
+                         down_world=None if down is None else np.asarray(down, dtype=float))
     truth = None
     if second is not None:  # side-2 world points onto side 1: W1 inv(W2)
         true_T = first.world_T_object @ invert(second.world_T_object)

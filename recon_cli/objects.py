@@ -120,8 +120,15 @@ class SceneObject:
         without the face resting on the board (points less than ``exclude_base`` above the
         object's lowest point, whichever way up it lies; -inf: the whole surface) and without
         faces hidden inside a union of primitives."""
+        return self.surface_samples(n, rng, exclude_base)[0]
+
+    def surface_samples(self, n: int, rng: np.random.Generator,
+                        exclude_base: float = 0.001) -> tuple[np.ndarray, np.ndarray]:
+        """The points of :meth:`surface_points` (M, 3) and their triangles' unit normals
+        (M, 3), world frame."""
         tri = self.vertices[self.triangles]  # (M, 3, 3)
-        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        area = 0.5 * np.linalg.norm(cross, axis=1)
         k = rng.choice(len(tri), size=n, p=area / area.sum())
         a, b = rng.random(n), rng.random(n)
         flip = a + b > 1.0
@@ -129,6 +136,7 @@ class SceneObject:
         t = tri[k]
         p = t[:, 0] + a[:, None] * (t[:, 1] - t[:, 0]) + b[:, None] * (t[:, 2] - t[:, 0])
         world = transform_points(self.world_T_object, p)
+        normals = cross[k] / np.maximum(2.0 * area[k], 1e-30)[:, None] @ self.world_T_object[:3, :3].T
         keep = world[:, 2] >= float(self.world_vertices()[:, 2].min()) + exclude_base
         if len(self.primitives) > 1:
             # a point of one primitive's surface inside (or on) another one is hidden
@@ -136,7 +144,7 @@ class SceneObject:
                                     for i, p in enumerate(self.primitives)])[k]
             for i, prim in enumerate(self.primitives):
                 keep &= ~(prim.contains(p, eps=1e-5) & (owner != i))
-        return world[keep]
+        return world[keep], normals[keep]
 
 
 def _from_primitives(name: str, description: str, prims: list[Primitive],

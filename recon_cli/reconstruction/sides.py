@@ -253,6 +253,33 @@ def _box_hypotheses(s1: _Side, s2: _Side) -> list[np.ndarray]:
     return out
 
 
+#: yaws tried about the vertical for a turn whose face down is known (360 deg / this apart)
+TURN_YAWS = 16
+
+
+def _turn_hypotheses(s1: _Side, s2: _Side, down_world: np.ndarray, up: np.ndarray) -> list[np.ndarray]:
+    """side1_T_side2 of a turn that put the side-1 world direction ``down_world`` straight
+    down (opposite ``up``), at :data:`TURN_YAWS` yaws about ``up`` (the yaw is not known),
+    the bounding-box centres of the two sides onto each other."""
+    from scipy.spatial.transform import Rotation
+
+    u = np.asarray(down_world, dtype=float) / np.linalg.norm(down_world)
+    axis = np.cross(u, -up)
+    if np.linalg.norm(axis) < 1e-9:  # already down (no turn) or straight up (upside down)
+        axis = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
+        angle = 0.0 if np.dot(u, -up) > 0 else math.pi
+    else:
+        angle = math.atan2(np.linalg.norm(axis), float(np.dot(u, -up)))
+    tip = Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix()
+    c1 = (s1.points.min(axis=0) + s1.points.max(axis=0)) / 2.0
+    c2 = (s2.points.min(axis=0) + s2.points.max(axis=0)) / 2.0
+    out = []
+    for k in range(TURN_YAWS):
+        R = Rotation.from_rotvec(up * (2.0 * math.pi * k / TURN_YAWS)).as_matrix() @ tip  # side 1 -> side 2
+        out.append(pose(R.T, c1 - R.T @ c2))
+    return out
+
+
 def _turned(side1_T_side2: np.ndarray, rotvec: np.ndarray, shift: np.ndarray, centre: np.ndarray) -> np.ndarray:
     """The pose followed by a turn ``rotvec`` [rad] about ``centre`` and a ``shift`` [m] (side-1 frame)."""
     from scipy.spatial.transform import Rotation
@@ -272,13 +299,20 @@ def _symmetry_probes(s1: _Side, s2: _Side, side1_T_side2: np.ndarray, steps: int
 
 
 # --------------------------------------------------------------------- refinement and scores
-def _icp(s1: _Side, s2: _Side, side1_T_side2: np.ndarray, voxel: float, fine: bool) -> np.ndarray:
+def _icp(s1: _Side, s2: _Side, side1_T_side2: np.ndarray, voxel: float, fine: bool,
+         seen_only: bool = False) -> np.ndarray:
     """Point-to-plane ICP with a Tukey kernel (as wide as the correspondence distance) at
-    decreasing correspondence distances: on the sparse clouds, or on the fine ones."""
+    decreasing correspondence distances: on the sparse clouds, or on the fine ones; with
+    ``seen_only``, the sparse ones restricted to the points the other side could have seen
+    at the start pose (:func:`_seen_by_other`; a bowl's inside, which side 2 upside down
+    cannot see, would otherwise pull side 2's outside into its wall)."""
     import open3d as o3d
 
     reg = o3d.pipelines.registration
     source, target = (s2.fine, s1.fine) if fine else (s2.sparse, s1.sparse)
+    if not fine and seen_only:
+        source, target = _seen_by_other(s2.sparse, s1, side1_T_side2), _seen_by_other(s1.sparse, s2,
+                                                                                     invert(side1_T_side2))
     T = side1_T_side2
     for d in ((voxel, 0.4 * voxel) if fine else (5.0 * voxel, 2.5 * voxel)):
         T = reg.registration_icp(source, target, d, T,
@@ -286,6 +320,19 @@ def _icp(s1: _Side, s2: _Side, side1_T_side2: np.ndarray, voxel: float, fine: bo
                                  reg.ICPConvergenceCriteria(1e-6 if fine else 1e-4, 1e-6 if fine else 1e-4, 30)
                                  ).transformation
     return np.asarray(T)
+
+
+def _seen_by_other(cloud: o3d.geometry.PointCloud, other: _Side, other_T_cloud: np.ndarray,
+                   opt: SidesOptions | None = None) -> o3d.geometry.PointCloud:
+    """The points of ``cloud`` the other side's cameras could have seen, placed by
+    ``other_T_cloud`` (:func:`_match`'s overlap: above the other side's lowest points, not
+    facing down); the whole cloud when fewer than 100 are."""
+    opt = opt or SidesOptions()
+    up = np.asarray(opt.up, dtype=float) / np.linalg.norm(opt.up)
+    p = transform_points(other_T_cloud, np.asarray(cloud.points))
+    n = np.asarray(cloud.normals) @ other_T_cloud[:3, :3].T
+    keep = np.flatnonzero((p @ up - other.floor > 0.0) & (n @ up >= opt.facing_down))
+    return cloud.select_by_index(keep.tolist()) if len(keep) >= 100 else cloud
 
 
 @dataclass(frozen=True)
@@ -448,33 +495,48 @@ def _shape_difference(s1: _Side, s2: _Side, a: np.ndarray, b: np.ndarray, voxel:
 
 # --------------------------------------------------------------------- the registration
 def register_sides(side1: o3d.geometry.PointCloud, side2: o3d.geometry.PointCloud, voxel: float, seed: int = 0,
-                   options: SidesOptions | None = None) -> SideRegistration:
+                   options: SidesOptions | None = None, down_world: np.ndarray | None = None) -> SideRegistration:
     """Side 2's partial model registered onto side 1's by shape alone (see the module docstring).
 
     side1, side2: clouds in the world frame, cropped to the object, the table cropped away
     (normals optional; colours are not used). voxel [m]: the registration voxel (a few
     millimetres for objects of 0.1-0.3 m; the result is refined on half of it). seed: of
-    every random draw; the result depends on it and the inputs only."""
+    every random draw; the result depends on it and the inputs only. down_world: the side-1
+    world direction that was turned to point straight down, when known (the face the object
+    was put on: :func:`_turn_hypotheses` adds its yaws to the hypotheses; a body of
+    revolution upside down shares only smooth surface, where features find no match)."""
     if not (math.isfinite(voxel) and voxel > 0):
         raise InputError(f"registration voxel {voxel!r} m is not a positive number", hint="e.g. 0.003")
     opt = options or SidesOptions()
     # one thread: Open3D's ICP sums over several threads in varying order, and the poses would
     # differ in their last digits from run to run
     with open3d_draws(seed, single_thread=True):
-        return _register(side1, side2, voxel, seed, opt)
+        return _register(side1, side2, voxel, seed, opt, down_world)
 
 
 def _register(side1: o3d.geometry.PointCloud, side2: o3d.geometry.PointCloud, voxel: float, seed: int,
-              opt: SidesOptions) -> SideRegistration:
+              opt: SidesOptions, down_world: np.ndarray | None = None) -> SideRegistration:
     up = np.asarray(opt.up, dtype=float) / np.linalg.norm(opt.up)
     s1, s2 = _prepare(side1, voxel, up, "side 1"), _prepare(side2, voxel, up, "side 2")
     centroid = s2.points.mean(axis=0)
 
     def refine(inits: list[np.ndarray], fine: bool) -> list[_Fit]:
-        return [_score(s1, s2, _icp(s1, s2, T, voxel, fine), voxel, up, opt, 1 if fine else 4) for T in inits]
+        if not fine:
+            return [_score(s1, s2, _icp(s1, s2, T, voxel, False), voxel, up, opt, 4) for T in inits]
+        # the fine ICP can slide onto the wrong one of two close surfaces (a thin wall's inside
+        # and outside: it does not compare normals); the pose it starts from stays when that scores better
+        return [max((_score(s1, s2, T, voxel, up, opt), _score(s1, s2, _icp(s1, s2, T, voxel, True), voxel, up, opt)),
+                    key=lambda f: f.key) for T in inits]
 
     inits = _global_hypotheses(s1, s2, voxel, seed, opt) + _box_hypotheses(s1, s2)
-    fits = _distinct(refine(inits, False), centroid, opt)
+    fits = refine(inits, False)
+    if down_world is not None:  # near the truth: refined as the others, and with each side's ICP
+        # partners only where the other side could see (a thin wall's other face does not pull)
+        turns = _turn_hypotheses(s1, s2, down_world, up)
+        fits += refine(turns, False) + [_score(s1, s2, _icp(s1, s2, T, voxel, False, seen_only=True), voxel, up,
+                                               opt, 4) for T in turns]
+        inits += 2 * turns
+    fits = _distinct(fits, centroid, opt)
     probes = _symmetry_probes(s1, s2, fits[0].side1_T_side2, opt.symmetry_steps)
     fits = _distinct(fits + refine(probes, False), centroid, opt)
     if min(fits[0].fitness, fits[0].fitness_reverse) < opt.min_fitness:  # nothing fits (the fine stage adds

@@ -118,7 +118,7 @@ class TwoSided:
         if side1.interrupted:
             return self._stopped((side1,), t0)
         try:
-            turn = turn_object(first, self._simulated(), self.rng, self.ask)
+            turn = turn_object(first, self._simulated(), self.rng, self.ask, side1.cloud)
         except KeyboardInterrupt:
             return self._stopped((side1,), t0)
         box = None

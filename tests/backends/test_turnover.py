@@ -74,7 +74,7 @@ def test_turned_is_a_copy_at_the_new_pose() -> None:
     assert not np.array_equal(obj.world_T_object, t.world_T_object)  # the original stays where it was
 
 
-def test_a_fall_back_onto_the_same_face_is_tried_again(monkeypatch) -> None:
+def test_a_face_physics_does_not_confirm_is_followed_by_the_next(monkeypatch) -> None:
     real = turnover._Sim.settle
     calls = []
 
@@ -86,14 +86,25 @@ def test_a_fall_back_onto_the_same_face_is_tried_again(monkeypatch) -> None:
 
     monkeypatch.setattr(turnover._Sim, "settle", first_lands_as_before)
     t = turn_over(_object("wood_block"), np.random.default_rng(0))
-    assert len(calls) == 2 and t.tilt_deg > 60.0
+    assert len(calls) == 2 and t.tilt_deg > 60.0 and t.tried == 2
 
 
-def test_an_object_that_always_falls_back_is_an_error(monkeypatch) -> None:
-    monkeypatch.setattr(turnover, "MIN_TILT_DEG", 181.0)
+def test_an_object_that_settles_on_no_face_it_is_put_on_is_an_error(monkeypatch) -> None:
     monkeypatch.setattr(turnover, "MAX_ATTEMPTS", 2)
-    with pytest.raises(ReconError, match="fell back onto the face it stood on in all 2 turns"):
+    monkeypatch.setattr(turnover._Sim, "settle", lambda self, T, name: (_object("wood_block").world_T_object.copy(),
+                                                                          0.5))
+    with pytest.raises(ReconError, match="settled on none of the 2 stable faces it was put on"):
         turn_over(_object("wood_block"), np.random.default_rng(0))
+
+
+def test_an_object_with_no_other_stable_face_is_one_line(monkeypatch) -> None:
+    # every face of the block counted as the one it stands on
+    monkeypatch.setattr(turnover, "MIN_TILT_DEG", 181.0)
+    with pytest.raises(ReconError) as e:
+        turn_over(_object("wood_block"), np.random.default_rng(0))
+    line = e.value.one_line()
+    assert "the object 'wood_block' cannot be turned over: its convex hull has no stable face but the one it stands " \
+           "on" in line and "--sides 1" in line and "\n" not in line
 
 
 def test_an_object_still_moving_at_the_time_out_is_an_error(monkeypatch) -> None:

@@ -61,3 +61,28 @@ def _the_page_shows_both_sides(out, report, printed: str):
     assert "report_files/scans/side_2/scan_0004.jpg" in html
     assert html.count(">charuco<") + html.count(">kinematics<") == 10  # each scan's pose source
     assert "cloud (both sides)" in html and "true whole toy_blocks surface" in html
+
+
+def test_a_bowl_is_turned_onto_its_rim_and_both_sides_register(tmp_path, capsys):
+    """An open container (tests/bowl.py: a thin-walled spherical cap) has one other stable
+    face, its rim: physics turns it upside down, and the sides, which share only smooth
+    surface, register by the turn's face (its yaw unknown): the merged cloud lies on the true
+    surface within the sensor's noise."""
+    from ..bowl import write_bowl
+
+    bowl = write_bowl(tmp_path / "bowl.ply")
+    out = tmp_path / "two"
+    code = main(["autoscan", "--sides", "2", "--object", str(bowl), "--n", "6", "--resolution", "0.3",
+                 "--no-pictures", "--seed", "0", "--out", str(out)])
+    text = capsys.readouterr()
+    assert code == 0, text.out + text.err
+    report = sides_file.read(out)
+    turn = report.turn
+    assert turn["tilt_deg"] > 179.0 and turn["stable_faces"] == 1 and turn["faces_tried"] == 1
+    assert turn["face"]["down_object"] == pytest.approx([0.0, 0.0, 1.0], abs=1e-9)  # the opening went down
+    assert turn["face"]["registration_fixed"] and turn["face"]["missed_in_view"] > 0.05
+    reg = report.registration
+    assert reg["reason"] is None and not reg["shape_ambiguous"], reg
+    # a body of revolution: any turn about its axis fits; the merged shape is right
+    assert report.accuracy["std_mm"] <= 0.29 and abs(report.accuracy["mean_mm"]) < 0.1, report.accuracy
+    assert report.coverage_whole > max(report.contributions.values()) + 0.05, report

@@ -1,15 +1,17 @@
 """Turning an object over between the two sides of a two-sided scan, by physics.
 
-An operator turns the object over and puts it back on its spot; in simulation MuJoCo does
-the turning: the object is tipped by about 90 deg about a random horizontal axis through
-its bounding-box centre (onto a flank: its old resting face then faces sideways and is
-seen, and the two sides share its top and a flank, whose shape fixes their registration;
-turned upside down instead, a box's sides would share only flat flanks, along which they
-can slide), given a random yaw, dropped from a few mm onto a plane at the surface it stands
-on, and simulated until it lies still. Where it comes to rest is a stable pose that
-physics chose, not one picked by hand. It is then moved in x, y so
-that its world bounding-box centre is where it was (the operator puts it back on the spot),
-keeping the settled height and orientation.
+An operator turns the object over onto another face it can rest on and puts it back on its
+spot; in simulation the faces it can rest on are the stable faces of its convex hull
+(:mod:`recon_cli.backends.sim.resting`, upside down included: a bowl on its rim), and the
+turn puts it on the one a ranking prefers (the two-sided scan's: the face that exposes most
+of what side 1 missed while side 1's surface still fixes the registration,
+recon_cli/both_sides.py; without one, a flank, the most stable first), with a random yaw,
+drops it from a few mm onto a plane at the surface it stands on, and lets MuJoCo simulate
+it until it lies still. Physics confirms the face: an object that settles elsewhere (it
+rolled off a narrow face) is put on the next face of the ranking. It is then moved in x, y
+so that its world bounding-box centre is where it was (the operator puts it back on the
+spot), keeping the settled height and orientation. An object with no stable face but the
+one it stands on cannot be turned over: one line says so.
 
 The object is one free rigid body of uniform density (:data:`DENSITY`): mass, centre of
 mass and inertia of the solid union of its primitives (built-in objects), else of its
@@ -31,11 +33,13 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from recon_cli.backends.sim.resting import Rest, resting_faces, tilt_deg
 from recon_cli.errors import ReconError
 from recon_cli.geometry.transforms import pose, pose_error, rot_z, transform_points
 from recon_cli.lazy import lazy_module
@@ -57,8 +61,6 @@ TIMESTEP_S = 0.001
 NOSLIP_ITERATIONS = 10
 """MuJoCo's noslip solver makes friction hard: without it, a soft rolling-friction constraint
 lets a bottle on its side creep on for many seconds."""
-FLIP_DEG = (75.0, 105.0)
-"""Range of the turning angle about the horizontal axis [deg]."""
 DROP_M = (0.002, 0.005)
 """Range of the drop height of the lowest point above the surface [m]."""
 REST_SPEED = 1e-3
@@ -73,9 +75,15 @@ REST_SAMPLE_S = 0.05
 TIMEOUT_S = 10.0
 """Simulated time [s] after which an object still moving is an error."""
 MIN_TILT_DEG = 60.0
-"""A turn that tilts the object's up axis by less than this [deg] left the same face down."""
+"""A face whose normal is within this [deg] of the face down now is the same face."""
+CONFIRM_DEG = 15.0
+"""The object settled on the face it was put on when that face's normal ends within this
+[deg] of straight down (a round body rolls a strip or two on)."""
 MAX_ATTEMPTS = 8
-"""Draws tried before an object that always falls back onto the same face is an error."""
+"""Faces tried (best ranked first) before an object that settles on none of them is an error."""
+SIMILAR_DEG = 30.0
+"""After a face that did not hold, faces within this [deg] of it are not tried: the strips of
+a tessellated round side (a mug lying opposite its handle rolls onto the handle)."""
 _GRID = 64  # cells along the longest side when integrating a union of primitives
 
 
@@ -88,6 +96,13 @@ class TurnOver:
     tilt_deg: float  # angle between the old and the new object "up" axis [deg]
     settle_s: float  # simulated seconds until at rest [s]
     dropped_from: float  # height of the drop above the rest surface [m]
+    rest: Rest | None = None  # the hull face it was put on and settled on
+    faces: int = 0  # stable faces other than the one it stood on
+    tried: int = 1  # faces put on until physics confirmed one
+
+
+Rank = Callable[[Rest], float]
+"""A face's preference (larger first) for the turn."""
 
 
 def turned(obj: SceneObject, t: TurnOver) -> SceneObject:
@@ -95,46 +110,76 @@ def turned(obj: SceneObject, t: TurnOver) -> SceneObject:
     return replace(obj, world_T_object=t.world_T_object.copy())
 
 
-def turn_over(obj: SceneObject, rng: np.random.Generator, surface_z: float | None = None) -> TurnOver:
-    """Turn ``obj`` over onto another face and let it settle on the plane ``surface_z`` [m]
-    (default: the lowest world z of its vertices, the surface it rests on now).
+def other_faces(obj: SceneObject) -> tuple[list[Rest], np.ndarray]:
+    """The stable faces of ``obj``'s hull (:func:`resting_faces`) other than the one it
+    stands on now, and the object-frame direction that points down now."""
+    down_now = obj.world_T_object[:3, :3].T @ np.array([0.0, 0.0, -1.0])
+    _, com, _ = mass_properties(obj)
+    return [r for r in resting_faces(obj.vertices, com) if tilt_deg(r.down, down_now) > MIN_TILT_DEG], down_now
 
-    Each draw tips it by 75-105 deg about a random horizontal axis through its bounding-box
-    centre, with a random yaw, and drops it from 2-5 mm. An object can fall back onto the face
-    it stood on (a tilt of the up axis below :data:`MIN_TILT_DEG`); then the next draw of
-    ``rng`` is tried, :data:`MAX_ATTEMPTS` at most, after which a ReconError is raised. A
-    ReconError too when it is still moving after :data:`TIMEOUT_S` of simulated time.
+
+def flank_first(down_now: np.ndarray) -> Rank:
+    """The ranking without one of the caller's: a flank (tilted by 60-120 deg: the old resting
+    face is then seen from the side, and the two sides share the old top and a flank), the
+    most stable first; then the others, the most stable first."""
+    return lambda r: (1000.0 if tilt_deg(r.down, down_now) <= 120.0 else 0.0) + r.tipping_deg
+
+
+def turn_over(obj: SceneObject, rng: np.random.Generator, surface_z: float | None = None,
+              rank: Rank | None = None) -> TurnOver:
+    """Turn ``obj`` over onto another stable face of its hull and let it settle on the plane
+    ``surface_z`` [m] (default: the lowest world z of its vertices, the surface it rests on
+    now).
+
+    The faces are tried in the order of ``rank`` (default :func:`flank_first`), each with a
+    random yaw from ``rng`` and a drop of 2-5 mm, until physics confirms one (the face ends
+    within :data:`CONFIRM_DEG` of straight down), :data:`MAX_ATTEMPTS` at most. A ReconError
+    when the object has no other stable face, when it settles on none of those tried, or
+    when it is still moving after :data:`TIMEOUT_S` of simulated time.
     """
     old = obj.world_T_object
     surface = float(obj.world_vertices()[:, 2].min()) if surface_z is None else float(surface_z)
     up_object = old[:3, :3].T @ np.array([0.0, 0.0, 1.0])  # the object axis that points up now
+    faces, down_now = other_faces(obj)
+    if not faces:
+        raise ReconError(f"the object '{obj.name}' cannot be turned over: its convex hull has no stable face but the "
+                         f"one it stands on (a face within {MIN_TILT_DEG:g} deg of it is the same face)",
+                         hint="scan it on one side (--sides 1)")
     lo, hi = obj.world_aabb()
     centre = (lo + hi) / 2.0
     sim = _Sim(obj, surface)
-    tilts = []
-    for attempt in range(1, MAX_ATTEMPTS + 1):
-        axis_angle = rng.uniform(0.0, 2.0 * math.pi)
-        flip = math.radians(rng.uniform(*FLIP_DEG))
+    ordered = sorted(faces, key=rank or flank_first(down_now), reverse=True)
+    landed: list[float] = []
+    tried: list[Rest] = []
+    for face in ordered:
+        if len(tried) == MAX_ATTEMPTS:
+            break
+        if any(tilt_deg(face.down, t.down) < SIMILAR_DEG for t in tried):
+            continue  # a strip of the same round side as a face that did not hold
+        tried.append(face)
+        attempt = len(tried)
         yaw = rng.uniform(0.0, 2.0 * math.pi)
         drop = float(rng.uniform(*DROP_M))
-        axis = np.array([math.cos(axis_angle), math.sin(axis_angle), 0.0])
-        turn = rot_z(yaw) @ _axis_angle(axis, flip)  # world frame, about the bounding-box centre
-        start = pose(turn @ old[:3, :3], centre + turn @ (old[:3, 3] - centre))
-        start[2, 3] += surface + drop - float(transform_points(start, obj.vertices)[:, 2].min())
+        R = rot_z(yaw) @ _turning(face.down, np.array([0.0, 0.0, -1.0]))
+        start = pose(R, np.zeros(3))
+        v = transform_points(start, obj.vertices)
+        start[:2, 3] = centre[:2] - (v.min(axis=0)[:2] + v.max(axis=0)[:2]) / 2.0
+        start[2, 3] = surface + drop - float(v[:, 2].min())
         rest, settle_s = sim.settle(start, obj.name)
+        off = tilt_deg(rest[:3, :3] @ face.down, np.array([0.0, 0.0, -1.0]))
         tilt = math.degrees(math.acos(float(np.clip((rest[:3, :3] @ up_object)[2], -1.0, 1.0))))
-        if tilt > MIN_TILT_DEG:
+        if off <= CONFIRM_DEG and tilt > MIN_TILT_DEG:
             v = transform_points(rest, obj.vertices)
             rest[:2, 3] += centre[:2] - (v.min(axis=0)[:2] + v.max(axis=0)[:2]) / 2.0  # back on the spot
             down = rest[:3, :3].T @ np.array([0.0, 0.0, -1.0])
-            log.debug("%s turned over in attempt %d: tilt %.1f deg, at rest after %.2f s",
-                      obj.name, attempt, tilt, settle_s)
-            return TurnOver(rest, down / np.linalg.norm(down), tilt, settle_s, drop)
-        tilts.append(tilt)
-        log.debug("%s fell back onto the same face (tilt %.1f deg), attempt %d", obj.name, tilt, attempt)
-    raise ReconError(f"the object '{obj.name}' fell back onto the face it stood on in all {MAX_ATTEMPTS} turns "
-                     f"(tilts {', '.join(f'{t:.0f}' for t in tilts)} deg, wanted more than {MIN_TILT_DEG:g} deg)",
-                     hint="try another seed")
+            log.debug("%s turned over onto face %d of %d: tilt %.1f deg, at rest after %.2f s",
+                      obj.name, attempt, len(ordered), tilt, settle_s)
+            return TurnOver(rest, down / np.linalg.norm(down), tilt, settle_s, drop, face, len(faces), attempt)
+        landed.append(off)
+        log.debug("%s put on face %d settled %.1f deg off it", obj.name, attempt, off)
+    raise ReconError(f"the object '{obj.name}' settled on none of the {len(landed)} stable faces it was put on "
+                     f"(it ended {', '.join(f'{a:.0f}' for a in landed)} deg off them, wanted at most "
+                     f"{CONFIRM_DEG:g} deg)", hint="try another seed")
 
 
 def simulate_resting(obj: SceneObject, seconds: float, surface_z: float | None = None) -> np.ndarray:
@@ -268,6 +313,18 @@ def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
     """Rotation (3, 3) by ``angle`` [rad] about the unit ``axis`` (Rodrigues)."""
     K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
     return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * (K @ K)
+
+
+def _turning(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation (3, 3) that turns unit vector ``a`` onto unit vector ``b``."""
+    axis = np.cross(a, b)
+    s, c = float(np.linalg.norm(axis)), float(np.dot(a, b))
+    if s < 1e-12:
+        if c > 0.0:
+            return np.eye(3)
+        other = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        return _axis_angle(other / np.linalg.norm(other), math.pi)
+    return _axis_angle(axis / s, math.atan2(s, c))
 
 
 # --------------------------------------------------------------------- mass properties

@@ -47,7 +47,7 @@ def turn_over(state: RunState, cmd: C.TurnOver, report: CommandReport) -> None:
     session.close()  # the robot stopped and the station released while the object is turned
     side_1 = _side_model(state, state.started, cmd.source)
     turn = turn_object(first, caps.simulated, turn_rng(state.config.seed if cmd.seed is None else cmd.seed),
-                       state.options.ask)
+                       state.options.ask, side_1.cloud)
     box = None
     if turn.scene_object is None:  # a real cell: nobody measured how it lies
         box = any_way_up_box(side_1.cloud, state.config.scene.box_margin)

@@ -38,7 +38,7 @@ def bowl_mesh(radius: float = 0.07, wall: float = 0.004, opening_deg: float = 70
     for k in range(segments):  # the rim
         a, b = at(0, rings - 1, k), at(0, rings - 1, k + 1)
         c, d = at(1, rings - 1, k + 1), at(1, rings - 1, k)
-        triangles += [(c, b, a), (d, c, a)]
+        triangles += [(a, b, c), (a, c, d)]
     return np.array(vertices), np.array(triangles)
 
 

@@ -273,10 +273,15 @@ def _turn_hypotheses(s1: _Side, s2: _Side, down_world: np.ndarray, up: np.ndarra
     tip = Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix()
     c1 = (s1.points.min(axis=0) + s1.points.max(axis=0)) / 2.0
     c2 = (s2.points.min(axis=0) + s2.points.max(axis=0)) / 2.0
+    # along up, the face the object rests on: side 1's farthest points along down_world lie on
+    # side 2's table (its lowest points)
+    support = float(np.quantile(s1.points @ u, 0.998))
     out = []
     for k in range(TURN_YAWS):
         R = Rotation.from_rotvec(up * (2.0 * math.pi * k / TURN_YAWS)).as_matrix() @ tip  # side 1 -> side 2
-        out.append(pose(R.T, c1 - R.T @ c2))
+        t = c2 - R @ c1  # side 2 = R side 1 + t: the boxes' centres onto each other ...
+        t += up * (s2.floor - (-support + float(t @ up)))  # ... and the face on the table
+        out.append(invert(pose(R, t)))
     return out
 
 
@@ -534,8 +539,9 @@ def _register(side1: o3d.geometry.PointCloud, side2: o3d.geometry.PointCloud, vo
         # partners only where the other side could see (a thin wall's other face does not pull)
         turns = _turn_hypotheses(s1, s2, down_world, up)
         fits += refine(turns, False) + [_score(s1, s2, _icp(s1, s2, T, voxel, False, seen_only=True), voxel, up,
-                                               opt, 4) for T in turns]
-        inits += 2 * turns
+                                               opt, 4) for T in turns] + \
+            [_score(s1, s2, T, voxel, up, opt, 4) for T in turns]  # as they are: the face exactly on the table
+        inits += 3 * turns
     fits = _distinct(fits, centroid, opt)
     probes = _symmetry_probes(s1, s2, fits[0].side1_T_side2, opt.symmetry_steps)
     fits = _distinct(fits + refine(probes, False), centroid, opt)

@@ -227,6 +227,12 @@ def two_sides(run: RunFolder, sides: TwoSides) -> Html:
            f"{num(numbers.get('settle_s'), '.2f', 's')}" if turn.get("by") == "physics" else
            f"by the operator (pause {num(numbers.get('pause_s'), '.1f', 's')})" if turn.get("by") == "operator"
            else "not recorded")
+    face = turn.get("face") if isinstance(turn.get("face"), dict) else None
+    if turn.get("by") == "physics" and face is not None:
+        how += f", onto a face of its hull that tips at {num(face.get('tipping_deg'), '.1f', '°')}"
+        if face.get("missed_in_view") is not None:
+            how += (f" and shows {pct(face.get('missed_in_view'))} of the surface (side 1 missed "
+                    f"{pct(face.get('missed_by_side_1'))})")
     truth = reg.get("truth") if isinstance(reg.get("truth"), dict) else None
     confidence = ("not trusted: " + str(reg["reason"]) if reg.get("reason") else
                   "ambiguous in pose and in shape" if reg.get("shape_ambiguous") else

@@ -55,6 +55,7 @@ def _the_page_shows_both_sides(out, report, printed: str):
     html = page.read_text()
     assert "<h1>recon autoscan --sides 2: toy_blocks" in html and 'id="sides"' in html
     assert "by physics: tipped" in html and "confidence" in html and ">unique<" in html
+    assert "onto a face of its hull that tips at" in html and "(side 1 missed" in html
     assert f"{report.contributions['side_1'] * 100:.2f} %" in html and f"{report.coverage_whole * 100:.2f} %" in html
     assert (out / "report_files" / "sides.png").stat().st_size > 20_000 and "report_files/sides.png" in html
     assert "Scans (10)" in html and "Side 1 (5 scans)" in html and "Side 2 (5 scans)" in html
@@ -63,16 +64,18 @@ def _the_page_shows_both_sides(out, report, printed: str):
     assert "cloud (both sides)" in html and "true whole toy_blocks surface" in html
 
 
+@pytest.mark.slow
 def test_a_bowl_is_turned_onto_its_rim_and_both_sides_register(tmp_path, capsys):
     """An open container (tests/bowl.py: a thin-walled spherical cap) has one other stable
     face, its rim: physics turns it upside down, and the sides, which share only smooth
     surface, register by the turn's face (its yaw unknown): the merged cloud lies on the true
-    surface within the sensor's noise."""
+    surface within the sensor's noise. (With fewer or smaller views the sides' overlap is too
+    small to trust, the truth included, and the run says so.)"""
     from ..bowl import write_bowl
 
     bowl = write_bowl(tmp_path / "bowl.ply")
     out = tmp_path / "two"
-    code = main(["autoscan", "--sides", "2", "--object", str(bowl), "--n", "6", "--resolution", "0.3",
+    code = main(["autoscan", "--sides", "2", "--object", str(bowl), "--n", "12", "--resolution", "0.5",
                  "--no-pictures", "--seed", "0", "--out", str(out)])
     text = capsys.readouterr()
     assert code == 0, text.out + text.err

@@ -63,6 +63,27 @@ def rotation_angle(R: npt.NDArray[np.float64]) -> float:
     return float(np.arctan2(s, np.clip(c, -1.0, 1.0)))
 
 
+def axis_angle(axis: npt.ArrayLike, angle: float) -> npt.NDArray[np.float64]:
+    """Rotation (3, 3) by ``angle`` [rad] about the unit ``axis`` (Rodrigues)."""
+    x, y, z = np.asarray(axis, dtype=float)
+    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    return np.asarray(np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K), dtype=float)
+
+
+def rotation_between(a: npt.ArrayLike, b: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """The smallest rotation (3, 3) that turns unit vector ``a`` onto unit vector ``b`` (for
+    opposite vectors: a half turn about an axis perpendicular to them)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    axis = np.cross(a, b)
+    s, c = float(np.linalg.norm(axis)), float(np.dot(a, b))
+    if s < 1e-12:
+        if c > 0.0:
+            return np.eye(3)
+        other = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        return axis_angle(other / np.linalg.norm(other), np.pi)
+    return axis_angle(axis / s, float(np.arctan2(s, c)))
+
+
 def pose_error(T_a: npt.NDArray[np.float64], T_b: npt.NDArray[np.float64]) -> tuple[float, float]:
     """Translation [m] and rotation [rad] between two poses of the same frame."""
     dt = float(np.linalg.norm(T_a[:3, 3] - T_b[:3, 3]))

@@ -66,7 +66,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from recon_cli.errors import InputError
-from recon_cli.geometry.transforms import invert, pose, rotation_angle, transform_points
+from recon_cli.geometry.transforms import axis_angle, invert, pose, rotation_angle, rotation_between, transform_points
 from recon_cli.randomness import open3d_draws
 
 if TYPE_CHECKING:
@@ -261,16 +261,8 @@ def _turn_hypotheses(s1: _Side, s2: _Side, down_world: np.ndarray, up: np.ndarra
     """side1_T_side2 of a turn that put the side-1 world direction ``down_world`` straight
     down (opposite ``up``), at :data:`TURN_YAWS` yaws about ``up`` (the yaw is not known),
     the bounding-box centres of the two sides onto each other."""
-    from scipy.spatial.transform import Rotation
-
     u = np.asarray(down_world, dtype=float) / np.linalg.norm(down_world)
-    axis = np.cross(u, -up)
-    if np.linalg.norm(axis) < 1e-9:  # already down (no turn) or straight up (upside down)
-        axis = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
-        angle = 0.0 if np.dot(u, -up) > 0 else math.pi
-    else:
-        angle = math.atan2(np.linalg.norm(axis), float(np.dot(u, -up)))
-    tip = Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix()
+    tip = rotation_between(u, -up)
     c1 = (s1.points.min(axis=0) + s1.points.max(axis=0)) / 2.0
     c2 = (s2.points.min(axis=0) + s2.points.max(axis=0)) / 2.0
     # along up, the face the object rests on: side 1's farthest points along down_world lie on
@@ -278,7 +270,7 @@ def _turn_hypotheses(s1: _Side, s2: _Side, down_world: np.ndarray, up: np.ndarra
     support = float(np.quantile(s1.points @ u, 0.998))
     out = []
     for k in range(TURN_YAWS):
-        R = Rotation.from_rotvec(up * (2.0 * math.pi * k / TURN_YAWS)).as_matrix() @ tip  # side 1 -> side 2
+        R = axis_angle(up, 2.0 * math.pi * k / TURN_YAWS) @ tip  # side 1 -> side 2
         t = c2 - R @ c1  # side 2 = R side 1 + t: the boxes' centres onto each other ...
         t += up * (s2.floor - (-support + float(t @ up)))  # ... and the face on the table
         out.append(invert(pose(R, t)))

@@ -41,7 +41,7 @@ import numpy as np
 
 from recon_cli.backends.sim.resting import Rest, resting_faces, tilt_deg
 from recon_cli.errors import ReconError
-from recon_cli.geometry.transforms import pose, pose_error, rot_z, transform_points
+from recon_cli.geometry.transforms import pose, pose_error, rot_z, rotation_between, transform_points
 from recon_cli.lazy import lazy_module
 from recon_cli.objects import Primitive, SceneObject
 
@@ -160,7 +160,7 @@ def turn_over(obj: SceneObject, rng: np.random.Generator, surface_z: float | Non
         attempt = len(tried)
         yaw = rng.uniform(0.0, 2.0 * math.pi)
         drop = float(rng.uniform(*DROP_M))
-        R = rot_z(yaw) @ _turning(face.down, np.array([0.0, 0.0, -1.0]))
+        R = rot_z(yaw) @ rotation_between(face.down, [0.0, 0.0, -1.0])
         start = pose(R, np.zeros(3))
         v = transform_points(start, obj.vertices)
         start[:2, 3] = centre[:2] - (v.min(axis=0)[:2] + v.max(axis=0)[:2]) / 2.0
@@ -307,24 +307,6 @@ def _hull_vertices(vertices: np.ndarray) -> np.ndarray:
     from scipy.spatial import ConvexHull
 
     return vertices[ConvexHull(vertices).vertices]
-
-
-def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation (3, 3) by ``angle`` [rad] about the unit ``axis`` (Rodrigues)."""
-    K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * (K @ K)
-
-
-def _turning(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The smallest rotation (3, 3) that turns unit vector ``a`` onto unit vector ``b``."""
-    axis = np.cross(a, b)
-    s, c = float(np.linalg.norm(axis)), float(np.dot(a, b))
-    if s < 1e-12:
-        if c > 0.0:
-            return np.eye(3)
-        other = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
-        return _axis_angle(other / np.linalg.norm(other), math.pi)
-    return _axis_angle(axis / s, math.atan2(s, c))
 
 
 # --------------------------------------------------------------------- mass properties
